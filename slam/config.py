@@ -1,0 +1,316 @@
+"""Configuration: one frozen dataclass per concern, loaded from TOML, overridable from the CLI.
+
+Every number an algorithm uses lives here with its default and a one-line reason. A run resolves
+its configuration in this order, later wins:
+
+1. the dataclass defaults below;
+2. ``configs/<dataset>.toml`` shipped with the project (sensor geometry per log);
+3. ``--config FILE``;
+4. ``--set section.key=value`` overrides (values parsed as TOML literals, never evaluated).
+
+The resolved configuration is written next to every run's outputs as ``config.toml``, so a run can
+be repeated exactly with ``slam run NAME --config RUN_DIR/config.toml``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from slam.errors import ConfigError
+from slam.resources import config_dir
+
+METHODS = ("odometry", "classic", "gmapping")
+"""Estimation methods of ``slam run``."""
+
+
+def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ConfigError(f"{name}: expected one of {', '.join(choices)}, found {value!r}")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Differential-drive robot geometry and odometry settings."""
+
+    meters_per_tick: float = math.pi * 0.254 / 360.0
+    """Wheel travel per encoder tick: wheel diameter 0.254 m, 360 ticks per revolution."""
+    track_width: float = 0.3937
+    """Effective skid-steer track width (m), used only when yaw comes from the wheels."""
+    yaw_source: str = "imu"
+    """Where yaw rate comes from: ``"imu"`` (z gyro, the course's model) or ``"encoders"``."""
+    imu_lowpass_hz: float = 10.0
+    """Cut-off of the low-pass filter on the gyro z rate (Hz); 0 disables filtering."""
+    max_imu_gap_s: float = 0.1
+    """Longest stretch past the IMU's last sample that odometry may hold the last rate (s)."""
+
+    def __post_init__(self) -> None:
+        _check_choice("robot.yaw_source", self.yaw_source, ("imu", "encoders"))
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """2D laser geometry and range semantics. ``None`` means: take it from the log."""
+
+    x: float = 0.13323
+    """Laser position ahead of the robot centre (m)."""
+    y: float = 0.0
+    """Laser position to the left of the robot centre (m)."""
+    yaw: float = 0.0
+    """Laser heading relative to the robot heading (rad)."""
+    fov_deg: float | None = None
+    """Field of view (degrees) for logs whose lines carry no geometry (CARMEN FLASER)."""
+    range_min: float | None = None
+    """Shortest valid range (m); shorter readings are invalid beams."""
+    range_max: float | None = None
+    """Longest range used as an obstacle hit (m); longer readings clear space only."""
+    no_return: float | None = None
+    """Readings at or beyond this (m) mean "no return" (e.g. 80 m on intel)."""
+    use_log_laser_pose: bool = True
+    """CARMEN: derive the laser offset from the laser and odometry poses written in each line."""
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """Occupancy grid geometry and log-odds update."""
+
+    resolution: float = 0.05
+    """Cell size (m)."""
+    initial_size_m: float = 40.0
+    """Side of the square map allocated at start (m); the map grows on demand."""
+    grow_margin_m: float = 10.0
+    """Extra room added on each side when the map must grow (m)."""
+    log_odds_hit: float = math.log(4.0)
+    """Log-odds added to a cell where a beam ends."""
+    log_odds_miss: float = -math.log(4.0) / 4.0
+    """Log-odds added to cells a beam passes through."""
+    log_odds_min: float = -20.0
+    """Lower clamp of the log-odds."""
+    log_odds_max: float = 20.0
+    """Upper clamp of the log-odds."""
+    occupied_threshold: float = 0.0
+    """Log-odds above which a cell counts as occupied in correlation and rendering."""
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Particle filter settings shared by both methods."""
+
+    method: str = "gmapping"
+    """``"odometry"`` (dead reckoning), ``"classic"`` (course method) or ``"gmapping"`` (default)."""
+    particles: int = 30
+    """Number of particles."""
+    seed: int = 0
+    """Seed of the single random generator of a run."""
+    every: int = 1
+    """Process every k-th scan."""
+    max_scans: int = 0
+    """Stop after this many processed scans (0: all)."""
+
+    def __post_init__(self) -> None:
+        _check_choice("filter.method", self.method, METHODS)
+        if self.particles < 1:
+            raise ConfigError(f"filter.particles: expected at least 1, found {self.particles}")
+        if self.every < 1:
+            raise ConfigError(f"filter.every: expected at least 1, found {self.every}")
+        if self.max_scans < 0:
+            raise ConfigError(f"filter.max_scans: expected 0 or more, found {self.max_scans}")
+
+
+@dataclass(frozen=True)
+class TextureConfig:
+    """Floor texture mapping from RGB-D frames."""
+
+    enabled: bool = True
+    """Compute the texture map when the dataset has RGB-D frames."""
+
+
+@dataclass(frozen=True)
+class VizConfig:
+    """Rerun recording of a run."""
+
+    record: bool = True
+    """Write ``recording.rrd`` in the run folder."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration of a run."""
+
+    dataset: str = ""
+    """Dataset name this configuration was resolved for."""
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    map: MapConfig = field(default_factory=MapConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    texture: TextureConfig = field(default_factory=TextureConfig)
+    viz: VizConfig = field(default_factory=VizConfig)
+
+
+def _section_types() -> dict[str, type]:
+    hints = typing.get_type_hints(Config)
+    return {name: tp for name, tp in hints.items() if dataclasses.is_dataclass(tp)}
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    """Check ``value`` against the annotated type ``tp``; return it converted (int → float)."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _coerce(value, arg, where)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(errors[0] if errors else f"{where}: unexpected value {value!r}")
+    if origin is tuple:
+        (item,) = typing.get_args(tp)[:1]
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected a list, found {value!r}")
+        return tuple(_coerce(v, item, f"{where}[{i}]") for i, v in enumerate(value))
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: expected a number, found {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, found {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, found {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, found {value!r}")
+        return value
+    raise ConfigError(f"{where}: unsupported type {tp!r}")
+
+
+def _apply(config: Config, table: Mapping[str, Any], source: str) -> Config:
+    sections = _section_types()
+    changes: dict[str, Any] = {}
+    for key, value in table.items():
+        if key == "dataset":
+            changes["dataset"] = _coerce(value, str, f"{source}: dataset")
+            continue
+        if key not in sections:
+            raise ConfigError(
+                f"{source}: unknown section [{key}]; expected one of {', '.join(sorted(sections))}"
+            )
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{source}: [{key}] must be a table, found {value!r}")
+        cls = sections[key]
+        hints = typing.get_type_hints(cls)
+        current = getattr(config, key)
+        updates = {}
+        for name, raw in value.items():
+            if name not in hints:
+                raise ConfigError(
+                    f"{source}: unknown key {key}.{name}; expected one of "
+                    f"{', '.join(sorted(hints))}"
+                )
+            updates[name] = _coerce(raw, hints[name], f"{source}: {key}.{name}")
+        changes[key] = dataclasses.replace(current, **updates)
+    return dataclasses.replace(config, **changes)
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """Parse ``section.key=value`` (value a TOML literal, else a bare string)."""
+    if "=" not in text or "." not in text.split("=", 1)[0]:
+        raise ConfigError(f"--set {text!r}: expected section.key=value, e.g. filter.particles=100")
+    lhs, raw = text.split("=", 1)
+    section, key = lhs.strip().split(".", 1)
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return section, key, value
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax errors into :class:`ConfigError`."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: config file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+
+
+def load_config(
+    dataset: str = "",
+    config_file: Path | None = None,
+    overrides: Iterable[str] = (),
+    base: Config | None = None,
+) -> Config:
+    """Resolve the configuration of a run (defaults, dataset config, file, overrides)."""
+    config = base or Config()
+    if dataset:
+        config = dataclasses.replace(config, dataset=dataset)
+        shipped = config_dir() / f"{dataset}.toml"
+        if shipped.is_file():
+            config = _apply(config, read_toml(shipped), str(shipped))
+    if config_file is not None:
+        config = _apply(config, read_toml(Path(config_file)), str(config_file))
+    for text in overrides:
+        section, key, value = parse_override(text)
+        config = _apply(config, {section: {key: value}}, f"--set {text}")
+    if dataset:
+        config = dataclasses.replace(config, dataset=dataset)
+    return config
+
+
+def to_dict(config: Any) -> dict[str, Any]:
+    """Nested plain-dict view of a config dataclass."""
+    return dataclasses.asdict(config)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        if math.isnan(value):
+            return "nan"
+        return repr(value)
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+        return f'"{escaped}"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ConfigError(f"cannot write {value!r} to TOML")
+
+
+def dumps(config: Config) -> str:
+    """Serialise a configuration to TOML text that :func:`load_config` reads back identically."""
+    lines = ["# Resolved configuration of this run (slam).", ""]
+    data = to_dict(config)
+    lines.append(f"dataset = {_toml_value(data.pop('dataset'))}")
+    for section, table in data.items():
+        lines.append("")
+        lines.append(f"[{section}]")
+        for key, value in table.items():
+            if value is None:
+                lines.append(f"# {key} unset: taken from the log")
+            else:
+                lines.append(f"{key} = {_toml_value(value)}")
+    return "\n".join(lines) + "\n"

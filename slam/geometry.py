@@ -1,0 +1,102 @@
+"""SE(2) geometry: poses as ``(x, y, theta)`` arrays, composition, inversion, relative motion.
+
+Every function broadcasts over leading dimensions, so a whole trajectory ``(N, 3)`` or a particle
+set is handled in one call. Angles are radians, wrapped to ``[-pi, pi)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+
+def wrap_angle(theta: ArrayLike) -> Array:
+    """Wrap angles to ``[-pi, pi)``."""
+    theta = np.asarray(theta, dtype=np.float64)
+    return (theta + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> Array:
+    """Return ``a ⊕ b``: pose ``b`` (expressed in the frame of ``a``) mapped to the world frame."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def inverse(a: ArrayLike) -> Array:
+    """Return ``a⁻¹`` so that ``compose(a, inverse(a))`` is the identity."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def relative(a: ArrayLike, b: ArrayLike) -> Array:
+    """Return ``a⁻¹ ⊕ b``: the motion from pose ``a`` to pose ``b`` in the frame of ``a``."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx = b[..., 0] - a[..., 0]
+    dy = b[..., 1] - a[..., 1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
+
+
+def transform_points(pose: ArrayLike, points: ArrayLike) -> Array:
+    """Map points ``(..., 2)`` from the frame of ``pose`` to the world frame."""
+    pose = np.asarray(pose, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+    x = pose[..., 0, None] + c[..., None] * points[..., 0] - s[..., None] * points[..., 1]
+    y = pose[..., 1, None] + s[..., None] * points[..., 0] + c[..., None] * points[..., 1]
+    return np.stack([x, y], axis=-1)
+
+
+def accumulate(increments: ArrayLike, start: ArrayLike | None = None) -> Array:
+    """Chain relative motions ``(N, 3)`` into ``N + 1`` poses starting at ``start`` (default origin)."""
+    increments = np.asarray(increments, dtype=np.float64).reshape(-1, 3)
+    poses = np.empty((increments.shape[0] + 1, 3))
+    poses[0] = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64)
+    for i, inc in enumerate(increments):
+        poses[i + 1] = compose(poses[i], inc)
+    return poses
+
+
+def interpolate_poses(times: ArrayLike, poses: ArrayLike, query: ArrayLike) -> Array:
+    """Linearly interpolate poses at ``query`` times (angles unwrapped before interpolation).
+
+    ``times`` must be non-decreasing; queries outside ``[times[0], times[-1]]`` are clamped to the
+    end poses, so callers that must not extrapolate check the range themselves.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64)
+    query = np.asarray(query, dtype=np.float64)
+    theta = np.unwrap(poses[:, 2])
+    out = np.stack(
+        [
+            np.interp(query, times, poses[:, 0]),
+            np.interp(query, times, poses[:, 1]),
+            wrap_angle(np.interp(query, times, theta)),
+        ],
+        axis=-1,
+    )
+    return out
+
+
+def yaw_to_quaternion(theta: ArrayLike) -> Array:
+    """Quaternions ``(qx, qy, qz, qw)`` of planar rotations by ``theta`` about z."""
+    theta = np.asarray(theta, dtype=np.float64)
+    zeros = np.zeros_like(theta)
+    return np.stack([zeros, zeros, np.sin(theta / 2.0), np.cos(theta / 2.0)], axis=-1)
+
+
+def quaternion_to_yaw(q: ArrayLike) -> Array:
+    """Yaw angle of quaternions ``(qx, qy, qz, qw)`` (the rotation's heading in the xy plane)."""
+    q = np.asarray(q, dtype=np.float64)
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))

@@ -1,0 +1,46 @@
+"""Locating the data directory (user datasets) and a writable cache (generated datasets).
+
+The data directory is ``--data-dir`` if given, else ``$SLAM_DATA_DIR``, else ``./data``. It may be
+read-only (CI points it at a shared folder), so generated data such as the simulator's demo goes to
+the cache: ``$SLAM_CACHE_DIR`` if set, else ``<data dir>/cache`` when that is writable, else
+``~/.cache/slam``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+DATA_DIR_ENV = "SLAM_DATA_DIR"
+CACHE_DIR_ENV = "SLAM_CACHE_DIR"
+
+
+def resolve_data_dir(cli_value: str | Path | None = None) -> Path:
+    """The data directory: ``cli_value``, else ``$SLAM_DATA_DIR``, else ``./data``."""
+    if cli_value:
+        return Path(cli_value).expanduser()
+    env = os.environ.get(DATA_DIR_ENV)
+    if env:
+        return Path(env).expanduser()
+    return Path("data")
+
+
+def _writable(folder: Path) -> bool:
+    probe = folder
+    while not probe.exists():
+        if probe.parent == probe:
+            return False
+        probe = probe.parent
+    return os.access(probe, os.W_OK)
+
+
+def resolve_cache_dir(data_dir: Path) -> Path:
+    """A writable folder for generated datasets (see the module docstring for the order)."""
+    env = os.environ.get(CACHE_DIR_ENV)
+    if env:
+        return Path(env).expanduser()
+    candidate = Path(data_dir) / "cache"
+    if _writable(candidate):
+        return candidate
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "slam"

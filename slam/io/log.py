@@ -1,0 +1,223 @@
+"""The ``Log``: the one in-memory form of a robot log that every loader produces.
+
+A ``Log`` holds time-stamped arrays per sensor stream. Streams a log does not have are ``None``.
+Arrays are numpy end to end: float64 for times and poses, float32 for ranges. Loaders validate
+shapes and dtypes before building these objects, so the pipeline can trust them.
+
+Conventions
+-----------
+* Times are seconds (Unix time for the ECE276A logs, the logger's clock for CARMEN logs).
+* ``ScanStream.ranges`` has shape ``(num_scans, num_beams)``; invalid beams (NaN, inf, negative,
+  below ``range_min``) are stored as NaN and counted in ``ScanStream.invalid_beams``. Readings at or
+  beyond ``no_return`` mean "no return": they may clear free space but never mark an obstacle.
+* Scans are kept in file order (CARMEN odometry follows file order, not timestamp order);
+  ``ScanStream.non_monotonic`` counts the scans whose timestamp is below the previous one.
+* Poses are ``(x, y, theta)`` rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.errors import DataError
+
+F64 = NDArray[np.float64]
+F32 = NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class EncoderStream:
+    """Wheel encoder ticks per interval, rows FR, FL, RR, RL (ECE276A robot)."""
+
+    time: F64
+    """``(N,)`` reading times (s)."""
+    counts: NDArray[np.int16]
+    """``(4, N)`` ticks accumulated since the previous reading."""
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class ImuStream:
+    """Inertial measurements."""
+
+    time: F64
+    """``(N,)`` sample times (s)."""
+    angular_velocity: F64
+    """``(3, N)`` body rates (rad/s); row 2 is the yaw rate."""
+    linear_acceleration: F64
+    """``(3, N)`` accelerations (g)."""
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class ScanStream:
+    """2D laser scans with their beam geometry."""
+
+    time: F64
+    """``(N,)`` scan times in file order (s); a scan's label for relations."""
+    ranges: F32
+    """``(N, B)`` ranges (m); NaN marks invalid beams."""
+    angles: F64
+    """``(B,)`` beam angles in the laser frame (rad, counter-clockwise, 0 = forward)."""
+    range_min: float
+    """Shortest valid range (m)."""
+    range_max: float
+    """Longest range that counts as an obstacle hit (m)."""
+    no_return: float
+    """Readings at or beyond this mean "no return" (m)."""
+    laser_offset: F64 = field(default_factory=lambda: np.zeros(3))
+    """``(3,)`` laser pose in the robot frame."""
+    odometry: F64 | None = None
+    """``(N, 3)`` robot odometry pose at each scan, when the log carries it (CARMEN)."""
+    laser_pose: F64 | None = None
+    """``(N, 3)`` laser pose in the odometry frame at each scan, when the log carries it."""
+    invalid_beams: int = 0
+    """How many readings were NaN/inf/negative or below ``range_min`` in the file."""
+    non_monotonic: int = 0
+    """How many scans have a timestamp smaller than the previous scan's."""
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    @property
+    def num_beams(self) -> int:
+        """Beams per scan."""
+        return int(self.ranges.shape[1])
+
+
+@dataclass(frozen=True)
+class OdometryStream:
+    """Odometry messages (CARMEN ``ODOM``): poses in the odometry frame."""
+
+    time: F64
+    """``(N,)`` message times (s)."""
+    poses: F64
+    """``(N, 3)`` odometry poses."""
+    velocities: F64
+    """``(N, 2)`` translational (m/s) and rotational (rad/s) velocity."""
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class RgbdIndex:
+    """Index of the RGB-D frames of a log; images are read only when asked for.
+
+    Frame ``k`` (0-based) of the RGB stream is the file ``rgb_dir / rgb_pattern.format(k + 1)``
+    taken at ``rgb_time[k]``; likewise for disparity.
+    """
+
+    rgb_time: F64
+    """``(R,)`` RGB frame times (s)."""
+    disparity_time: F64
+    """``(D,)`` disparity frame times (s)."""
+    rgb_dir: Path
+    """Folder of the RGB PNG files."""
+    disparity_dir: Path
+    """Folder of the disparity PNG files."""
+    rgb_pattern: str
+    """File name of RGB frame k (1-based) as a ``str.format`` pattern, e.g. ``rgb20_{}.png``."""
+    disparity_pattern: str
+    """File name of disparity frame k (1-based), e.g. ``disparity20_{}.png``."""
+
+    def rgb_path(self, k: int) -> Path:
+        """Path of RGB frame ``k`` (0-based)."""
+        return self.rgb_dir / self.rgb_pattern.format(k + 1)
+
+    def disparity_path(self, k: int) -> Path:
+        """Path of disparity frame ``k`` (0-based)."""
+        return self.disparity_dir / self.disparity_pattern.format(k + 1)
+
+    def load_rgb(self, k: int) -> NDArray[np.uint8]:
+        """RGB frame ``k`` as ``(480, 640, 3)`` uint8 in RGB order; :class:`DataError` if unreadable."""
+        import cv2
+
+        path = self.rgb_path(k)
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise DataError(f"{path}: missing or not a readable PNG (RGB frame {k + 1})")
+        return image[:, :, ::-1]
+
+    def load_disparity(self, k: int) -> NDArray[np.uint16]:
+        """Disparity frame ``k`` as ``(480, 640)`` uint16; :class:`DataError` if unreadable."""
+        import cv2
+
+        path = self.disparity_path(k)
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise DataError(f"{path}: missing or not a readable PNG (disparity frame {k + 1})")
+        if image.dtype != np.uint16 or image.ndim != 2:
+            raise DataError(
+                f"{path}: expected a single-channel uint16 disparity PNG, "
+                f"found {image.dtype} with shape {image.shape}"
+            )
+        return image
+
+
+@dataclass(frozen=True)
+class Log:
+    """One robot log in memory: whichever streams the source has."""
+
+    name: str
+    """Dataset name (registry name or file stem)."""
+    kind: str
+    """Loader that produced it: ``"ece276a"`` or ``"carmen"``."""
+    source: Path | None = None
+    """File or folder it was read from."""
+    encoders: EncoderStream | None = None
+    imu: ImuStream | None = None
+    scans: ScanStream | None = None
+    odometry: OdometryStream | None = None
+    rgbd: RgbdIndex | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+    """Loader notes (e.g. CARMEN comment lines, skipped message types)."""
+
+    def streams(self) -> dict[str, Any]:
+        """The streams present, by name."""
+        names = ("encoders", "imu", "scans", "odometry", "rgbd")
+        return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
+
+    def summary(self) -> dict[str, Any]:
+        """Counts, durations, rates and gaps of every stream (what ``slam data verify`` prints)."""
+        out: dict[str, Any] = {"name": self.name, "kind": self.kind}
+        for name, stream in self.streams().items():
+            if isinstance(stream, RgbdIndex):
+                out["rgb"] = _time_summary(stream.rgb_time)
+                out["disparity"] = _time_summary(stream.disparity_time)
+                continue
+            info = _time_summary(stream.time)
+            if isinstance(stream, ScanStream):
+                info["beams"] = stream.num_beams
+                info["invalid_beams"] = stream.invalid_beams
+                info["no_return_beams"] = int(np.count_nonzero(stream.ranges >= stream.no_return))
+                info["non_monotonic"] = stream.non_monotonic
+            out[name] = info
+        out.update({k: v for k, v in self.meta.items() if isinstance(v, int | float | str)})
+        return out
+
+
+def _time_summary(time: F64) -> dict[str, Any]:
+    n = int(time.shape[0])
+    if n == 0:
+        return {"count": 0}
+    dt = np.diff(time)
+    duration = float(time.max() - time.min())
+    positive = dt[dt > 0]
+    return {
+        "count": n,
+        "start": float(time[0]),
+        "duration_s": duration,
+        "rate_hz": float((n - 1) / duration) if duration > 0 else 0.0,
+        "median_dt_s": float(np.median(positive)) if positive.size else 0.0,
+        "max_gap_s": float(dt.max()) if dt.size else 0.0,
+    }

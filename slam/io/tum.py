@@ -1,0 +1,71 @@
+"""TUM trajectory files: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
+
+Planar poses are written with z = 0 and a yaw-only quaternion, the form evo and most SLAM tools
+read. Timestamps keep microseconds (CARMEN relations match scans to 1e-4 s).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.errors import DataError
+from slam.geometry import quaternion_to_yaw, yaw_to_quaternion
+from slam.io.atomic import write_text
+
+
+def format_tum(times: NDArray[np.float64], poses: NDArray[np.float64]) -> str:
+    """TUM text of ``(N,)`` times and ``(N, 3)`` planar poses."""
+    times = np.asarray(times, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64)
+    if times.shape[0] != poses.shape[0]:
+        raise ValueError(f"{times.shape[0]} times for {poses.shape[0]} poses")
+    q = yaw_to_quaternion(poses[:, 2])
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    for t, p, qq in zip(times, poses, q, strict=True):
+        lines.append(
+            f"{t:.6f} {p[0]:.6f} {p[1]:.6f} 0.000000 "
+            f"{qq[0]:.9f} {qq[1]:.9f} {qq[2]:.9f} {qq[3]:.9f}"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_tum(path: Path, times: NDArray[np.float64], poses: NDArray[np.float64]) -> None:
+    """Write a planar trajectory to ``path`` atomically."""
+    write_text(Path(path), format_tum(times, poses))
+
+
+def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Read a TUM file; return ``(times (N,), poses (N, 3))`` with yaw from the quaternion."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise DataError(f"{path}: trajectory file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read trajectory ({exc})") from None
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.split()
+        if len(fields) != 8:
+            raise DataError(
+                f"{path}:{lineno}: expected 8 columns 'timestamp tx ty tz qx qy qz qw', "
+                f"found {len(fields)}"
+            )
+        try:
+            rows.append([float(f) for f in fields])
+        except ValueError:
+            raise DataError(f"{path}:{lineno}: non-numeric field in {line!r}") from None
+    if not rows:
+        raise DataError(f"{path}: no poses (expected lines 'timestamp tx ty tz qx qy qz qw')")
+    data = np.asarray(rows)
+    if not np.all(np.isfinite(data)):
+        bad = int(np.argmax(~np.all(np.isfinite(data), axis=1)))
+        raise DataError(f"{path}: pose {bad + 1} has a NaN or infinite value")
+    poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], axis=-1)
+    return data[:, 0], poses

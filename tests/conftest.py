@@ -1,0 +1,45 @@
+"""Shared fixtures: the data directory (tests that need real logs skip without it)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("RERUN_ANALYTICS", "0")
+os.environ.setdefault("RERUN_TELEMETRY", "0")
+
+
+def _shared_data_dir() -> Path | None:
+    env = os.environ.get("SLAM_DATA_DIR")
+    if env and Path(env).is_dir():
+        return Path(env)
+    return None
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    """The real data directory (``$SLAM_DATA_DIR``); skips the test when it is absent."""
+    path = _shared_data_dir()
+    if path is None:
+        pytest.skip("SLAM_DATA_DIR is not set or is not a folder: real logs unavailable")
+    return path
+
+
+@pytest.fixture(scope="session")
+def ece276a_dir(data_dir: Path) -> Path:
+    """``<data dir>/ece276a`` with the real encoder, IMU and Kinect files."""
+    path = data_dir / "ece276a"
+    if not (path / "Encoders20.npz").is_file():
+        pytest.skip(f"{path}/Encoders20.npz is absent: ECE276A logs unavailable")
+    return path
+
+
+@pytest.fixture(scope="session")
+def carmen_dir(data_dir: Path) -> Path:
+    """``<data dir>/carmen`` with the CARMEN logs and relations."""
+    path = data_dir / "carmen"
+    if not (path / "intel.clf.gz").is_file():
+        pytest.skip(f"{path}/intel.clf.gz is absent: CARMEN logs unavailable")
+    return path

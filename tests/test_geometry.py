@@ -1,0 +1,83 @@
+"""SE(2) identities and helpers."""
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from slam.geometry import (
+    accumulate,
+    compose,
+    interpolate_poses,
+    inverse,
+    quaternion_to_yaw,
+    relative,
+    transform_points,
+    wrap_angle,
+    yaw_to_quaternion,
+)
+
+coord = st.floats(-100, 100, allow_nan=False)
+angle = st.floats(-10, 10, allow_nan=False)
+pose = st.tuples(coord, coord, angle).map(np.array)
+
+
+def test_wrap_angle_range_and_values():
+    assert wrap_angle(np.pi) == -np.pi
+    assert np.isclose(wrap_angle(3 * np.pi / 2), -np.pi / 2)
+    assert np.isclose(wrap_angle(-7.0), -7.0 + 2 * np.pi)
+
+
+def test_compose_known_values():
+    a = np.array([1.0, 2.0, np.pi / 2])
+    b = np.array([1.0, 0.0, np.pi / 2])
+    np.testing.assert_allclose(compose(a, b), [1.0, 3.0, -np.pi], atol=1e-12)
+
+
+@given(pose)
+def test_inverse_is_identity(a):
+    np.testing.assert_allclose(compose(a, inverse(a)), 0.0, atol=1e-9)
+    np.testing.assert_allclose(compose(inverse(a), a), 0.0, atol=1e-9)
+
+
+@given(pose, pose)
+def test_relative_then_compose_recovers(a, b):
+    r = relative(a, b)
+    c = compose(a, r)
+    np.testing.assert_allclose(c[:2], b[:2], atol=1e-8)
+    assert abs(wrap_angle(c[2] - b[2])) < 1e-9
+
+
+@given(pose, pose, pose)
+def test_compose_is_associative(a, b, c):
+    left = compose(compose(a, b), c)
+    right = compose(a, compose(b, c))
+    np.testing.assert_allclose(left[:2], right[:2], atol=1e-7)
+    assert abs(wrap_angle(left[2] - right[2])) < 1e-9
+
+
+def test_transform_points_matches_compose():
+    p = np.array([2.0, -1.0, 0.3])
+    pts = np.array([[1.0, 0.0], [0.0, 2.0]])
+    out = transform_points(p, pts)
+    expected = np.array([compose(p, [x, y, 0.0])[:2] for x, y in pts])
+    np.testing.assert_allclose(out, expected, atol=1e-12)
+
+
+def test_accumulate_square():
+    inc = np.tile([1.0, 0.0, np.pi / 2], (4, 1))
+    poses = accumulate(inc)
+    np.testing.assert_allclose(poses[-1], [0.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(poses[2], [1.0, 1.0, -np.pi], atol=1e-12)
+
+
+def test_interpolate_poses_across_wrap():
+    t = np.array([0.0, 1.0])
+    p = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 0.0, -np.pi + 0.1]])
+    q = interpolate_poses(t, p, [0.5])
+    np.testing.assert_allclose(q[0, :2], [1.0, 0.0])
+    assert abs(abs(q[0, 2]) - np.pi) < 1e-12
+
+
+def test_quaternion_round_trip():
+    th = np.linspace(-3.1, 3.1, 13)
+    np.testing.assert_allclose(quaternion_to_yaw(yaw_to_quaternion(th)), th, atol=1e-12)
