@@ -1,0 +1,32 @@
+"""Helpers shared by the bench modules (not a bench itself)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+
+def data_dir() -> Path:
+    """The data directory benches read real logs from (``$SLAM_DATA_DIR`` or ``./data``)."""
+    from slam.io.datadir import resolve_data_dir
+
+    return resolve_data_dir(None)
+
+
+def best_of(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, Any]:
+    """Smallest wall time of ``repeat`` calls of ``fn`` and the last result."""
+    best = float("inf")
+    result = None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def skip(reason: str) -> dict:
+    """Result of a bench that cannot run here (e.g. its data is absent)."""
+    return {"skipped": reason, "pid": os.getpid()}
