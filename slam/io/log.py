@@ -67,7 +67,9 @@ class ScanStream:
     ranges: F32
     """``(N, B)`` ranges (m); NaN marks invalid beams."""
     angles: F64
-    """``(B,)`` beam angles in the laser frame (rad, counter-clockwise, 0 = forward)."""
+    """Beam angles in the laser frame (rad, counter-clockwise, 0 = forward): ``(B,)`` when every
+    scan has the same geometry, ``(N, B)`` when a log mixes beam counts (rows NaN-padded, like
+    ``ranges``)."""
     range_min: float
     """Shortest valid range (m)."""
     range_max: float
@@ -90,8 +92,12 @@ class ScanStream:
 
     @property
     def num_beams(self) -> int:
-        """Beams per scan."""
+        """Beams per scan (the widest scan when beam counts vary)."""
         return int(self.ranges.shape[1])
+
+    def scan_angles(self, i: int) -> F64:
+        """Beam angles of scan ``i``."""
+        return self.angles if self.angles.ndim == 1 else self.angles[i]
 
 
 @dataclass(frozen=True)
