@@ -1,0 +1,607 @@
+"""The dataset registry: dataset names -> loader, files, expected figures; status and verification.
+
+This module owns ``data/datasets.toml`` (its schema and validation), the question "which files of
+a dataset are under the data directory" (:func:`dataset_status`), loading a dataset by name
+whatever its format (:func:`load_dataset`, which dispatches to the format's loader) and the checks
+of ``slam data verify`` (:func:`verify_dataset`: sizes and sha256 where known, then the loader's
+own validation, then counts and rates against the registry's expectations).
+
+The data directory itself is chosen by :func:`slam.io.datadir.resolve_data_dir`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tomllib
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from slam.errors import ConfigError, DataError
+from slam.resources import registry_path
+
+if TYPE_CHECKING:
+    from slam.config import Config
+    from slam.io.log import Log
+
+LOADERS: tuple[str, ...] = ("ece276a", "carmen")
+"""Loaders the registry may name."""
+
+FILE_STREAMS: tuple[str, ...] = (
+    "encoders",
+    "imu",
+    "scans",
+    "odometry",
+    "rgb",
+    "disparity",
+    "rgb_images",
+    "disparity_images",
+    "relations",
+)
+"""Streams a registry file may provide."""
+
+EXPECT_STREAMS: tuple[str, ...] = ("encoders", "imu", "scans", "odometry", "rgb", "disparity")
+"""Streams an ``expect`` table may describe: the stream keys of :meth:`Log.summary`."""
+
+RATE_TOLERANCE = 0.10
+"""Relative deviation of a measured rate from the registry's nominal rate that verify accepts."""
+
+STATES: tuple[str, ...] = ("present", "partial", "absent")
+"""Values of :attr:`DatasetStatus.state`."""
+
+
+@dataclass(frozen=True)
+class DataFile:
+    """One file (or folder, when :attr:`path` ends with ``/``) of a dataset."""
+
+    path: str
+    """Location relative to the data directory, ``/``-separated."""
+    streams: tuple[str, ...]
+    """What it provides (see :data:`FILE_STREAMS`)."""
+    size: int | None = None
+    """Size in bytes, when known."""
+    sha256: str | None = None
+    """SHA-256 of the contents (hex), when known."""
+    entries: int | None = None
+    """Folders: how many files it should hold, when known."""
+
+    @property
+    def is_dir(self) -> bool:
+        """Whether this entry is a folder."""
+        return self.path.endswith("/")
+
+    def location(self, data_dir: Path) -> Path:
+        """Absolute location under ``data_dir``."""
+        return Path(data_dir) / self.path.rstrip("/")
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """Figures a stream of a dataset should show once loaded."""
+
+    count: int | None = None
+    """Exact number of readings."""
+    rate_hz: float | None = None
+    """Nominal reading rate (Hz); verify accepts :data:`RATE_TOLERANCE` relative deviation."""
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A dataset of the registry."""
+
+    name: str
+    loader: str
+    """``"ece276a"`` or ``"carmen"``."""
+    folder: str
+    """Folder under the data directory."""
+    files: tuple[DataFile, ...]
+    description: str
+    source: str
+    """Where the files come from."""
+    number: str | None = None
+    """ECE276A dataset number (the ``NN`` in ``EncodersNN.npz``)."""
+    relations: str | None = None
+    """Ground-truth relations file, relative to the data directory (CARMEN)."""
+    expect: Mapping[str, Expectation] = field(default_factory=dict)
+    """Expected figures per stream (keys of :meth:`Log.summary`)."""
+
+    def file_for(self, stream: str) -> DataFile | None:
+        """The file that provides ``stream``, if any."""
+        return next((f for f in self.files if stream in f.streams), None)
+
+    def log_file(self) -> DataFile:
+        """The log file of a CARMEN dataset (the file providing scans)."""
+        found = self.file_for("scans")
+        if found is None:  # validated at load time, so only a hand-built Dataset gets here
+            raise ConfigError(f"dataset {self.name}: no file provides scans")
+        return found
+
+
+@dataclass(frozen=True)
+class DatasetStatus:
+    """Which files of a dataset are under a data directory."""
+
+    dataset: Dataset
+    data_dir: Path
+    state: str
+    """``"present"`` (every file), ``"partial"`` (some) or ``"absent"`` (none)."""
+    present: tuple[str, ...]
+    """Registry paths found."""
+    missing: tuple[str, ...]
+    """Registry paths not found."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (what ``slam data list --json`` prints per dataset)."""
+        return {
+            "name": self.dataset.name,
+            "loader": self.dataset.loader,
+            "folder": self.dataset.folder,
+            "status": self.state,
+            "present": list(self.present),
+            "missing": list(self.missing),
+        }
+
+
+# --- reading the registry -------------------------------------------------------------------
+
+
+def load_registry(path: Path | None = None) -> dict[str, Dataset]:
+    """Read and validate the registry (default: the project's ``data/datasets.toml``).
+
+    Raises :class:`ConfigError` naming the file and the offending key.
+    """
+    path = Path(path) if path is not None else registry_path()
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: dataset registry not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the dataset registry ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    return parse_registry(raw, str(path))
+
+
+def parse_registry(raw: Mapping[str, Any], source: str = "datasets.toml") -> dict[str, Dataset]:
+    """Validate a parsed registry table; ``source`` prefixes every error message."""
+    _keys(raw, source, "", required=("datasets",), optional=("schema",))
+    schema = raw.get("schema", 1)
+    if schema != 1:
+        raise ConfigError(f"{source}: schema: expected 1, found {schema!r}")
+    table = _table(raw["datasets"], source, "datasets")
+    if not table:
+        raise ConfigError(f"{source}: datasets: expected at least one dataset, found none")
+    return {name: _dataset(name, value, source) for name, value in table.items()}
+
+
+def _where(source: str, key: str) -> str:
+    return f"{source}: {key}" if key else source
+
+
+def _table(value: Any, source: str, key: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{_where(source, key)}: expected a table, found {value!r}")
+    return value
+
+
+def _keys(
+    table: Mapping[str, Any],
+    source: str,
+    key: str,
+    required: tuple[str, ...],
+    optional: tuple[str, ...] = (),
+) -> None:
+    prefix = f"{key}." if key else ""
+    for name in required:
+        if name not in table:
+            raise ConfigError(f"{_where(source, prefix + name)}: required key is missing")
+    allowed = set(required) | set(optional)
+    for name in table:
+        if name not in allowed:
+            raise ConfigError(
+                f"{_where(source, prefix + name)}: unknown key; expected one of "
+                f"{', '.join(sorted(allowed))}"
+            )
+
+
+def _string(value: Any, source: str, key: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ConfigError(f"{_where(source, key)}: expected a non-empty string, found {value!r}")
+    return value
+
+
+def _count(value: Any, source: str, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ConfigError(f"{_where(source, key)}: expected an integer >= 0, found {value!r}")
+    return value
+
+
+def _relative(value: Any, source: str, key: str) -> str:
+    text = _string(value, source, key)
+    parts = text.rstrip("/").split("/")
+    if text.startswith("/") or "\\" in text or any(p in ("", ".", "..") for p in parts):
+        raise ConfigError(
+            f"{_where(source, key)}: expected a path relative to the data directory "
+            f"(like 'ece276a/Encoders20.npz'), found {text!r}"
+        )
+    return text
+
+
+def _dataset(name: str, value: Any, source: str) -> Dataset:
+    key = f"datasets.{name}"
+    table = _table(value, source, key)
+    _keys(
+        table,
+        source,
+        key,
+        required=("loader", "folder", "files", "description", "source"),
+        optional=("number", "relations", "expect"),
+    )
+    loader = _string(table["loader"], source, f"{key}.loader")
+    if loader not in LOADERS:
+        raise ConfigError(
+            f"{source}: {key}.loader: expected one of {', '.join(LOADERS)}, found {loader!r}"
+        )
+    folder = _relative(table["folder"], source, f"{key}.folder")
+    files_raw = table["files"]
+    if not isinstance(files_raw, list) or not files_raw:
+        raise ConfigError(
+            f"{source}: {key}.files: expected a non-empty list of tables, found {files_raw!r}"
+        )
+    files = tuple(_file(f, source, f"{key}.files[{i}]") for i, f in enumerate(files_raw))
+    for i, f in enumerate(files):
+        if not f.path.startswith(folder.rstrip("/") + "/"):
+            raise ConfigError(
+                f"{source}: {key}.files[{i}].path: expected a path inside the dataset folder "
+                f"{folder!r}, found {f.path!r}"
+            )
+    paths = [f.path for f in files]
+    duplicate = next((p for p in paths if paths.count(p) > 1), None)
+    if duplicate:
+        raise ConfigError(f"{source}: {key}.files: {duplicate!r} is listed twice")
+
+    number = None
+    if loader == "ece276a":
+        if "number" not in table:
+            raise ConfigError(
+                f"{source}: {key}.number: required for an ece276a dataset (e.g. number = 20)"
+            )
+        raw_number = table["number"]
+        if isinstance(raw_number, bool) or not isinstance(raw_number, int | str):
+            raise ConfigError(
+                f"{source}: {key}.number: expected an integer or string, found {raw_number!r}"
+            )
+        number = str(raw_number)
+    elif "number" in table:
+        raise ConfigError(f"{source}: {key}.number: only ece276a datasets have a number")
+
+    relations = None
+    if "relations" in table:
+        relations = _relative(table["relations"], source, f"{key}.relations")
+        if relations not in paths:
+            raise ConfigError(
+                f"{source}: {key}.relations: {relations!r} must also be listed under files"
+            )
+    if loader == "carmen":
+        logs = [f for f in files if "scans" in f.streams]
+        if len(logs) != 1:
+            raise ConfigError(
+                f"{source}: {key}.files: a carmen dataset needs exactly one file providing "
+                f"'scans' (the log), found {len(logs)}"
+            )
+
+    expect: dict[str, Expectation] = {}
+    if "expect" in table:
+        for stream, spec in _table(table["expect"], source, f"{key}.expect").items():
+            where = f"{key}.expect.{stream}"
+            if stream not in EXPECT_STREAMS:
+                raise ConfigError(
+                    f"{source}: {where}: unknown stream; expected one of "
+                    f"{', '.join(EXPECT_STREAMS)}"
+                )
+            spec = _table(spec, source, where)
+            _keys(spec, source, where, required=(), optional=("count", "rate_hz"))
+            rate = spec.get("rate_hz")
+            if rate is not None and (
+                isinstance(rate, bool) or not isinstance(rate, int | float) or rate <= 0
+            ):
+                raise ConfigError(
+                    f"{source}: {where}.rate_hz: expected a positive number, found {rate!r}"
+                )
+            count = spec.get("count")
+            expect[stream] = Expectation(
+                count=None if count is None else _count(count, source, f"{where}.count"),
+                rate_hz=None if rate is None else float(rate),
+            )
+
+    return Dataset(
+        name=name,
+        loader=loader,
+        folder=folder.rstrip("/"),
+        files=files,
+        description=_string(table["description"], source, f"{key}.description"),
+        source=_string(table["source"], source, f"{key}.source"),
+        number=number,
+        relations=relations,
+        expect=expect,
+    )
+
+
+def _file(value: Any, source: str, key: str) -> DataFile:
+    table = _table(value, source, key)
+    _keys(table, source, key, required=("path", "streams"), optional=("size", "sha256", "entries"))
+    path = _relative(table["path"], source, f"{key}.path")
+    streams = table["streams"]
+    if not isinstance(streams, list) or not streams:
+        raise ConfigError(
+            f"{source}: {key}.streams: expected a non-empty list of stream names, found {streams!r}"
+        )
+    for s in streams:
+        if s not in FILE_STREAMS:
+            raise ConfigError(
+                f"{source}: {key}.streams: unknown stream {s!r}; expected some of "
+                f"{', '.join(FILE_STREAMS)}"
+            )
+    size = table.get("size")
+    sha = table.get("sha256")
+    entries = table.get("entries")
+    is_dir = path.endswith("/")
+    if is_dir and (size is not None or sha is not None):
+        raise ConfigError(f"{source}: {key}: a folder ({path!r}) has no size or sha256")
+    if not is_dir and entries is not None:
+        raise ConfigError(f"{source}: {key}.entries: only folders (paths ending in /) have entries")
+    if sha is not None:
+        sha = _string(sha, source, f"{key}.sha256").lower()
+        if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+            raise ConfigError(
+                f"{source}: {key}.sha256: expected 64 hex digits, found {table['sha256']!r}"
+            )
+    return DataFile(
+        path=path,
+        streams=tuple(streams),
+        size=None if size is None else _count(size, source, f"{key}.size"),
+        sha256=sha,
+        entries=None if entries is None else _count(entries, source, f"{key}.entries"),
+    )
+
+
+def get_dataset(name: str, registry: Mapping[str, Dataset] | None = None) -> Dataset:
+    """The registry entry ``name``; :class:`DataError` listing the known names otherwise."""
+    registry = load_registry() if registry is None else registry
+    if name not in registry:
+        raise DataError(
+            f"unknown dataset {name!r}; known datasets: {', '.join(registry)} "
+            f"(see `slam data list`)"
+        )
+    return registry[name]
+
+
+# --- what is on disk ------------------------------------------------------------------------
+
+
+def check_readable_dir(folder: Path, what: str = "folder") -> bool:
+    """Whether ``folder`` exists; :class:`DataError` naming it when it exists but cannot be read
+    (no read or search permission) or is not a folder."""
+    folder = Path(folder)
+    try:
+        if not folder.exists():
+            return False
+        if not folder.is_dir():
+            raise DataError(f"{folder}: expected the {what}, found a file")
+    except PermissionError:
+        raise DataError(f"{folder}: cannot read the {what} (permission denied)") from None
+    if not os.access(folder, os.R_OK | os.X_OK):
+        raise DataError(f"{folder}: cannot read the {what} (permission denied)")
+    return True
+
+
+def _exists(entry: DataFile, data_dir: Path) -> bool:
+    location = entry.location(data_dir)
+    try:
+        return location.is_dir() if entry.is_dir else location.is_file()
+    except PermissionError:
+        raise DataError(f"{location}: cannot read (permission denied)") from None
+
+
+def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
+    """Which of ``dataset``'s files are under ``data_dir``: present, partial or absent.
+
+    A missing data directory or dataset folder makes the dataset absent; one that exists but
+    cannot be read raises :class:`DataError` naming it.
+    """
+    data_dir = Path(data_dir)
+    present: list[str] = []
+    missing: list[str] = []
+    if check_readable_dir(data_dir, "data directory") and check_readable_dir(
+        data_dir / dataset.folder, f"folder of dataset {dataset.name}"
+    ):
+        for entry in dataset.files:
+            parent = entry.location(data_dir).parent
+            if parent != data_dir / dataset.folder:
+                check_readable_dir(parent, f"folder of {entry.path}")
+            (present if _exists(entry, data_dir) else missing).append(entry.path)
+    else:
+        missing = [f.path for f in dataset.files]
+    if not missing:
+        state = "present"
+    elif not present:
+        state = "absent"
+    else:
+        state = "partial"
+    return DatasetStatus(dataset, data_dir, state, tuple(present), tuple(missing))
+
+
+# --- loading --------------------------------------------------------------------------------
+
+
+def load_dataset(
+    name: str,
+    data_dir: Path,
+    *,
+    need: Collection[str] | None = None,
+    config: Config | None = None,
+    registry: Mapping[str, Dataset] | None = None,
+) -> Log:
+    """Load registry dataset ``name`` from ``data_dir`` with its format's loader.
+
+    ``need`` names the streams that must be present (ECE276A: ``encoders``, ``imu``, ``scans``,
+    ``kinect``; default: the loader's own default, encoders and IMU. CARMEN: ``scans``,
+    ``odometry``; default: none beyond the log file). ``config`` (default: the dataset's shipped
+    configuration, ``configs/<name>.toml``) supplies the lidar geometry and range semantics.
+    ``registry`` replaces the project's registry (tests, other registries).
+    """
+    from slam.config import load_config
+
+    dataset = get_dataset(name, registry)
+    data_dir = Path(data_dir)
+    check_readable_dir(data_dir, "data directory")
+    folder = data_dir / dataset.folder
+    check_readable_dir(folder, f"folder of dataset {name}")
+    config = config if config is not None else load_config(name)
+
+    if dataset.loader == "ece276a":
+        from slam.io.ece276a import DEFAULT_NEED, load_ece276a
+
+        assert dataset.number is not None  # guaranteed by the registry validation
+        return load_ece276a(
+            folder,
+            dataset.number,
+            need=DEFAULT_NEED if need is None else need,
+            name=name,
+            lidar=config.lidar,
+        )
+
+    from slam.io.carmen import load_carmen
+
+    path = dataset.log_file().location(data_dir)
+    if not _exists(dataset.log_file(), data_dir):
+        raise DataError(
+            f"{name}: missing {path} (a CARMEN log, {dataset.description}). Put the file there, "
+            f"or point --data-dir (or SLAM_DATA_DIR) at a data directory that has "
+            f"{dataset.log_file().path}; see docs/data.md"
+        )
+    log = load_carmen(path, name=name, lidar=config.lidar)
+    absent = [s for s in (need or ()) if s not in log.streams()]
+    if absent:
+        raise DataError(
+            f"{path}: the log has no {', '.join(absent)} stream; "
+            f"found {', '.join(log.streams()) or 'none'}"
+        )
+    return log
+
+
+# --- verification ---------------------------------------------------------------------------
+
+
+def sha256_of(path: Path, chunk: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's contents."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _check_file(entry: DataFile, data_dir: Path) -> dict[str, Any]:
+    """Size, hash or entry-count check of one present registry entry."""
+    location = entry.location(data_dir)
+    result: dict[str, Any] = {"path": entry.path, "status": "ok", "problems": []}
+    try:
+        if entry.is_dir:
+            count = sum(1 for e in os.scandir(location) if e.is_file())
+            result["entries"] = count
+            if entry.entries is not None and count < entry.entries:
+                result["problems"].append(f"holds {count} files, expected {entry.entries}")
+        else:
+            size = location.stat().st_size
+            result["size"] = size
+            if entry.size is not None and size != entry.size:
+                result["problems"].append(f"size {size} bytes, expected {entry.size}")
+            elif entry.sha256 is not None:
+                digest = sha256_of(location)
+                result["sha256"] = "ok" if digest == entry.sha256 else digest
+                if digest != entry.sha256:
+                    result["problems"].append(f"sha256 {digest}, expected {entry.sha256}")
+    except PermissionError:
+        result["problems"].append("cannot read (permission denied)")
+    except OSError as exc:
+        result["problems"].append(f"cannot read ({exc.strerror})")
+    if result["problems"]:
+        result["status"] = "bad"
+    return result
+
+
+def _check_expectations(dataset: Dataset, summary: Mapping[str, Any]) -> list[str]:
+    problems = []
+    for stream, expected in dataset.expect.items():
+        info = summary.get(stream)
+        if not isinstance(info, Mapping):
+            continue  # its file is missing, which the file list already reports
+        count = info.get("count", 0)
+        if expected.count is not None and count != expected.count:
+            problems.append(f"{stream}: {count} readings, expected {expected.count}")
+        rate = info.get("rate_hz")
+        nominal = expected.rate_hz
+        if (
+            nominal is not None
+            and rate is not None
+            and abs(rate - nominal) > RATE_TOLERANCE * nominal
+        ):
+            problems.append(
+                f"{stream}: {rate:.2f} Hz, expected {nominal:g} Hz ± {RATE_TOLERANCE:.0%}"
+            )
+    return problems
+
+
+def verify_dataset(
+    name: str,
+    data_dir: Path,
+    *,
+    config: Config | None = None,
+    registry: Mapping[str, Dataset] | None = None,
+) -> dict[str, Any]:
+    """Check dataset ``name`` under ``data_dir`` and summarise it (``slam data verify``).
+
+    Checks every present file's size and sha256 where the registry knows them (folders: their
+    file count), loads what is present with the format's loader (keys, shapes, dtypes, timestamps
+    and rates are validated there) and compares reading counts and rates with the registry.
+    Returns a JSON-ready report: ``status``, ``files``, ``missing``, ``summary`` (from
+    :meth:`Log.summary`) and ``problems`` (empty when everything present checks out). Raises
+    :class:`DataError` when no file of the dataset is present. ``registry`` replaces the
+    project's registry.
+    """
+    dataset = get_dataset(name, registry)
+    data_dir = Path(data_dir)
+    status = dataset_status(dataset, data_dir)
+    if status.state == "absent":
+        raise DataError(
+            f"{name}: none of its files is under {data_dir} (expected "
+            f"{', '.join(status.missing)}); see docs/data.md for where to put them, or point "
+            f"--data-dir (or SLAM_DATA_DIR) at the folder that holds them"
+        )
+    files = [_check_file(f, data_dir) for f in dataset.files if f.path in status.present]
+    problems = [f"{f['path']}: {p}" for f in files for p in f["problems"]]
+    summary: dict[str, Any] = {}
+    if dataset.loader == "carmen" and dataset.log_file().path in status.missing:
+        pass  # only the relations file is there: nothing to load
+    else:
+        try:
+            log = load_dataset(name, data_dir, need=(), config=config, registry=registry)
+        except DataError as exc:
+            problems.append(str(exc))
+        else:
+            summary = log.summary()
+            problems.extend(_check_expectations(dataset, summary))
+    return {
+        "name": name,
+        "loader": dataset.loader,
+        "data_dir": str(data_dir),
+        "status": status.state,
+        "files": files,
+        "missing": list(status.missing),
+        "summary": summary,
+        "problems": problems,
+    }
