@@ -1,0 +1,584 @@
+"""CARMEN log loader: ``.clf`` / ``.log`` text, optionally gzip-compressed, into a :class:`Log`.
+
+This module owns the CARMEN text format (``docs/data-formats.md`` §2): which messages become which
+stream, the beam geometry of ``FLASER`` lines, the "no return" semantics of their ranges and the
+errors a malformed file produces.
+
+Messages
+--------
+* ``# ...``: comment lines, kept in ``log.meta["comments"]`` and counted in
+  ``log.meta["comment_lines"]``.
+* ``ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp`` → :attr:`Log.odometry`.
+* ``FLASER n r_1 .. r_n x y theta odom_x odom_y odom_theta ipc_timestamp hostname
+  logger_timestamp`` → :attr:`Log.scans`. The line carries no geometry: its ``n`` beams span
+  ``fov_deg`` (default 180°) centred on 0, step ``fov / (n − 1)``.
+* ``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
+  n_remissions rem_1.. laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+  forward_safety_dist side_safety_dist turn_axis ipc_timestamp hostname logger_timestamp``
+  → :attr:`Log.scans`, beam ``k`` at ``start_angle + k · angular_res``.
+* Any other message type (``PARAM``, ``SYNC``, ``RAWLASER1``, ...) is counted and skipped:
+  ``log.meta["skipped"]`` maps type to count, ``log.meta["skipped_lines"]`` is the total.
+
+Scans stay in FILE order: the odometry written in the scan lines follows file order, not
+timestamp order (intel: 631 scans have a timestamp below their predecessor's). A scan's time is
+its ``ipc_timestamp``, the timestamp the Kümmerle relations files use: on intel, aces, fr079 and
+fr-clinic both timestamps are equal and every relation ``t1``/``t2`` equals a scan's timestamp
+exactly; on mit-csail the ``logger_timestamp`` counts from the start of logging (0.09 s, 0.27 s,
+...) while every relation ``t1``/``t2`` matches an ``ipc_timestamp`` within 5e-6 s.
+
+Parsing is vectorised: the text is split into lines once, each line is classified by its first
+token, scan lines are grouped by their layout (beam count) and each group's numeric fields are
+converted by one :func:`numpy.loadtxt` call. Only when that call fails does a bisection over the
+group find the first bad line so the error can name it.
+"""
+
+from __future__ import annotations
+
+import gzip
+import re
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import LidarConfig
+from slam.errors import ConfigError, DataError
+from slam.geometry import relative, wrap_angle
+from slam.io.log import Log, OdometryStream, ScanStream
+
+F64 = NDArray[np.float64]
+
+DEFAULT_FOV_DEG = 180.0
+"""FLASER field of view when the config gives none: every log here spans −90°..+90°."""
+DEFAULT_NO_RETURN = 80.0
+"""Readings at or beyond this mean "no return" when the config gives none: SICK scanners write
+their maximum codes (81.83 m, 81.91 m) for beams without an echo."""
+DEFAULT_RANGE_MIN = 0.05
+"""Shortest valid reading when the config gives none (m): below every genuine reading of the
+benchmark logs (the shortest is 0.12 m, on fr079), so zero readings count as invalid beams."""
+
+GZIP_MAGIC = b"\x1f\x8b"
+
+_MESSAGE_TYPE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+
+_FLASER_TAIL = (
+    "x",
+    "y",
+    "theta",
+    "odom_x",
+    "odom_y",
+    "odom_theta",
+    "ipc_timestamp",
+    "hostname",
+    "logger_timestamp",
+)
+_ODOM_FIELDS = (
+    "ODOM",
+    "x",
+    "y",
+    "theta",
+    "tv",
+    "rv",
+    "accel",
+    "ipc_timestamp",
+    "hostname",
+    "logger_timestamp",
+)
+_ROBOTLASER_HEAD = (
+    "ROBOTLASER1",
+    "laser_type",
+    "start_angle",
+    "fov",
+    "angular_res",
+    "max_range",
+    "accuracy",
+    "remission_mode",
+    "num_readings",
+)
+_ROBOTLASER_TAIL = (
+    "laser_x",
+    "laser_y",
+    "laser_theta",
+    "robot_x",
+    "robot_y",
+    "robot_theta",
+    "tv",
+    "rv",
+    "forward_safety_dist",
+    "side_safety_dist",
+    "turn_axis",
+    "ipc_timestamp",
+    "hostname",
+    "logger_timestamp",
+)
+
+
+@dataclass(frozen=True)
+class _Lines:
+    """Lines of one message layout: their text and 1-based line numbers in the file."""
+
+    text: list[str]
+    lineno: list[int]
+
+
+@dataclass(frozen=True)
+class _ScanGroup:
+    """Scans of one layout, parsed: where they go in file order and their arrays."""
+
+    order: NDArray[np.int64]
+    """1-based line numbers (sorting them gives file order)."""
+    ranges: F64
+    angles: F64
+    """``(n,)`` shared by the group or ``(L, n)`` per scan (ROBOTLASER1)."""
+    laser_pose: F64
+    odometry: F64
+    time: F64
+    max_range: F64 | None = None
+    """ROBOTLASER1: the range limit each line declares."""
+
+
+def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | None = None) -> Log:
+    """Read a CARMEN log (plain text or gzip, detected by its magic bytes) into a :class:`Log`.
+
+    ``lidar`` supplies what FLASER lines do not carry: ``fov_deg`` (default 180),
+    ``range_min`` (default :data:`DEFAULT_RANGE_MIN`), ``no_return`` (default
+    :data:`DEFAULT_NO_RETURN`, or the declared ``max_range`` for ROBOTLASER1-only logs) and
+    ``range_max`` (default ``no_return``). The laser offset in the robot frame is the median of
+    ``relative(odometry pose, laser pose)`` over the log when ``lidar.use_log_laser_pose`` is true
+    (the default), else ``(lidar.x, lidar.y, lidar.yaw)``; it is reported in ``log.meta``.
+
+    Raises :class:`DataError` naming the file (and the line number for a malformed line) when
+    the file is missing, unreadable, truncated, malformed or holds no scan.
+    """
+    path = Path(path)
+    lidar = lidar or LidarConfig()
+    text = _read_text(path)
+    lines = text.split("\n")
+
+    comments: list[str] = []
+    skipped: dict[str, int] = {}
+    odom = _Lines([], [])
+    flaser: dict[int, _Lines] = {}
+    robotlaser: dict[tuple[int, int], _Lines] = {}
+    for lineno, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line[0] == "#":
+            comments.append(line[1:].strip())
+            continue
+        head = line.split(None, 2)
+        kind = head[0]
+        if kind == "FLASER":
+            n = _beam_count(path, lineno, head, 1, "FLASER")
+            group = flaser.setdefault(n, _Lines([], []))
+        elif kind == "ODOM":
+            group = odom
+        elif kind == "ROBOTLASER1":
+            key = _robotlaser_layout(path, lineno, line)
+            group = robotlaser.setdefault(key, _Lines([], []))
+        else:
+            if not _MESSAGE_TYPE.match(kind):
+                raise DataError(
+                    f"{path}:{lineno}: expected a message type such as FLASER or ODOM "
+                    f"or a '#' comment, found {_clip(kind)!r}"
+                )
+            skipped[kind] = skipped.get(kind, 0) + 1
+            continue
+        group.text.append(line)
+        group.lineno.append(lineno)
+
+    groups = [_parse_flaser(path, n, g, lidar) for n, g in flaser.items()]
+    groups += [_parse_robotlaser(path, n, nrem, g) for (n, nrem), g in robotlaser.items()]
+    if not groups:
+        raise DataError(
+            f"{path}: no scans (expected FLASER or ROBOTLASER1 lines; found "
+            f"{len(odom.text)} ODOM, {len(comments)} comment and "
+            f"{sum(skipped.values())} other lines)"
+        )
+    scans, offset_source = _assemble_scans(path, groups, lidar)
+    odometry = _parse_odom(path, odom) if odom.text else None
+
+    meta: dict[str, Any] = {
+        "comments": comments,
+        "comment_lines": len(comments),
+        "flaser_scans": sum(len(g.lineno) for g in flaser.values()),
+        "robotlaser_scans": sum(len(g.lineno) for g in robotlaser.values()),
+        "odom_messages": len(odom.text),
+        "skipped": dict(sorted(skipped.items())),
+        "skipped_lines": sum(skipped.values()),
+        "skipped_types": ", ".join(f"{k}={v}" for k, v in sorted(skipped.items())),
+        "scan_time": "ipc_timestamp",
+        "laser_offset_source": offset_source,
+        "laser_offset_x": float(scans.laser_offset[0]),
+        "laser_offset_y": float(scans.laser_offset[1]),
+        "laser_offset_yaw": float(scans.laser_offset[2]),
+    }
+    return Log(
+        name=name or _stem(path),
+        kind="carmen",
+        source=path,
+        scans=scans,
+        odometry=odometry,
+        meta=meta,
+    )
+
+
+def _stem(path: Path) -> str:
+    name = path.name
+    for suffix in (".gz", ".clf", ".log"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            name = name[: -len(suffix)]
+    return name
+
+
+def _clip(text: str, limit: int = 40) -> str:
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _read_text(path: Path) -> str:
+    """The file's text; gzip is recognised by its magic bytes whatever the suffix."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DataError(f"{path}: CARMEN log not found") from None
+    except IsADirectoryError:
+        raise DataError(f"{path}: is a folder, expected a CARMEN log file (.clf/.log)") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read CARMEN log ({exc.strerror or exc})") from None
+    if raw[:2] == GZIP_MAGIC:
+        try:
+            raw = gzip.decompress(raw)
+        except EOFError:
+            raise DataError(
+                f"{path}: truncated gzip file (the compressed stream ends early); download it again"
+            ) from None
+        except (OSError, zlib.error) as exc:
+            raise DataError(f"{path}: corrupt gzip file ({exc})") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        lineno = raw.count(b"\n", 0, exc.start) + 1
+        raise DataError(
+            f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x}"
+        ) from None
+
+
+def _beam_count(path: Path, lineno: int, tokens: Sequence[str], index: int, kind: str) -> int:
+    """The beam count field ``tokens[index]`` as a positive integer."""
+    if len(tokens) <= index:
+        raise DataError(f"{path}:{lineno}: {kind} line ends before its beam count")
+    token = tokens[index]
+    try:
+        n = int(token)
+    except ValueError:
+        raise DataError(
+            f"{path}:{lineno}: {kind} beam count: expected an integer, found {_clip(token)!r}"
+        ) from None
+    if n < 1:
+        raise DataError(f"{path}:{lineno}: {kind} beam count: expected at least 1, found {n}")
+    return n
+
+
+def _robotlaser_layout(path: Path, lineno: int, line: str) -> tuple[int, int]:
+    """``(num_readings, num_remissions)`` of a ROBOTLASER1 line: what fixes its layout."""
+    tokens = line.split()
+    n = _beam_count(path, lineno, tokens, 8, "ROBOTLASER1")
+    if len(tokens) <= 9 + n:
+        raise DataError(
+            f"{path}:{lineno}: ROBOTLASER1 declares {n} readings but the line ends after "
+            f"{len(tokens)} fields, before its remission count"
+        )
+    token = tokens[9 + n]
+    try:
+        nrem = int(token)
+    except ValueError:
+        raise DataError(
+            f"{path}:{lineno}: ROBOTLASER1 remission count (field {10 + n}): expected an "
+            f"integer, found {_clip(token)!r}"
+        ) from None
+    if nrem < 0:
+        raise DataError(
+            f"{path}:{lineno}: ROBOTLASER1 remission count: expected 0 or more, found {nrem}"
+        )
+    return n, nrem
+
+
+def _parse_table(
+    path: Path,
+    kind: str,
+    lines: _Lines,
+    ncols: int,
+    skip: Sequence[int],
+    field_name: Callable[[int], str],
+    finite: Callable[[int], bool],
+) -> F64:
+    """Numeric fields of lines that all have ``ncols`` fields: ``(L, ncols − len(skip))``.
+
+    Columns in ``skip`` (message type, host name) are not converted; ``finite(col)`` says
+    whether a column must hold a finite number (poses, times) or may hold NaN/inf (ranges).
+    """
+    for line, lineno in zip(lines.text, lines.lineno, strict=True):
+        found = len(line.split())
+        if found != ncols:
+            raise DataError(
+                f"{path}:{lineno}: {kind} line: expected {ncols} fields"
+                f"{_layout_hint(kind, ncols)}, found {found}"
+            )
+    usecols = [c for c in range(ncols) if c not in set(skip)]
+    values = _loadtxt(lines.text, usecols)
+    if values is None:
+        lineno, message = _locate_bad_line(lines, usecols, field_name)
+        raise DataError(f"{path}:{lineno}: {kind} {message}")
+    must_be_finite = np.array([finite(c) for c in usecols])
+    bad = ~np.isfinite(values[:, must_be_finite])
+    if bad.any():
+        row, k = np.argwhere(bad)[0]
+        col = np.asarray(usecols)[must_be_finite][k]
+        raise DataError(
+            f"{path}:{lines.lineno[row]}: {kind} {field_name(col)} (field {col + 1}): "
+            f"expected a finite number, found {values[row, usecols.index(col)]}"
+        )
+    return values
+
+
+def _layout_hint(kind: str, ncols: int) -> str:
+    if kind == "FLASER":
+        return f" (FLASER n=<{ncols - 11}> beams + 11)"
+    if kind == "ODOM":
+        return " (ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp)"
+    return ""
+
+
+def _loadtxt(text: list[str], usecols: list[int]) -> F64 | None:
+    """One C-level conversion of the lines; ``None`` if any field is not a number."""
+    try:
+        values = np.loadtxt(text, usecols=usecols, comments=None, ndmin=2, dtype=np.float64)
+    except ValueError:
+        return None
+    if values.shape != (len(text), len(usecols)):
+        return None
+    return values
+
+
+def _locate_bad_line(
+    lines: _Lines, usecols: list[int], field_name: Callable[[int], str]
+) -> tuple[int, str]:
+    """Bisect a group that failed to convert down to its first bad line and field."""
+    lo, hi = 0, len(lines.text)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if _loadtxt(lines.text[lo:mid], usecols) is None:
+            hi = mid
+        else:
+            lo = mid
+    tokens = lines.text[lo].split()
+    for col in usecols:
+        if _loadtxt([tokens[col]], [0]) is None:
+            return lines.lineno[lo], (
+                f"{field_name(col)} (field {col + 1}): expected a number, "
+                f"found {_clip(tokens[col])!r}"
+            )
+    return lines.lineno[lo], "line: its fields could not be read as numbers"
+
+
+def _flaser_field(n: int) -> Callable[[int], str]:
+    def name(col: int) -> str:
+        if col == 0:
+            return "message type"
+        if col == 1:
+            return "beam count"
+        if col < n + 2:
+            return f"range {col - 1}"
+        return _FLASER_TAIL[col - n - 2]
+
+    return name
+
+
+def _parse_flaser(path: Path, n: int, lines: _Lines, lidar: LidarConfig) -> _ScanGroup:
+    ncols = n + 11
+    values = _parse_table(
+        path,
+        "FLASER",
+        lines,
+        ncols,
+        skip=(0, n + 9),
+        field_name=_flaser_field(n),
+        finite=lambda col: col < 2 or col >= n + 2,
+    )
+    # values columns: 0 n, 1..n ranges, n+1..n+6 poses, n+7 ipc, n+8 logger
+    fov = np.deg2rad(lidar.fov_deg if lidar.fov_deg is not None else DEFAULT_FOV_DEG)
+    step = fov / (n - 1) if n > 1 else 0.0
+    angles = (np.arange(n) - (n - 1) / 2.0) * step
+    return _ScanGroup(
+        order=np.asarray(lines.lineno, dtype=np.int64),
+        ranges=values[:, 1 : n + 1],
+        angles=angles,
+        laser_pose=values[:, n + 1 : n + 4],
+        odometry=values[:, n + 4 : n + 7],
+        time=values[:, n + 7],
+    )
+
+
+def _robotlaser_field(n: int, nrem: int) -> Callable[[int], str]:
+    def name(col: int) -> str:
+        if col < 9:
+            return _ROBOTLASER_HEAD[col]
+        if col < 9 + n:
+            return f"range {col - 8}"
+        if col == 9 + n:
+            return "num_remissions"
+        if col < 10 + n + nrem:
+            return f"remission {col - 9 - n}"
+        return _ROBOTLASER_TAIL[col - 10 - n - nrem]
+
+    return name
+
+
+def _parse_robotlaser(path: Path, n: int, nrem: int, lines: _Lines) -> _ScanGroup:
+    ncols = 24 + n + nrem
+    base = 10 + n + nrem
+    values = _parse_table(
+        path,
+        "ROBOTLASER1",
+        lines,
+        ncols,
+        skip=(0, base + 12),
+        field_name=_robotlaser_field(n, nrem),
+        finite=lambda col: col < 9 or col == 9 + n or col >= base,
+    )
+    # values column c-1 holds file column c for c < base + 12; the logger stamp is last.
+    # The declared fov is implied by start, resolution and count; the count is authoritative.
+    start, res, max_range = values[:, 1], values[:, 3], values[:, 4]
+    angles = start[:, None] + res[:, None] * np.arange(n)[None, :]
+    tail = values[:, base - 1 :]
+    return _ScanGroup(
+        order=np.asarray(lines.lineno, dtype=np.int64),
+        ranges=values[:, 8 : 8 + n],
+        angles=angles,
+        laser_pose=tail[:, 0:3],
+        odometry=tail[:, 3:6],
+        time=tail[:, 11],
+        max_range=max_range,
+    )
+
+
+def _lidar_limits(lidar: LidarConfig, groups: list[_ScanGroup]) -> tuple[float, float, float]:
+    """``(range_min, range_max, no_return)`` from the config, else the documented defaults."""
+    if lidar.fov_deg is not None and not 0.0 < lidar.fov_deg <= 360.0:
+        raise ConfigError(f"lidar.fov_deg: expected a value in (0, 360], found {lidar.fov_deg}")
+    range_min = DEFAULT_RANGE_MIN if lidar.range_min is None else lidar.range_min
+    if lidar.no_return is not None:
+        no_return = lidar.no_return
+    elif all(g.max_range is not None for g in groups):
+        no_return = min(float(np.min(g.max_range)) for g in groups if g.max_range is not None)
+    else:
+        no_return = DEFAULT_NO_RETURN
+    range_max = no_return if lidar.range_max is None else lidar.range_max
+    if not range_min < range_max <= no_return:
+        raise ConfigError(
+            "lidar: expected range_min < range_max <= no_return, found "
+            f"range_min={range_min}, range_max={range_max}, no_return={no_return}"
+        )
+    return range_min, range_max, no_return
+
+
+def _assemble_scans(
+    path: Path, groups: list[_ScanGroup], lidar: LidarConfig
+) -> tuple[ScanStream, str]:
+    """Merge the layout groups back into file order and build the :class:`ScanStream`."""
+    range_min, range_max, no_return = _lidar_limits(lidar, groups)
+    order = np.concatenate([g.order for g in groups])
+    position = np.empty(order.shape[0], dtype=np.int64)
+    position[np.argsort(order, kind="stable")] = np.arange(order.shape[0])
+    total = order.shape[0]
+    width = max(g.ranges.shape[1] for g in groups)
+
+    time = np.empty(total)
+    laser_pose = np.empty((total, 3))
+    odometry = np.empty((total, 3))
+    ranges = np.full((total, width), np.nan)
+    padded = np.zeros((total, width), dtype=bool)
+    shared = _shared_angles(groups)
+    angles = shared if shared is not None else np.full((total, width), np.nan)
+    start = 0
+    for g in groups:
+        rows = position[start : start + g.order.shape[0]]
+        start += g.order.shape[0]
+        n = g.ranges.shape[1]
+        time[rows] = g.time
+        laser_pose[rows] = g.laser_pose
+        odometry[rows] = g.odometry
+        ranges[rows, :n] = g.ranges
+        padded[rows, n:] = True
+        if shared is None:
+            angles[rows, :n] = g.angles
+    with np.errstate(invalid="ignore"):
+        invalid = ~padded & (~np.isfinite(ranges) | (ranges < range_min) | (ranges < 0.0))
+    ranges[invalid] = np.nan
+
+    if lidar.use_log_laser_pose:
+        offset = _median_offset(odometry, laser_pose)
+        source = "log"
+    else:
+        offset = np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64)
+        source = "config"
+    scans = ScanStream(
+        time=time,
+        ranges=ranges.astype(np.float32),
+        angles=angles,
+        range_min=float(range_min),
+        range_max=float(range_max),
+        no_return=float(no_return),
+        laser_offset=offset,
+        odometry=odometry,
+        laser_pose=laser_pose,
+        invalid_beams=int(np.count_nonzero(invalid)),
+        non_monotonic=int(np.count_nonzero(np.diff(time) < 0)),
+    )
+    return scans, source
+
+
+def _shared_angles(groups: list[_ScanGroup]) -> F64 | None:
+    """The one ``(B,)`` angle vector every scan uses, or ``None`` if scans differ."""
+    first = groups[0].angles
+    candidate = first if first.ndim == 1 else first[0]
+    for g in groups:
+        rows = g.angles[None, :] if g.angles.ndim == 1 else g.angles
+        if rows.shape[1] != candidate.shape[0] or not np.array_equal(
+            rows, np.broadcast_to(candidate, rows.shape)
+        ):
+            return None
+    return candidate.copy()
+
+
+def _median_offset(odometry: F64, laser_pose: F64) -> F64:
+    """Median laser pose in the robot frame over the log (yaw taken around its circular mean)."""
+    rel = relative(odometry, laser_pose)
+    mean_yaw = float(np.arctan2(np.sin(rel[:, 2]).mean(), np.cos(rel[:, 2]).mean()))
+    yaw = mean_yaw + float(np.median(wrap_angle(rel[:, 2] - mean_yaw)))
+    offset = np.array([np.median(rel[:, 0]), np.median(rel[:, 1]), float(wrap_angle(yaw))])
+    offset[np.abs(offset) < 1e-12] = 0.0
+    return offset
+
+
+def _parse_odom(path: Path, lines: _Lines) -> OdometryStream:
+    values = _parse_table(
+        path,
+        "ODOM",
+        lines,
+        len(_ODOM_FIELDS),
+        skip=(0, 8),
+        field_name=lambda col: _ODOM_FIELDS[col],
+        finite=lambda col: True,
+    )
+    # values columns: x y theta tv rv accel ipc logger
+    return OdometryStream(
+        time=values[:, 6].copy(),
+        poses=values[:, 0:3].copy(),
+        velocities=values[:, 3:5].copy(),
+    )
