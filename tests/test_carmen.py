@@ -1,0 +1,383 @@
+"""CARMEN loader: real benchmark logs (counts, rates, geometry) and every malformed-input case."""
+
+from __future__ import annotations
+
+import gzip
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from slam.config import LidarConfig, load_config
+from slam.errors import ConfigError, DataError
+from slam.eval.relations import match_times
+from slam.io.carmen import DEFAULT_NO_RETURN, DEFAULT_RANGE_MIN, load_carmen
+from slam.io.log import Log
+from slam.io.relations import read_relations
+
+# --- real logs ----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def intel(carmen_dir: Path) -> Log:
+    return load_carmen(carmen_dir / "intel.clf.gz", name="intel", lidar=load_config("intel").lidar)
+
+
+def test_intel_counts_rates_and_order(intel: Log):
+    scans = intel.scans
+    assert len(scans) == 13631
+    assert scans.non_monotonic == 631
+    assert scans.num_beams == 180
+    assert scans.angles.shape == (180,)
+    assert scans.angles[0] == pytest.approx(-np.pi / 2)
+    assert scans.angles[-1] == pytest.approx(np.pi / 2)
+    assert np.diff(scans.angles) == pytest.approx(np.full(179, np.pi / 179))
+    assert scans.ranges.dtype == np.float32 and scans.ranges.shape == (13631, 180)
+    assert scans.odometry.shape == (13631, 3) and scans.laser_pose.shape == (13631, 3)
+    np.testing.assert_array_equal(scans.laser_offset, [0.0, 0.0, 0.0])
+    assert scans.time[0] == pytest.approx(976052857.337530, abs=1e-6)
+    summary = intel.summary()
+    assert summary["scans"]["duration_s"] == pytest.approx(2691.296, abs=1e-3)
+    assert summary["scans"]["rate_hz"] == pytest.approx(5.0645, abs=1e-3)
+    assert summary["scans"]["no_return_beams"] == 68313  # the 81.83 m code, intel config
+    assert summary["scans"]["invalid_beams"] == 0
+    assert summary["odometry"]["count"] == 26915
+    assert summary["comment_lines"] == 2
+    assert summary["laser_offset_source"] == "log"
+    assert scans.range_max == 27.0 and scans.no_return == 80.0
+
+
+def test_intel_odometry_follows_file_order(intel: Log):
+    # data-formats.md §2: the odometry path is 508 m in file order, 661 m sorted by time.
+    odom = intel.scans.odometry
+    in_file_order = np.hypot(*np.diff(odom[:, :2], axis=0).T).sum()
+    by_time = odom[np.argsort(intel.scans.time, kind="stable")]
+    sorted_length = np.hypot(*np.diff(by_time[:, :2], axis=0).T).sum()
+    assert in_file_order == pytest.approx(508, abs=1)
+    assert sorted_length == pytest.approx(661, abs=1)
+
+
+def test_relations_match_ipc_timestamps(intel: Log, carmen_dir: Path):
+    relations = read_relations(carmen_dir / "relations" / "intel.relations")
+    assert len(relations) == 2984
+    for t in (relations.t1, relations.t2):
+        assert np.all(match_times(intel.scans.time, t, tolerance=1e-9) >= 0)
+
+
+@pytest.mark.parametrize(
+    "name, scans, beams, odom, no_return_beams",
+    [
+        ("aces", 7374, 180, 7375, 11139),
+        ("fr079", 4934, 360, 8951, 36881),
+        ("mit-csail", 1988, 361, 0, 23711),
+    ],
+)
+def test_other_logs_counts(carmen_dir, name, scans, beams, odom, no_return_beams):
+    log = load_carmen(carmen_dir / f"{name}.clf.gz", name=name, lidar=load_config(name).lidar)
+    assert len(log.scans) == scans
+    assert log.scans.num_beams == beams
+    assert log.scans.angles.shape == (beams,)
+    assert log.scans.non_monotonic == 0
+    assert log.summary()["scans"]["no_return_beams"] == no_return_beams
+    assert (len(log.odometry) if log.odometry is not None else 0) == odom
+    np.testing.assert_array_equal(log.scans.laser_offset, [0.0, 0.0, 0.0])
+    if name == "mit-csail":
+        # Relations match the ipc timestamps (to 5e-6 s); the logger stamps start at 0.09 s.
+        rel = read_relations(carmen_dir / "relations" / "mit-csail.relations")
+        assert np.all(match_times(log.scans.time, rel.t1, tolerance=1e-5) >= 0)
+        assert log.scans.time[0] == pytest.approx(1134864629.895182, abs=1e-6)
+
+
+def test_fr_clinic_mixes_180_and_181_beams(carmen_dir):
+    log = load_carmen(carmen_dir / "fr-clinic.clf.gz", lidar=load_config("fr-clinic").lidar)
+    scans = log.scans
+    assert len(scans) == 6917
+    assert scans.angles.shape == (6917, 181)
+    short = np.isnan(scans.angles[:, -1])
+    assert np.count_nonzero(short) == 5169
+    assert np.all(np.isnan(scans.ranges[short, -1]))
+    # Both geometries span -90..+90 degrees.
+    assert scans.scan_angles(int(np.flatnonzero(short)[0]))[179] == pytest.approx(np.pi / 2)
+    assert scans.scan_angles(int(np.flatnonzero(~short)[0]))[180] == pytest.approx(np.pi / 2)
+    assert scans.invalid_beams == 0  # NaN padding is not an invalid reading
+    assert log.summary()["scans"]["no_return_beams"] == 5849 + 150066
+
+
+# --- small hand-written logs ----------------------------------------------------------------------
+
+
+def flaser(ranges, pose=(0.0, 0.0, 0.0), odom=None, t=1.0, host="h") -> str:
+    odom = pose if odom is None else odom
+    fields = ["FLASER", str(len(ranges)), *map(str, ranges), *map(str, pose), *map(str, odom)]
+    return " ".join([*fields, f"{t:.6f}", host, f"{t:.6f}"])
+
+
+def odom_line(x, y, theta, t) -> str:
+    return f"ODOM {x} {y} {theta} 0.1 0.2 0 {t:.6f} h {t + 0.5:.6f}"
+
+
+def write(tmp_path: Path, lines: list[str], name: str = "log.clf") -> Path:
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_small_log_parses_exactly(tmp_path):
+    lines = [
+        "# a comment",
+        "PARAM robot_width 0.5",
+        odom_line(0.0, 0.0, 0.0, 9.5),
+        flaser([1.0, 2.0, 3.0], pose=(0.1, 0.2, 0.3), odom=(0.0, 0.2, 0.3), t=10.0),
+        "",
+        flaser([4.0, 85.0, 5.0], pose=(1.1, 1.2, 1.3), odom=(1.0, 1.2, 1.3), t=9.0),
+        "SYNC x",
+        "PARAM other 1",
+        flaser(["nan", "inf", "-1"], t=11.0),
+        flaser(["0", "0.01", "0.07"], t=12.0),
+    ]
+    log = load_carmen(write(tmp_path, lines), lidar=LidarConfig(use_log_laser_pose=False))
+    scans = log.scans
+    assert log.kind == "carmen" and log.name == "log"
+    np.testing.assert_array_equal(scans.time, [10.0, 9.0, 11.0, 12.0])
+    assert scans.non_monotonic == 1
+    np.testing.assert_allclose(scans.angles, [-np.pi / 2, 0.0, np.pi / 2])
+    np.testing.assert_array_equal(scans.ranges[0], np.float32([1, 2, 3]))
+    np.testing.assert_array_equal(scans.ranges[1], np.float32([4, 85, 5]))
+    # nan, inf, negative, zero and 0.01 (< range_min 0.05) are invalid; 0.07 is valid.
+    assert scans.invalid_beams == 5
+    assert np.isnan(scans.ranges[2]).all() and np.isnan(scans.ranges[3, :2]).all()
+    assert scans.ranges[3, 2] == np.float32(0.07)
+    np.testing.assert_array_equal(scans.laser_pose[0], [0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(scans.odometry[1], [1.0, 1.2, 1.3])
+    assert scans.range_min == DEFAULT_RANGE_MIN
+    assert scans.no_return == scans.range_max == DEFAULT_NO_RETURN
+    assert log.summary()["scans"]["no_return_beams"] == 1  # the 85 m reading
+    # use_log_laser_pose = false: the config's offset (ECE276A defaults) is used as is.
+    np.testing.assert_array_equal(scans.laser_offset, [0.13323, 0.0, 0.0])
+    np.testing.assert_array_equal(log.odometry.time, [9.5])
+    np.testing.assert_array_equal(log.odometry.velocities, [[0.1, 0.2]])
+    assert log.meta["comments"] == ["a comment"]
+    assert log.meta["skipped"] == {"PARAM": 2, "SYNC": 1}
+    assert log.meta["skipped_lines"] == 3
+    assert log.summary()["skipped_types"] == "PARAM=2, SYNC=1"
+
+
+def test_laser_offset_from_log_is_the_median(tmp_path):
+    lines = []
+    for k, theta in enumerate([0.0, 1.0, -2.0, 3.0, 0.5]):
+        c, s = np.cos(theta), np.sin(theta)
+        odom = (float(k), 2.0, theta)
+        # laser 0.25 m ahead and 0.05 m left of the robot, turned by 0.1 rad
+        laser = (k + 0.25 * c - 0.05 * s, 2.0 + 0.25 * s + 0.05 * c, theta + 0.1)
+        lines.append(flaser([1.0, 1.0], pose=laser, odom=odom, t=k))
+    lines.append(flaser([1.0, 1.0], pose=(9.0, 9.0, 2.0), odom=(0.0, 0.0, 0.0), t=9))  # outlier
+    log = load_carmen(write(tmp_path, lines), lidar=LidarConfig(fov_deg=90.0))
+    np.testing.assert_allclose(log.scans.laser_offset, [0.25, 0.05, 0.1], atol=1e-9)
+    np.testing.assert_allclose(log.scans.angles, [-np.pi / 4, np.pi / 4])
+    assert log.meta["laser_offset_x"] == pytest.approx(0.25)
+
+
+def test_gzip_is_detected_by_magic_bytes(tmp_path):
+    text = "\n".join([flaser([1.0, 2.0], t=1.0), flaser([3.0, 4.0], t=2.0)]) + "\n"
+    plain = tmp_path / "plain.clf"
+    plain.write_text(text)
+    hidden = tmp_path / "compressed.clf"  # gzip content without a .gz suffix
+    hidden.write_bytes(gzip.compress(text.encode()))
+    a, b = load_carmen(plain), load_carmen(hidden)
+    np.testing.assert_array_equal(a.scans.ranges, b.scans.ranges)
+    np.testing.assert_array_equal(b.scans.time, [1.0, 2.0])
+
+
+def test_mixed_beam_counts_pad_with_nan(tmp_path):
+    lines = [flaser([1.0, 2.0, 3.0], t=1), flaser([1.0, 2.0], t=2), flaser([5.0, 6.0, 7.0], t=3)]
+    scans = load_carmen(write(tmp_path, lines)).scans
+    assert scans.angles.shape == (3, 3)
+    np.testing.assert_allclose(scans.angles[1, :2], [-np.pi / 2, np.pi / 2])
+    assert np.isnan(scans.angles[1, 2]) and np.isnan(scans.ranges[1, 2])
+    np.testing.assert_array_equal(scans.ranges[2], np.float32([5, 6, 7]))
+    assert scans.invalid_beams == 0
+
+
+def robotlaser(ranges, remissions=(), start=-1.0, res=0.5, max_range=40.0, t=1.0) -> str:
+    fields = ["ROBOTLASER1", "0", str(start), str(res * (len(ranges) - 1)), str(res)]
+    fields += [str(max_range), "0.01", "0", str(len(ranges)), *map(str, ranges)]
+    fields += [str(len(remissions)), *map(str, remissions)]
+    fields += ["1.1", "2.0", "0.5", "1.0", "2.0", "0.5"]  # laser pose, robot pose
+    fields += ["0.3", "0.1", "0.5", "0.2", "0.1", f"{t:.6f}", "host", f"{t:.6f}"]
+    return " ".join(fields)
+
+
+def test_robotlaser1_carries_its_geometry(tmp_path):
+    lines = [robotlaser([1.0, 2.0, 3.0, 45.0], remissions=(0.5, 0.6), t=5.0)]
+    lines.append(robotlaser([2.0, 2.5, 3.5, 4.5], t=6.0))
+    log = load_carmen(write(tmp_path, lines))
+    scans = log.scans
+    np.testing.assert_allclose(scans.angles, [-1.0, -0.5, 0.0, 0.5])
+    np.testing.assert_array_equal(scans.ranges[0], np.float32([1, 2, 3, 45]))
+    np.testing.assert_array_equal(scans.odometry[0], [1.0, 2.0, 0.5])
+    np.testing.assert_array_equal(scans.laser_pose[1], [1.1, 2.0, 0.5])
+    np.testing.assert_allclose(scans.laser_offset, [0.1 * np.cos(0.5), -0.1 * np.sin(0.5), 0.0])
+    assert scans.no_return == 40.0  # the declared max_range when the config gives none
+    assert log.summary()["scans"]["no_return_beams"] == 1
+    assert log.meta["robotlaser_scans"] == 2
+
+
+# --- malformed input: each error names the file and line ------------------------------------------
+
+GOOD = flaser([1.0, 2.0, 3.0], t=1.0)
+
+
+@pytest.mark.parametrize(
+    "bad_line, message",
+    [
+        (flaser([1.0, 2.0, 3.0]).replace("FLASER 3", "FLASER 4"), r"expected 15 fields.*found 14"),
+        (flaser([1.0, 2.0]).replace(" 2.0 ", " "), r"expected 13 fields.*found 12"),
+        (flaser([1.0, "1.5x", 3.0]), r"range 2 \(field 4\): expected a number, found '1.5x'"),
+        (flaser([1.0, 2.0], odom=(0.0, "abc", 0.0)), r"odom_y \(field 9\): expected a number"),
+        (flaser([1.0, 2.0]).replace("FLASER 2", "FLASER two"), r"beam count: expected an integer"),
+        (flaser([1.0, 2.0]).replace("FLASER 2", "FLASER -2"), r"beam count: expected at least 1"),
+        ("FLASER", r"FLASER line ends before its beam count"),
+        (flaser([1.0, 2.0], pose=("nan", 0.0, 0.0)), r"x \(field 5\): expected a finite number"),
+        (flaser([1.0], t=float("inf")), r"ipc_timestamp \(field 10\): expected a finite number"),
+        ("ODOM 1 2 3 0 0 0 5.0 h", r"ODOM line: expected 10 fields.*found 9"),
+        ("ODOM 1 2 three 0 0 0 5.0 h 5.0", r"ODOM theta \(field 4\): expected a number"),
+        ("3.0 FLASER 2 1 1", r"expected a message type such as FLASER or ODOM"),
+        (robotlaser([1.0, 2.0]).replace(" 2 1.0 2.0 0 ", " 2 1.0 2.0 x "), r"remission count"),
+        (robotlaser([1.0, 2.0]).replace("host", "host extra"), r"expected 26 fields, found 27"),
+    ],
+)
+def test_bad_line_names_file_and_line(tmp_path, bad_line, message):
+    path = write(tmp_path, ["# header", GOOD, GOOD, bad_line, GOOD])
+    with pytest.raises(DataError, match=rf"log\.clf:4: .*{message}"):
+        load_carmen(path)
+
+
+def test_bad_line_found_deep_in_a_large_group(tmp_path):
+    lines = [flaser([1.0, 2.0], t=float(k)) for k in range(500)]
+    lines[377] = flaser([1.0, "bad"], t=377.0)
+    with pytest.raises(DataError, match=r"log\.clf:378: FLASER range 2 \(field 4\).*'bad'"):
+        load_carmen(write(tmp_path, lines))
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", r"no scans"),
+        (b"# only a comment\nODOM 1 2 3 0 0 0 5 h 5\n", r"no scans .*found 1 ODOM, 1 comment"),
+        (b"FLASER 1 1.0 0 0 0 0 0 0 1.0 h 1.0\n\xff\xfe\n", r"log\.clf:2: expected text"),
+    ],
+)
+def test_empty_or_not_text(tmp_path, content, message):
+    path = tmp_path / "log.clf"
+    path.write_bytes(content)
+    with pytest.raises(DataError, match=message):
+        load_carmen(path)
+
+
+def test_truncated_gzip_names_the_file(tmp_path):
+    data = gzip.compress(("\n".join([GOOD] * 200) + "\n").encode())
+    path = tmp_path / "cut.clf.gz"
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DataError, match=r"cut\.clf\.gz: truncated gzip"):
+        load_carmen(path)
+
+
+def test_truncated_text_names_the_last_line(tmp_path):
+    text = "\n".join([GOOD, GOOD, GOOD])
+    path = tmp_path / "log.clf"
+    path.write_text(text[:-12])  # cut inside the last line
+    with pytest.raises(DataError, match=r"log\.clf:3: FLASER line: expected 14 fields"):
+        load_carmen(path)
+
+
+def test_missing_file_and_folder(tmp_path):
+    with pytest.raises(DataError, match=r"nope\.clf: CARMEN log not found"):
+        load_carmen(tmp_path / "nope.clf")
+    with pytest.raises(DataError, match=r"is a folder, expected a CARMEN log file"):
+        load_carmen(tmp_path)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root can read files without permission")
+def test_unreadable_file(tmp_path):
+    path = write(tmp_path, [GOOD])
+    path.chmod(0)
+    try:
+        with pytest.raises(DataError, match=r"log\.clf: cannot read CARMEN log"):
+            load_carmen(path)
+    finally:
+        path.chmod(0o644)
+
+
+def test_inconsistent_lidar_config_is_a_config_error(tmp_path):
+    path = write(tmp_path, [GOOD])
+    with pytest.raises(ConfigError, match=r"range_min < range_max <= no_return"):
+        load_carmen(path, lidar=LidarConfig(range_max=90.0, no_return=80.0))
+    with pytest.raises(ConfigError, match=r"lidar.fov_deg"):
+        load_carmen(path, lidar=LidarConfig(fov_deg=0.0))
+
+
+# --- fuzzing: the parser either parses or raises DataError ---------------------------------------
+
+BASE = [
+    "# comment",
+    odom_line(0.0, 0.0, 0.0, 0.5),
+    flaser([1.0, 2.0, 3.0], pose=(0.1, 0.0, 0.0), t=1.0),
+    flaser([1.5, 2.5, 3.5], t=2.0),
+    robotlaser([1.0, 2.0], remissions=(0.3,), t=3.0),
+    "PARAM a b",
+]
+TOKENS = st.sampled_from(
+    ["FLASER", "ODOM", "ROBOTLASER1", "#", "0", "1", "3", "-1", "2.5", "1e999", "nan", "inf",
+     "-inf", "x", "1_0", "0x1f", "", " ", "\t", "\x00", "é", "\u00a0", "\x1c", "\r", "99999999999"]
+)  # fmt: skip
+
+
+@st.composite
+def mutated_logs(draw) -> bytes:
+    lines = list(BASE)
+    for _ in range(draw(st.integers(1, 4))):
+        k = draw(st.integers(0, len(lines) - 1))
+        tokens = lines[k].split(" ")
+        op = draw(st.sampled_from(["drop", "insert", "replace", "truncate", "line", "dup"]))
+        pos = draw(st.integers(0, len(tokens) - 1))
+        if op == "drop":
+            del tokens[pos]
+        elif op == "insert":
+            tokens.insert(pos, draw(TOKENS))
+        elif op == "replace":
+            tokens[pos] = draw(st.one_of(TOKENS, st.text(max_size=6)))
+        elif op == "truncate":
+            tokens = tokens[:pos]
+        elif op == "line":
+            lines.insert(k, " ".join(draw(st.lists(TOKENS, max_size=8))))
+        else:
+            lines.insert(k, lines[k])
+        if op not in ("line", "dup"):
+            lines[k] = " ".join(tokens)
+    data = "\n".join(lines).encode("utf-8", errors="surrogatepass")
+    if draw(st.booleans()):
+        data = data[: draw(st.integers(0, len(data)))]
+    return data
+
+
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.one_of(mutated_logs(), st.binary(max_size=300)), compress=st.booleans())
+def test_fuzz_parses_or_raises_data_error(tmp_path, data, compress):
+    path = tmp_path / "fuzz.clf"
+    path.write_bytes(gzip.compress(data) if compress else data)
+    try:
+        log = load_carmen(path)
+    except DataError:
+        return
+    scans = log.scans
+    assert scans.ranges.dtype == np.float32
+    assert scans.ranges.shape[0] == scans.time.shape[0] == scans.odometry.shape[0] > 0
+    assert np.all(np.isfinite(scans.time)) and np.all(np.isfinite(scans.odometry))
+    assert scans.invalid_beams == int(np.count_nonzero(np.isnan(scans.ranges))) - int(
+        np.count_nonzero(np.isnan(scans.angles)) if scans.angles.ndim == 2 else 0
+    )
