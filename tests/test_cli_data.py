@@ -209,7 +209,6 @@ def test_verify_reports_a_changed_file(capsys, data_dir, tmp_path):
 
 
 def test_verify_carmen_dataset(capsys, carmen_dir):
-    pytest.importorskip("slam.io.carmen", reason="the CARMEN loader has not landed yet")
     code, out, err = _run(
         capsys, "data", "verify", "intel", "--data-dir", str(carmen_dir.parent), "--json"
     )

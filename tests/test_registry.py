@@ -32,19 +32,6 @@ NAMES = [
 ]
 
 
-def _carmen_loader_available() -> bool:
-    try:
-        import slam.io.carmen  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-needs_carmen = pytest.mark.skipif(
-    not _carmen_loader_available(), reason="slam.io.carmen has not landed yet"
-)
-
-
 # --- the shipped registry ---------------------------------------------------------------------
 
 
@@ -417,11 +404,43 @@ def test_verify_bad_file_and_absent_dataset(tmp_path):
     assert "Encoders7.npz: not a readable npz archive" in report["problems"][1]
 
 
-@needs_carmen
 def test_load_and_verify_a_carmen_dataset(carmen_dir):
-    log = load_dataset("intel", carmen_dir.parent, need=("scans",))
-    assert log.kind == "carmen" and len(log.scans) == 13631
-    report = verify_dataset("intel", carmen_dir.parent)
+    log = load_dataset("mit-csail", carmen_dir.parent, need=("scans",))
+    assert log.kind == "carmen" and log.name == "mit-csail"
+    assert len(log.scans) == 1988 and log.scans.num_beams == 361
+    with pytest.raises(DataError, match="mit-csail.clf.gz: the log has no odometry stream"):
+        load_dataset("mit-csail", carmen_dir.parent, need=("scans", "odometry"))
+    report = verify_dataset("mit-csail", carmen_dir.parent)
     assert report["status"] == "present" and report["problems"] == []
-    assert report["summary"]["scans"]["count"] == 13631
+    assert report["summary"]["scans"]["count"] == 1988
     assert [f["sha256"] for f in report["files"]] == ["ok", "ok"]
+
+
+def test_verify_with_only_the_relations_file(tmp_path, carmen_dir):
+    (tmp_path / "carmen/relations").mkdir(parents=True)
+    (tmp_path / "carmen/relations/intel.relations").symlink_to(
+        carmen_dir / "relations/intel.relations"
+    )
+    report = verify_dataset("intel", tmp_path)
+    assert report["status"] == "partial" and report["missing"] == ["carmen/intel.clf.gz"]
+    assert report["problems"] == [] and report["summary"] == {}
+    with pytest.raises(DataError, match=r"intel: missing .*carmen/intel\.clf\.gz \(a CARMEN log"):
+        load_dataset("intel", tmp_path)
+
+
+def test_ece276a_registry_paths_match_the_loader():
+    from slam.io.ece276a import rgbd_dirs, stream_file
+
+    for name in ("dataset20", "dataset21", "dataset23"):
+        d = get_dataset(name)
+        root = Path("/d")
+        for stream in ("encoders", "imu", "scans"):
+            registered = d.file_for(stream).location(root)
+            assert registered == stream_file(root / d.folder, d.number, stream)
+        if d.file_for("rgb") is not None:
+            assert d.file_for("rgb").location(root) == stream_file(
+                root / d.folder, d.number, "kinect"
+            )
+            rgb_dir, disparity_dir = rgbd_dirs(root / d.folder, d.number)
+            assert d.file_for("rgb_images").location(root) == rgb_dir
+            assert d.file_for("disparity_images").location(root) == disparity_dir
