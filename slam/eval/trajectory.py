@@ -1,0 +1,256 @@
+"""Trajectory-to-reference metrics: SE(2) alignment, ATE and RPE (pure maths, no I/O).
+
+Association
+    The reference is sorted by time and interpolated (:func:`slam.geometry.interpolate_poses`)
+    at each estimate time. Estimate poses whose time lies outside the reference's time range are
+    excluded and counted, never extrapolated.
+
+Alignment
+    :func:`align_se2` is the closed-form least-squares rigid alignment in the plane (Horn /
+    Umeyama without scale): with centred positions ``aₖ`` (estimate) and ``bₖ`` (reference),
+    ``θ = atan2(Σ aₖ × bₖ, Σ aₖ · bₖ)`` and ``t = b̄ − R(θ) ā``. The aligned estimate is
+    ``T ⊕ xₖ`` with ``T = (t, θ)``.
+
+ATE (absolute trajectory error)
+    ``‖position(T ⊕ xₖ) − position(yₖ)‖`` over the associated poses: RMSE (the headline figure),
+    mean, median, max and standard deviation, plus the RMSE of the heading error in degrees.
+
+RPE (relative pose error)
+    For pose pairs ``(i, j)`` a fixed ``delta`` apart (in frames or in seconds, see
+    :class:`DeltaUnit`), ``Eᵢⱼ = (yᵢ⁻¹ ⊕ yⱼ)⁻¹ ⊕ (xᵢ⁻¹ ⊕ xⱼ)``; translation mean, RMSE, median
+    and max of ``‖translation(Eᵢⱼ)‖``, rotation mean and RMSE of ``|rotation(Eᵢⱼ)|`` in degrees.
+    RPE does not depend on any alignment. Pairs are formed over the associated poses sorted by
+    time: in frames, ``j = i + delta``; in seconds, ``j`` is the first pose with
+    ``tⱼ ≥ tᵢ + delta`` (to 1e-6 s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slam.errors import UsageError
+from slam.geometry import compose, interpolate_poses, relative, wrap_angle
+
+F64 = NDArray[np.float64]
+
+
+class DeltaUnit(Enum):
+    """Unit of the RPE pair spacing."""
+
+    FRAMES = "frames"
+    """``delta`` poses apart (an integer)."""
+    SECONDS = "seconds"
+    """At least ``delta`` seconds apart."""
+
+
+class Alignment(Enum):
+    """How the estimate is brought into the reference frame before ATE."""
+
+    SE2 = "se2"
+    """Least-squares rotation and translation (no scale)."""
+    NONE = "none"
+    """Compare as is (both trajectories already share a frame)."""
+
+
+@dataclass(frozen=True)
+class Association:
+    """Estimate poses paired with the reference interpolated at their times (time-sorted)."""
+
+    time: F64
+    """``(M,)`` times of the associated estimate poses, non-decreasing."""
+    estimate: F64
+    """``(M, 3)`` estimate poses."""
+    reference: F64
+    """``(M, 3)`` reference poses interpolated at ``time``."""
+    excluded: int
+    """Estimate poses outside the reference's time range (not evaluated)."""
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+
+def associate(
+    est_times: ArrayLike, est_poses: ArrayLike, ref_times: ArrayLike, ref_poses: ArrayLike
+) -> Association:
+    """Pair each estimate pose with the reference interpolated at its time."""
+    est_times, est_poses = _checked(est_times, est_poses, "estimate")
+    ref_times, ref_poses = _checked(ref_times, ref_poses, "reference")
+    ref_order = np.argsort(ref_times, kind="stable")
+    ref_times, ref_poses = ref_times[ref_order], ref_poses[ref_order]
+    inside = (est_times >= ref_times[0]) & (est_times <= ref_times[-1])
+    est_order = np.argsort(est_times[inside], kind="stable")
+    time = est_times[inside][est_order]
+    estimate = est_poses[inside][est_order]
+    reference = interpolate_poses(ref_times, ref_poses, time) if time.size else np.empty((0, 3))
+    return Association(
+        time=time,
+        estimate=estimate,
+        reference=reference,
+        excluded=int(np.count_nonzero(~inside)),
+    )
+
+
+def _checked(times: ArrayLike, poses: ArrayLike, what: str) -> tuple[F64, F64]:
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if times.shape[0] != poses.shape[0]:
+        raise ValueError(f"{what}: {times.shape[0]} times for {poses.shape[0]} poses")
+    if times.size == 0:
+        raise UsageError(f"{what} trajectory has no poses")
+    return times, poses
+
+
+def align_se2(source_xy: ArrayLike, target_xy: ArrayLike) -> F64:
+    """The SE(2) transform ``T = (tx, ty, θ)`` minimising ``Σ ‖R(θ) sₖ + t − tgtₖ‖²``.
+
+    ``compose(T, pose)`` then maps a source pose into the target frame.
+    """
+    source = np.asarray(source_xy, dtype=np.float64).reshape(-1, 2)
+    target = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
+    if source.shape != target.shape or source.shape[0] == 0:
+        raise ValueError(f"cannot align {source.shape[0]} points to {target.shape[0]} points")
+    mu_s, mu_t = source.mean(axis=0), target.mean(axis=0)
+    a, b = source - mu_s, target - mu_t
+    cross = float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+    dot = float(np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    theta = math.atan2(cross, dot)
+    c, s = math.cos(theta), math.sin(theta)
+    tx = mu_t[0] - (c * mu_s[0] - s * mu_s[1])
+    ty = mu_t[1] - (s * mu_s[0] + c * mu_s[1])
+    return np.array([tx, ty, theta])
+
+
+@dataclass(frozen=True)
+class AteResult:
+    """Absolute trajectory error after alignment."""
+
+    errors: F64
+    """``(M,)`` position error of each associated pose (m)."""
+    yaw_errors: F64
+    """``(M,)`` heading error of each associated pose (rad, signed)."""
+    transform: F64
+    """``(3,)`` alignment applied to the estimate (identity with :attr:`Alignment.NONE`)."""
+
+    def summary(self) -> dict[str, float]:
+        """RMSE, mean, median, max and std of the position error; heading RMSE in degrees."""
+        e = self.errors
+        return {
+            "ate_rmse": float(np.sqrt(np.mean(e**2))),
+            "ate_mean": float(e.mean()),
+            "ate_median": float(np.median(e)),
+            "ate_max": float(e.max()),
+            "ate_std": float(e.std()),
+            "ate_rot_rmse_deg": float(np.rad2deg(np.sqrt(np.mean(self.yaw_errors**2)))),
+        }
+
+
+def ate(association: Association, alignment: Alignment = Alignment.SE2) -> AteResult:
+    """Absolute trajectory error of an association (see the module docstring)."""
+    if len(association) == 0:
+        raise UsageError(
+            "no estimate pose lies within the reference's time range: nothing to compare"
+        )
+    if alignment is Alignment.SE2:
+        transform = align_se2(association.estimate[:, :2], association.reference[:, :2])
+    else:
+        transform = np.zeros(3)
+    aligned = compose(transform, association.estimate)
+    diff = aligned[:, :2] - association.reference[:, :2]
+    return AteResult(
+        errors=np.hypot(diff[:, 0], diff[:, 1]),
+        yaw_errors=wrap_angle(aligned[:, 2] - association.reference[:, 2]),
+        transform=transform,
+    )
+
+
+@dataclass(frozen=True)
+class RpeResult:
+    """Relative pose error over pose pairs a fixed delta apart."""
+
+    trans: F64
+    """``(P,)`` translational error of each pair (m)."""
+    rot: F64
+    """``(P,)`` rotational error of each pair (rad, absolute)."""
+    delta: float
+    unit: DeltaUnit
+
+    def summary(self) -> dict[str, Any]:
+        """Translation mean/RMSE/median/max (m), rotation mean/RMSE (deg), pair count."""
+        t, r = self.trans, np.rad2deg(self.rot)
+        empty = t.size == 0
+        return {
+            "rpe_trans_mean": math.nan if empty else float(t.mean()),
+            "rpe_trans_rmse": math.nan if empty else float(np.sqrt(np.mean(t**2))),
+            "rpe_trans_median": math.nan if empty else float(np.median(t)),
+            "rpe_trans_max": math.nan if empty else float(t.max()),
+            "rpe_rot_mean_deg": math.nan if empty else float(r.mean()),
+            "rpe_rot_rmse_deg": math.nan if empty else float(np.sqrt(np.mean(r**2))),
+            "rpe_pairs": int(t.size),
+            "rpe_delta": self.delta,
+            "rpe_delta_unit": self.unit.value,
+        }
+
+
+def rpe_pairs(
+    time: ArrayLike, delta: float, unit: DeltaUnit
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Index pairs ``(i, j)`` of time-sorted poses ``delta`` apart (see the module docstring)."""
+    time = np.asarray(time, dtype=np.float64)
+    if not delta > 0:
+        raise UsageError(f"RPE delta: expected a positive value, found {delta}")
+    n = time.shape[0]
+    if unit is DeltaUnit.FRAMES:
+        if delta != int(delta):
+            raise UsageError(f"RPE delta in frames: expected a whole number, found {delta}")
+        i = np.arange(max(n - int(delta), 0), dtype=np.int64)
+        return i, i + int(delta)
+    # A microsecond of slack (the precision of TUM files) so that poses exactly delta apart
+    # pair despite rounding.
+    j = np.searchsorted(time, time + delta - 1e-6, side="left").astype(np.int64)
+    i = np.flatnonzero(j < n).astype(np.int64)
+    return i, j[i]
+
+
+def rpe(
+    association: Association, delta: float = 1, unit: DeltaUnit = DeltaUnit.FRAMES
+) -> RpeResult:
+    """Relative pose error of an association (see the module docstring)."""
+    i, j = rpe_pairs(association.time, delta, unit)
+    est = relative(association.estimate[i], association.estimate[j])
+    ref = relative(association.reference[i], association.reference[j])
+    error = relative(ref, est)
+    return RpeResult(
+        trans=np.hypot(error[:, 0], error[:, 1]),
+        rot=np.abs(error[:, 2]),
+        delta=float(delta),
+        unit=unit,
+    )
+
+
+def evaluate_against_reference(
+    est_times: ArrayLike,
+    est_poses: ArrayLike,
+    ref_times: ArrayLike,
+    ref_poses: ArrayLike,
+    *,
+    alignment: Alignment = Alignment.SE2,
+    delta: float = 1,
+    unit: DeltaUnit = DeltaUnit.FRAMES,
+) -> dict[str, Any]:
+    """ATE and RPE of an estimate against a reference, as one flat dictionary."""
+    association = associate(est_times, est_poses, ref_times, ref_poses)
+    ate_result = ate(association, alignment)
+    out: dict[str, Any] = {"matched": len(association), "excluded": association.excluded}
+    out.update(ate_result.summary())
+    out.update(rpe(association, delta, unit).summary())
+    out["alignment"] = alignment.value
+    out["alignment_x"] = float(ate_result.transform[0])
+    out["alignment_y"] = float(ate_result.transform[1])
+    out["alignment_yaw_deg"] = float(np.rad2deg(ate_result.transform[2]))
+    return out

@@ -1,0 +1,174 @@
+"""SE(2) alignment, ATE and RPE against a reference, with values computed by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from slam.errors import UsageError
+from slam.eval.trajectory import (
+    Alignment,
+    DeltaUnit,
+    align_se2,
+    associate,
+    ate,
+    evaluate_against_reference,
+    rpe,
+    rpe_pairs,
+)
+from slam.geometry import compose, transform_points
+
+
+def wiggly_trajectory(n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    times = 50.0 + np.arange(n) * 0.1
+    increments = np.column_stack(
+        [rng.uniform(0.05, 0.2, n), rng.normal(0, 0.01, n), rng.normal(0, 0.1, n)]
+    )
+    poses = np.zeros((n, 3))
+    for k in range(1, n):
+        poses[k] = compose(poses[k - 1], increments[k])
+    return times, poses
+
+
+def test_align_se2_recovers_a_known_transform():
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-10, 10, (30, 2))
+    transform = np.array([2.0, -1.0, 0.7])
+    target = transform_points(transform, points)
+    np.testing.assert_allclose(align_se2(points, target), transform, atol=1e-12)
+
+
+def test_align_se2_handles_half_turns():
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]])
+    target = transform_points(np.array([0.0, 0.0, np.pi]), points)
+    assert abs(align_se2(points, target)[2]) == pytest.approx(np.pi)
+
+
+def test_ate_is_zero_on_a_rigidly_moved_copy():
+    times, reference = wiggly_trajectory()
+    moved = compose(np.array([-3.0, 5.0, 2.5]), reference)
+    result = ate(associate(times, moved, times, reference))
+    summary = result.summary()
+    assert summary["ate_rmse"] == pytest.approx(0, abs=1e-9)
+    assert summary["ate_rot_rmse_deg"] == pytest.approx(0, abs=1e-9)
+    # The alignment is the inverse of the move.
+    np.testing.assert_allclose(compose(result.transform, moved[17]), reference[17], atol=1e-9)
+
+
+def test_ate_known_value_on_a_scaled_square():
+    # A square scaled by 1.1 about its centre: no rigid motion removes the scale, so after the
+    # best alignment (the identity, by symmetry) each corner is off by 0.1 * its radius √0.5.
+    times = np.arange(4.0)
+    reference = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    estimate = reference.copy()
+    estimate[:, :2] = 0.5 + 1.1 * (reference[:, :2] - 0.5)
+    result = ate(associate(times, estimate, times, reference))
+    expected = 0.1 * math.sqrt(0.5)
+    np.testing.assert_allclose(result.errors, expected, atol=1e-12)
+    np.testing.assert_allclose(result.transform, 0.0, atol=1e-12)
+    summary = result.summary()
+    assert summary["ate_rmse"] == pytest.approx(expected)
+    assert summary["ate_max"] == pytest.approx(expected)
+    assert summary["ate_std"] == pytest.approx(0, abs=1e-12)
+
+
+def test_ate_without_alignment_sees_the_offset():
+    times = np.arange(5.0)
+    reference = np.column_stack([times, np.zeros(5), np.zeros(5)])
+    estimate = reference + np.array([0.3, 0.4, 0.0])
+    association = associate(times, estimate, times, reference)
+    assert ate(association, Alignment.NONE).summary()["ate_rmse"] == pytest.approx(0.5)
+    assert ate(association, Alignment.SE2).summary()["ate_rmse"] == pytest.approx(0, abs=1e-12)
+
+
+def test_association_interpolates_and_excludes_outside_times():
+    ref_times = np.array([0.0, 2.0, 4.0])
+    reference = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, np.pi / 2]])
+    est_times = np.array([-1.0, 1.0, 3.0, 5.0, 6.0])
+    estimate = np.array([[9, 9, 0], [1, 0, 0], [2, 1, np.pi / 4], [9, 9, 0], [9, 9, 0]], float)
+    association = associate(est_times, estimate, ref_times, reference)
+    assert association.excluded == 3
+    np.testing.assert_array_equal(association.time, [1.0, 3.0])
+    np.testing.assert_allclose(association.reference, [[1, 0, 0], [2, 1, np.pi / 4]])
+    assert ate(association, Alignment.NONE).summary()["ate_max"] == pytest.approx(0, abs=1e-12)
+
+
+def test_association_sorts_a_reference_in_file_order():
+    ref_times = np.array([2.0, 0.0, 4.0])
+    reference = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [4.0, 0.0, 0.0]])
+    association = associate(np.array([3.0, 1.0]), np.zeros((2, 3)), ref_times, reference)
+    np.testing.assert_allclose(association.reference[:, 0], [1.0, 3.0])
+
+
+def straight_line(scale: float = 1.0, yaw_step: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Poses every second along x (each step ``scale`` m, then a turn of ``yaw_step``)."""
+    poses = np.zeros((5, 3))
+    for k in range(1, 5):
+        poses[k] = compose(poses[k - 1], [scale, 0.0, yaw_step])
+    return np.arange(5.0), poses
+
+
+def test_rpe_known_values_in_frames_and_seconds():
+    times, reference = straight_line()
+    _, estimate = straight_line(scale=1.1)  # every step 10 % too long
+    association = associate(times, estimate, times, reference)
+    one = rpe(association, 1, DeltaUnit.FRAMES).summary()
+    assert one["rpe_pairs"] == 4
+    assert one["rpe_trans_mean"] == pytest.approx(0.1)
+    assert one["rpe_trans_rmse"] == pytest.approx(0.1)
+    assert one["rpe_rot_mean_deg"] == pytest.approx(0, abs=1e-12)
+    two = rpe(association, 2, DeltaUnit.FRAMES).summary()
+    assert two["rpe_pairs"] == 3 and two["rpe_trans_mean"] == pytest.approx(0.2)
+    seconds = rpe(association, 2.0, DeltaUnit.SECONDS).summary()
+    assert seconds["rpe_pairs"] == 3 and seconds["rpe_trans_mean"] == pytest.approx(0.2)
+    assert seconds["rpe_delta_unit"] == "seconds"
+
+
+def test_rpe_rotation_error():
+    times, reference = straight_line()
+    _, estimate = straight_line(yaw_step=0.01)  # turns 0.01 rad per step, reference does not
+    one = rpe(associate(times, estimate, times, reference), 1).summary()
+    # pair k: δ = (1, 0, 0.01) vs δ* = (1, 0, 0): the error is a pure 0.01 rad turn.
+    assert one["rpe_rot_mean_deg"] == pytest.approx(math.degrees(0.01))
+    assert one["rpe_trans_mean"] == pytest.approx(0, abs=1e-12)
+
+
+def test_rpe_pairs_in_seconds_take_the_first_pose_delta_later():
+    i, j = rpe_pairs(np.array([0.0, 0.5, 1.0, 3.0, 3.2]), 1.0, DeltaUnit.SECONDS)
+    np.testing.assert_array_equal(i, [0, 1, 2])
+    np.testing.assert_array_equal(j, [2, 3, 3])
+
+
+@pytest.mark.parametrize(
+    "delta, unit, message",
+    [
+        (0, DeltaUnit.FRAMES, "expected a positive value"),
+        (-1.0, DeltaUnit.SECONDS, "expected a positive value"),
+        (1.5, DeltaUnit.FRAMES, "expected a whole number"),
+    ],
+)
+def test_rpe_bad_delta(delta, unit, message):
+    with pytest.raises(UsageError, match=message):
+        rpe_pairs(np.arange(5.0), delta, unit)
+
+
+def test_no_overlap_is_a_usage_error():
+    times, poses = straight_line()
+    with pytest.raises(UsageError, match="no estimate pose lies within the reference"):
+        evaluate_against_reference(times + 100, poses, times, poses)
+
+
+def test_evaluate_against_reference_keys():
+    times, reference = wiggly_trajectory(50)
+    moved = compose(np.array([1.0, 2.0, 0.3]), reference)
+    out = evaluate_against_reference(
+        times, moved, times, reference, delta=1.0, unit=DeltaUnit.SECONDS
+    )
+    assert out["matched"] == 50 and out["excluded"] == 0
+    assert out["ate_rmse"] == pytest.approx(0, abs=1e-9)
+    assert out["rpe_trans_mean"] == pytest.approx(0, abs=1e-9)
+    assert out["rpe_pairs"] == 40  # 10 poses per second: pairs (k, k + 10)
+    assert out["alignment_yaw_deg"] == pytest.approx(-math.degrees(0.3))
