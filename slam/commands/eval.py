@@ -1,0 +1,142 @@
+"""``slam eval RUN_DIR``: accuracy of a run's trajectory against ground truth.
+
+``--relations FILE`` applies the Kümmerle relation metric (CARMEN benchmark logs);
+``--reference FILE.tum`` computes ATE and RPE against a reference trajectory. Both may be given.
+The command reads ``RUN_DIR/trajectory.tum``, prints a table (or the JSON with ``--json``) and
+writes the same JSON to ``RUN_DIR/eval.json`` atomically (replacing an earlier one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from slam.errors import DataError, UsageError
+
+TRAJECTORY_FILE = "trajectory.tum"
+"""The trajectory a run folder holds."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``eval`` sub-command."""
+    from slam.eval.relations import DEFAULT_TOLERANCE_S
+    from slam.eval.trajectory import Alignment, DeltaUnit
+
+    parser = subparsers.add_parser(
+        "eval",
+        help="evaluate a run's trajectory (relations metric, ATE, RPE)",
+        description=__doc__.split("\n\n")[1].replace("``", "'"),
+    )
+    parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder to evaluate")
+    parser.add_argument(
+        "--relations",
+        type=Path,
+        metavar="FILE",
+        help="ground-truth relations file (t1 t2 x y z roll pitch yaw)",
+    )
+    parser.add_argument(
+        "--reference", type=Path, metavar="FILE.tum", help="reference trajectory (TUM)"
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print the JSON report instead of a table"
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        default=DEFAULT_TOLERANCE_S,
+        help=f"largest time difference (s) matching a relation to a pose (default {DEFAULT_TOLERANCE_S:g})",
+    )
+    parser.add_argument(
+        "--align",
+        choices=[a.value for a in Alignment],
+        default=Alignment.SE2.value,
+        help="alignment before ATE (default se2: least-squares rotation + translation)",
+    )
+    parser.add_argument("--delta", type=float, default=1.0, help="RPE pair spacing (default 1)")
+    parser.add_argument(
+        "--delta-unit",
+        choices=[u.value for u in DeltaUnit],
+        default=DeltaUnit.FRAMES.value,
+        help="unit of --delta (default frames)",
+    )
+    parser.set_defaults(func=run_eval)
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    """Evaluate, print and write ``eval.json``."""
+    from slam.eval.report import format_table, to_json, write_eval_json
+    from slam.io.tum import read_tum
+
+    if args.relations is None and args.reference is None:
+        raise UsageError("slam eval: give --relations FILE and/or --reference FILE.tum")
+    if not args.tolerance > 0:
+        raise UsageError(
+            f"--tolerance: expected a positive number of seconds, found {args.tolerance}"
+        )
+    run_dir: Path = args.run_dir
+    if not run_dir.is_dir():
+        raise DataError(
+            f"{run_dir}: run folder not found (expected a folder with {TRAJECTORY_FILE})"
+        )
+    times, poses = read_tum(run_dir / TRAJECTORY_FILE)
+
+    result: dict[str, Any] = {
+        "trajectory": str(run_dir / TRAJECTORY_FILE),
+        "poses": int(times.shape[0]),
+    }
+    if args.relations is not None:
+        result["relations"] = _relations(times, poses, args.relations, args.tolerance)
+    if args.reference is not None:
+        result["reference"] = str(args.reference)
+        result.update(_reference(times, poses, args))
+
+    try:
+        write_eval_json(run_dir, result)
+    except OSError as exc:
+        raise DataError(f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})") from None
+    print(to_json(result) if args.json else format_table(result), end="")
+    return 0
+
+
+def _relations(times: Any, poses: Any, path: Path, tolerance: float) -> dict[str, Any]:
+    from slam.eval.relations import relation_errors
+    from slam.io.relations import read_relations
+
+    relations = read_relations(path)
+    errors = relation_errors(times, poses, relations, tolerance)
+    if errors.count == 0:
+        raise DataError(
+            f"{path}: none of its {len(relations)} relations matches two poses of the trajectory "
+            f"within {tolerance:g} s (relations span {relations.t1.min():.6f}..{relations.t2.max():.6f} s, "
+            f"trajectory {times.min():.6f}..{times.max():.6f} s): is it the same log?"
+        )
+    summary: dict[str, Any] = {"file": str(path)}
+    summary.update(errors.summary())
+    first = errors.unmatched_index[:10]
+    summary["unmatched_first"] = [[float(relations.t1[k]), float(relations.t2[k])] for k in first]
+    if errors.unmatched:
+        print(
+            f"slam: warning: {errors.unmatched} of {errors.total} relations in {path} match no pose "
+            f"within {tolerance:g} s (first: t1={relations.t1[first[0]]:.6f}, "
+            f"t2={relations.t2[first[0]]:.6f}); the statistics cover the {errors.count} others",
+            file=sys.stderr,
+        )
+    return summary
+
+
+def _reference(times: Any, poses: Any, args: argparse.Namespace) -> dict[str, Any]:
+    from slam.eval.trajectory import Alignment, DeltaUnit, evaluate_against_reference
+    from slam.io.tum import read_tum
+
+    ref_times, ref_poses = read_tum(args.reference)
+    return evaluate_against_reference(
+        times,
+        poses,
+        ref_times,
+        ref_poses,
+        alignment=Alignment(args.align),
+        delta=args.delta,
+        unit=DeltaUnit(args.delta_unit),
+    )
