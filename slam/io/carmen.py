@@ -211,7 +211,7 @@ def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | Non
         "odom_messages": len(odom.text),
         "skipped": dict(sorted(skipped.items())),
         "skipped_lines": sum(skipped.values()),
-        "skipped_types": ", ".join(f"{k}={v}" for k, v in sorted(skipped.items())),
+        "skipped_types": ", ".join(f"{k}={v}" for k, v in sorted(skipped.items())) or "none",
         "scan_time": "ipc_timestamp",
         "laser_offset_source": offset_source,
         "laser_offset_x": float(scans.laser_offset[0]),
