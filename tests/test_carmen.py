@@ -311,6 +311,18 @@ def test_unreadable_file(tmp_path):
         path.chmod(0o644)
 
 
+def test_read_error_is_a_data_error(tmp_path, monkeypatch):
+    """Whoever runs the tests (root reads anything), an OS read error becomes one DataError."""
+    path = write(tmp_path, [GOOD])
+
+    def refuse(self):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "read_bytes", refuse)
+    with pytest.raises(DataError, match=r"log\.clf: cannot read CARMEN log \(Permission denied\)"):
+        load_carmen(path)
+
+
 def test_inconsistent_lidar_config_is_a_config_error(tmp_path):
     path = write(tmp_path, [GOOD])
     with pytest.raises(ConfigError, match=r"range_min < range_max <= no_return"):
