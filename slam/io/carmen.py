@@ -200,7 +200,7 @@ def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | Non
             f"{len(odom.text)} ODOM, {len(comments)} comment and "
             f"{sum(skipped.values())} other lines)"
         )
-    scans, offset_source = _assemble_scans(path, groups, lidar)
+    scans, offset_source = _assemble_scans(groups, lidar)
     odometry = _parse_odom(path, odom) if odom.text else None
 
     meta: dict[str, Any] = {
@@ -487,9 +487,7 @@ def _lidar_limits(lidar: LidarConfig, groups: list[_ScanGroup]) -> tuple[float, 
     return range_min, range_max, no_return
 
 
-def _assemble_scans(
-    path: Path, groups: list[_ScanGroup], lidar: LidarConfig
-) -> tuple[ScanStream, str]:
+def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanStream, str]:
     """Merge the layout groups back into file order and build the :class:`ScanStream`."""
     range_min, range_max, no_return = _lidar_limits(lidar, groups)
     order = np.concatenate([g.order for g in groups])
