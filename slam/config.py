@@ -27,7 +27,7 @@ from typing import Any
 from slam.errors import ConfigError
 from slam.resources import config_dir
 
-METHODS = ("odometry", "classic", "gmapping")
+METHODS = ("odometry", "classic", "rbpf")
 """Estimation methods of ``slam run``."""
 
 
@@ -89,22 +89,27 @@ class MapConfig:
     """Extra room added on each side when the map must grow (m)."""
     log_odds_hit: float = math.log(4.0)
     """Log-odds added to a cell where a beam ends."""
-    log_odds_miss: float = -math.log(4.0) / 4.0
+    log_odds_miss: float = -math.log(4.0)
     """Log-odds added to cells a beam passes through."""
-    log_odds_min: float = -20.0
+    log_odds_min: float = -10.0
     """Lower clamp of the log-odds."""
-    log_odds_max: float = 20.0
+    log_odds_max: float = 10.0
     """Upper clamp of the log-odds."""
     occupied_threshold: float = 0.0
     """Log-odds above which a cell counts as occupied in correlation and rendering."""
+    free_range_no_return: float = 0.0
+    """"No return" beams clear free space up to this range (m); 0 leaves them out."""
+    free_beam_stride: int = 1
+    """Cast free-space rays for every k-th beam only (hits are always integrated)."""
 
 
 @dataclass(frozen=True)
 class FilterConfig:
     """Particle filter settings shared by both methods."""
 
-    method: str = "gmapping"
-    """``"odometry"`` (dead reckoning), ``"classic"`` (course method) or ``"gmapping"`` (default)."""
+    method: str = "rbpf"
+    """``"rbpf"`` (default: per-particle maps, scan-matching proposal), ``"classic"`` (the course's
+    single-map correlation filter) or ``"odometry"`` (dead reckoning)."""
     particles: int = 30
     """Number of particles."""
     seed: int = 0
@@ -113,6 +118,12 @@ class FilterConfig:
     """Process every k-th scan."""
     max_scans: int = 0
     """Stop after this many processed scans (0: all)."""
+    resample_threshold: float = 0.5
+    """Resample when N_eff falls below this fraction of the particle count."""
+    motion_alphas: tuple[float, ...] = (0.1, 0.05, 0.05, 0.1, 0.02)
+    """Odometry noise: σx = a0·d + a1·|dθ|, σy = a2·d + a1·|dθ|, σθ = a3·|dθ| + a4·d."""
+    motion_floor: tuple[float, ...] = (0.002, 0.002, 0.002)
+    """Noise standard deviation added to every update (m, m, rad), for particle diversity."""
 
     def __post_init__(self) -> None:
         _check_choice("filter.method", self.method, METHODS)
@@ -122,6 +133,76 @@ class FilterConfig:
             raise ConfigError(f"filter.every: expected at least 1, found {self.every}")
         if self.max_scans < 0:
             raise ConfigError(f"filter.max_scans: expected 0 or more, found {self.max_scans}")
+        if not 0.0 <= self.resample_threshold <= 1.0:
+            raise ConfigError(
+                f"filter.resample_threshold: expected 0..1, found {self.resample_threshold}"
+            )
+        if len(self.motion_alphas) != 5:
+            raise ConfigError(
+                f"filter.motion_alphas: expected 5 numbers, found {len(self.motion_alphas)}"
+            )
+        if len(self.motion_floor) != 3:
+            raise ConfigError(
+                f"filter.motion_floor: expected 3 numbers, found {len(self.motion_floor)}"
+            )
+
+
+@dataclass(frozen=True)
+class RbpfConfig:
+    """The default method: Rao-Blackwellised particles, each with its own distance-field map."""
+
+    update_distance: float = 0.1
+    """Run a filter update after this much travel since the last one (m)."""
+    update_angle: float = 0.05
+    """... or after this much rotation (rad). Scans in between move particles by odometry only."""
+    match_beams: int = 360
+    """At most this many beams (evenly spread) are used for scan matching and weighting."""
+    insert_beams: int = 1081
+    """At most this many beams are inserted into the particle maps per update."""
+    tile: int = 16
+    """Tile side (cells) of the copy-on-write particle maps."""
+    dmax: float = 0.3
+    """Truncation of the distance field (m): beams further from any surface carry no gradient."""
+    sigmas: tuple[float, ...] = (0.15, 0.075, 0.04)
+    """Scan-matching sensor sigmas (m), wide to narrow; the last one scores the particles."""
+    z_hit: float = 1.0
+    """Weight of the Gaussian term of the likelihood field model."""
+    z_rand: float = 0.05
+    """Weight of the uniform (unexplained beam) term of the likelihood field model."""
+    max_iterations: int = 10
+    """Levenberg-Marquardt iterations per sigma level."""
+    min_inliers: float = 0.3
+    """Keep the predicted pose when fewer beams than this fraction lie near known surfaces."""
+    temperature: float = 10.0
+    """Log-likelihoods are divided by this before weighting (beams are not independent)."""
+    skip_insert_below: float = 0.02
+    """A hit closer than this (m) to an existing surface adds nothing to a particle's map."""
+
+    def __post_init__(self) -> None:
+        if not self.sigmas or any(s <= 0 for s in self.sigmas):
+            raise ConfigError(f"rbpf.sigmas: expected positive numbers, found {self.sigmas}")
+        if self.tile < 2:
+            raise ConfigError(f"rbpf.tile: expected at least 2, found {self.tile}")
+        if self.temperature <= 0:
+            raise ConfigError(f"rbpf.temperature: expected > 0, found {self.temperature}")
+
+
+@dataclass(frozen=True)
+class ClassicConfig:
+    """The course's method: one shared map, map correlation with a local pose search."""
+
+    beams: int = 270
+    """At most this many beams (evenly spread) are correlated."""
+    xy_radius: int = 4
+    """Local search over ±xy_radius cells in x and y (the course's 9×9 grid)."""
+    yaw_step: float = 0.01
+    """Yaw step of the local search (rad)."""
+    yaw_steps: int = 2
+    """Yaw offsets −yaw_steps..yaw_steps times yaw_step."""
+    temperature: float = 2.0
+    """Softmax temperature on the correlation counts."""
+    snap_to_best: bool = True
+    """Move each particle to its best local offset (the search acts as a scan matcher)."""
 
 
 @dataclass(frozen=True)
@@ -150,6 +231,8 @@ class Config:
     lidar: LidarConfig = field(default_factory=LidarConfig)
     map: MapConfig = field(default_factory=MapConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
+    rbpf: RbpfConfig = field(default_factory=RbpfConfig)
+    classic: ClassicConfig = field(default_factory=ClassicConfig)
     texture: TextureConfig = field(default_factory=TextureConfig)
     viz: VizConfig = field(default_factory=VizConfig)
 

@@ -1,0 +1,323 @@
+"""Maps: the dense log-odds occupancy grid and the per-particle tiled distance-field maps.
+
+Both share one cell convention: ``grid[iy, ix]`` is the cell whose lower-left corner is
+``(origin_x + ix·res, origin_y + iy·res)``, rows going up in y. Images for people are flipped so
+that +y points up on screen.
+
+* :class:`OccupancyGrid`: what a run outputs (``map.npz``, ``map.png``); Bresenham log-odds
+  updates (hit ``+log 4``, miss along the ray, clamped) through :mod:`slam.kernels.grid`; grows
+  on demand.
+* :class:`ParticleMaps`: one truncated distance field per particle, stored as copy-on-write tiles
+  (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import MapConfig
+from slam.io.atomic import atomic_path
+from slam.kernels.field import insert_hits, match_particles, recount_tiles
+from slam.kernels.grid import integrate_rays
+
+F64 = NDArray[np.float64]
+
+
+def _grow_extent(lo: float, hi: float, cur_lo: float, cur_hi: float, margin: float):
+    new_lo = min(cur_lo, lo - margin) if lo < cur_lo else cur_lo
+    new_hi = max(cur_hi, hi + margin) if hi > cur_hi else cur_hi
+    return new_lo, new_hi
+
+
+class OccupancyGrid:
+    """A dense log-odds occupancy grid that grows to contain what is integrated into it."""
+
+    def __init__(self, config: MapConfig, center: tuple[float, float] = (0.0, 0.0)) -> None:
+        self.config = config
+        self.resolution = float(config.resolution)
+        cells = max(int(np.ceil(config.initial_size_m / self.resolution)), 1)
+        self.origin = np.array(
+            [center[0] - cells * self.resolution / 2, center[1] - cells * self.resolution / 2]
+        )
+        self.log_odds = np.zeros((cells, cells), dtype=np.float32)
+
+    @classmethod
+    def from_arrays(
+        cls, log_odds: NDArray[np.float32], resolution: float, origin: F64, config: MapConfig
+    ) -> OccupancyGrid:
+        """A grid wrapping existing arrays (e.g. read back from ``map.npz``)."""
+        grid = cls.__new__(cls)
+        grid.config = config
+        grid.resolution = float(resolution)
+        grid.origin = np.asarray(origin, dtype=np.float64).copy()
+        grid.log_odds = np.ascontiguousarray(log_odds, dtype=np.float32)
+        return grid
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(rows, columns)`` of the grid."""
+        return self.log_odds.shape  # type: ignore[return-value]
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` covered by the grid (m)."""
+        h, w = self.shape
+        return (
+            float(self.origin[0]),
+            float(self.origin[1]),
+            float(self.origin[0] + w * self.resolution),
+            float(self.origin[1] + h * self.resolution),
+        )
+
+    def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
+        """Grow the grid (by at least ``grow_margin_m``) so the box lies inside it."""
+        x0, y0, x1, y1 = self.extent
+        if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+            return
+        margin = self.config.grow_margin_m
+        nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, margin)
+        ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, margin)
+        res = self.resolution
+        left = int(np.ceil((x0 - nx0) / res))
+        bottom = int(np.ceil((y0 - ny0) / res))
+        right = int(np.ceil((nx1 - x1) / res))
+        top = int(np.ceil((ny1 - y1) / res))
+        self.log_odds = np.pad(self.log_odds, ((bottom, top), (left, right)))
+        self.origin = self.origin - np.array([left * res, bottom * res])
+
+    def world_to_cell(self, xy: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Cell indices ``(..., 2)`` as ``(ix, iy)`` of world points ``(..., 2)``."""
+        return np.floor((np.asarray(xy) - self.origin) / self.resolution).astype(np.int64)
+
+    def integrate(self, sensor_xy: F64, endpoints: F64, hit: NDArray[np.bool_]) -> None:
+        """Integrate rays from ``sensor_xy`` to world ``endpoints (K, 2)``; ``hit`` marks returns."""
+        if endpoints.shape[0] == 0:
+            return
+        lo = np.minimum(endpoints.min(axis=0), sensor_xy)
+        hi = np.maximum(endpoints.max(axis=0), sensor_xy)
+        self.ensure_contains(lo[0], lo[1], hi[0], hi[1])
+        c = self.config
+        integrate_rays(
+            self.log_odds,
+            float(self.origin[0]),
+            float(self.origin[1]),
+            self.resolution,
+            float(sensor_xy[0]),
+            float(sensor_xy[1]),
+            np.ascontiguousarray(endpoints[:, 0]),
+            np.ascontiguousarray(endpoints[:, 1]),
+            np.ascontiguousarray(hit),
+            c.log_odds_hit,
+            c.log_odds_miss,
+            c.log_odds_min,
+            c.log_odds_max,
+        )
+
+    def occupied(self) -> NDArray[np.bool_]:
+        """Cells whose log-odds exceed the occupied threshold."""
+        return self.log_odds > self.config.occupied_threshold
+
+    def probability(self) -> NDArray[np.float32]:
+        """Occupancy probability ``1 − 1/(1 + e^l)`` per cell."""
+        return (1.0 - 1.0 / (1.0 + np.exp(self.log_odds))).astype(np.float32)
+
+    def to_image(self) -> NDArray[np.uint8]:
+        """Greyscale picture: occupied black, free white, unknown mid grey; +y up."""
+        p = self.probability()
+        img = (255.0 * (1.0 - p)).astype(np.uint8)
+        return np.ascontiguousarray(img[::-1])
+
+    def world_to_pixel(self, xy: F64) -> NDArray[np.int64]:
+        """Pixel ``(column, row)`` in :meth:`to_image` of world points ``(..., 2)``."""
+        h, _ = self.shape
+        cells = np.floor((np.asarray(xy) - self.origin) / self.resolution).astype(np.int64)
+        return np.stack([cells[..., 0], h - 1 - cells[..., 1]], axis=-1)
+
+    def save_npz(self, path: Path) -> None:
+        """Write ``log_odds``, ``resolution`` and ``origin`` to ``path`` atomically."""
+        with atomic_path(Path(path)) as tmp:
+            np.savez_compressed(
+                tmp,
+                log_odds=self.log_odds,
+                resolution=np.float64(self.resolution),
+                origin=self.origin.astype(np.float64),
+            )
+
+
+@dataclass
+class MatchResult:
+    """What scan matching all particles returns."""
+
+    poses: F64
+    """``(P, 3)`` refined poses (the predicted pose where the match was not trusted)."""
+    loglik: F64
+    """``(P,)`` log-likelihood of the scan at each refined pose."""
+    inliers: F64
+    """``(P,)`` fraction of beams within the distance cap of a known surface."""
+
+
+class ParticleMaps:
+    """One truncated distance-field map per particle, as shared copy-on-write tiles."""
+
+    def __init__(
+        self,
+        particles: int,
+        resolution: float,
+        dmax: float,
+        tile: int = 16,
+        center: tuple[float, float] = (0.0, 0.0),
+        size_m: float = 40.0,
+        grow_margin_m: float = 10.0,
+        capacity: int = 1024,
+    ) -> None:
+        self.resolution = float(resolution)
+        self.dmax = float(dmax)
+        self.tile = int(tile)
+        self.grow_margin_m = float(grow_margin_m)
+        tile_m = self.tile * self.resolution
+        n = max(int(np.ceil(size_m / tile_m)), 1)
+        self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
+        self.tables = np.full((particles, n, n), -1, dtype=np.int32)
+        self.pool = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
+        self.refcount = np.zeros(capacity, dtype=np.int32)
+        self.free_stack = np.arange(capacity - 1, -1, -1, dtype=np.int32)
+        self.free_top = np.array([capacity], dtype=np.int64)
+
+    @property
+    def capacity(self) -> int:
+        """Tiles allocated in the pool (used or free)."""
+        return int(self.pool.shape[0])
+
+    @property
+    def tiles_in_use(self) -> int:
+        """Tiles referenced by at least one particle."""
+        return self.capacity - int(self.free_top[0])
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the pool, the tables and the bookkeeping arrays."""
+        return int(
+            self.pool.nbytes + self.tables.nbytes + self.refcount.nbytes + self.free_stack.nbytes
+        )
+
+    def _grow_pool(self) -> None:
+        old = self.capacity
+        new = old * 2
+        pool = np.empty((new, self.tile, self.tile), dtype=np.float32)
+        pool[:old] = self.pool
+        self.pool = pool
+        self.refcount = np.concatenate([self.refcount, np.zeros(new - old, np.int32)])
+        top = int(self.free_top[0])
+        stack = np.empty(new, dtype=np.int32)
+        stack[:top] = self.free_stack[:top]
+        stack[top : top + new - old] = np.arange(new - 1, old - 1, -1, dtype=np.int32)
+        self.free_stack = stack
+        self.free_top[0] = top + new - old
+
+    def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
+        """Grow every particle's tile table so the box lies inside it."""
+        tile_m = self.tile * self.resolution
+        _, nty, ntx = self.tables.shape
+        x0, y0 = self.origin
+        x1, y1 = x0 + ntx * tile_m, y0 + nty * tile_m
+        if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+            return
+        m = self.grow_margin_m
+        nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, m)
+        ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, m)
+        left = int(np.ceil((x0 - nx0) / tile_m))
+        bottom = int(np.ceil((y0 - ny0) / tile_m))
+        right = int(np.ceil((nx1 - x1) / tile_m))
+        top = int(np.ceil((ny1 - y1) / tile_m))
+        self.tables = np.pad(
+            self.tables, ((0, 0), (bottom, top), (left, right)), constant_values=-1
+        )
+        self.origin = self.origin - np.array([left * tile_m, bottom * tile_m])
+
+    def insert(self, poses: F64, hx: F64, hy: F64, skip_below: float) -> None:
+        """Insert hits ``(hx, hy)`` (robot frame) into every particle's map at ``poses``."""
+        if hx.shape[0] == 0:
+            return
+        start = 0
+        while True:
+            stopped = insert_hits(
+                self.pool,
+                self.refcount,
+                self.free_stack,
+                self.free_top,
+                self.tables,
+                self.tile,
+                float(self.origin[0]),
+                float(self.origin[1]),
+                self.resolution,
+                self.dmax,
+                poses,
+                hx,
+                hy,
+                skip_below,
+                start,
+            )
+            if stopped < 0:
+                return
+            self._grow_pool()
+            start = stopped
+
+    def share_from(self, particle: int) -> None:
+        """Make every particle's map the map of ``particle`` (shared tiles)."""
+        self.tables[:] = self.tables[particle]
+        self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
+
+    def resample(self, indices: NDArray[np.int64]) -> None:
+        """Children share their parents' tiles; tiles nobody uses go back to the free stack."""
+        self.tables = np.ascontiguousarray(self.tables[indices])
+        self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
+
+    def match(
+        self,
+        poses: F64,
+        ex: F64,
+        ey: F64,
+        sigmas: F64,
+        z_hit: float,
+        z_rand: float,
+        max_iter: int,
+        min_inliers: float,
+    ) -> MatchResult:
+        """Scan-match every particle's predicted pose against its own map and score it."""
+        n = poses.shape[0]
+        out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n))
+        match_particles(
+            self.pool,
+            self.tables,
+            self.tile,
+            float(self.origin[0]),
+            float(self.origin[1]),
+            self.resolution,
+            self.dmax,
+            np.ascontiguousarray(poses),
+            ex,
+            ey,
+            sigmas,
+            z_hit,
+            z_rand,
+            max_iter,
+            min_inliers,
+            out.poses,
+            out.loglik,
+            out.inliers,
+        )
+        return out
+
+    def distance_image(self, particle: int) -> NDArray[np.float32]:
+        """Dense ``(H, W)`` distance field of one particle (``dmax`` where unknown)."""
+        table = self.tables[particle]
+        nty, ntx = table.shape
+        t = self.tile
+        out = np.full((nty * t, ntx * t), self.dmax, dtype=np.float32)
+        ys, xs = np.nonzero(table >= 0)
+        for ty, tx in zip(ys, xs, strict=True):
+            out[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t] = self.pool[table[ty, tx]]
+        return out

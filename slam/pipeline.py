@@ -1,0 +1,279 @@
+"""The ``slam run`` pipeline: find the data, estimate, write the run folder.
+
+``run(request)`` resolves the configuration, loads the log (a registry dataset, the simulator's
+``demo``, or a log file/folder given by path), runs the chosen method, and writes the run folder
+atomically (it appears complete or not at all):
+
+* ``config.toml``   — the exact configuration used (re-run with ``--config``);
+* ``trajectory.tum`` — one pose per processed scan (per encoder reading for ``odometry`` on
+  ECE276A logs);
+* ``map.npz``, ``map.png`` — log-odds grid (resolution, origin) and a picture with the trajectory;
+* ``metrics.json``  — sizes, timings (wall, scans/s, real-time factor, peak memory), filter
+  diagnostics, and ATE/RPE when the dataset has a ground-truth trajectory.
+
+Later stages (texture mapping, the rerun recording) plug in here; estimation itself lives in
+:mod:`slam.odometry` and :mod:`slam.particle_filter`.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import time
+import warnings
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import Config, dumps
+from slam.errors import DataError
+from slam.io.atomic import atomic_dir, atomic_path, write_text
+from slam.io.log import Log
+from slam.io.tum import format_tum, read_tum
+from slam.mapping import OccupancyGrid
+
+F64 = NDArray[np.float64]
+
+
+@dataclass
+class RunRequest:
+    """Everything ``slam run`` was asked to do."""
+
+    name: str
+    """Dataset name (registry or ``demo``) or a path to a log file or ECE276A folder."""
+    config: Config
+    """The resolved configuration."""
+    data_dir: Path
+    """The data directory."""
+    out: Path | None = None
+    """Run folder; default ``runs/<name>-<YYYYmmdd-HHMMSS>``."""
+    force: bool = False
+    """Replace an existing run folder."""
+    progress: bool = False
+    """Show a progress bar."""
+
+
+@dataclass
+class Source:
+    """A loaded log and what we know about it."""
+
+    log: Log
+    ground_truth: tuple[F64, F64] | None = None
+    """``(times, poses)`` of the true trajectory when the dataset has one (simulated logs)."""
+    notes: list[str] = field(default_factory=list)
+
+
+def _needs(config: Config) -> tuple[str, ...]:
+    if config.filter.method == "odometry":
+        return ("encoders", "imu")
+    return ("encoders", "imu", "scans")
+
+
+def _ground_truth(folder: Path) -> tuple[F64, F64] | None:
+    path = folder / "groundtruth.tum"
+    return read_tum(path) if path.is_file() else None
+
+
+def load_source(name: str, data_dir: Path, config: Config, progress: bool = False) -> Source:
+    """Load the log ``name``: the demo, a registry dataset, or a path to a log."""
+    from slam.io import registry
+
+    need = _needs(config)
+    if name == "demo":
+        from slam.io.datadir import resolve_cache_dir
+        from slam.io.ece276a import load_ece276a
+        from slam.sim.demo import DEMO_NUMBER, ensure_demo
+
+        folder = ensure_demo(resolve_cache_dir(data_dir), progress=progress)
+        log = load_ece276a(folder, DEMO_NUMBER, need=need, name="demo", lidar=config.lidar)
+        return Source(log, _ground_truth(folder), [f"demo dataset: {folder}"])
+    path = Path(name)
+    if name not in registry.load_registry() and path.exists():
+        return _load_path(path, config, need)
+    if config.filter.method == "odometry":
+        carmen = registry.get_dataset(name).loader == "carmen"
+        need = () if carmen else need
+    elif registry.get_dataset(name).loader == "carmen":
+        need = ("scans",)
+    log = registry.load_dataset(name, data_dir, need=need, config=config)
+    return Source(log)
+
+
+def _load_path(path: Path, config: Config, need: tuple[str, ...]) -> Source:
+    if path.is_dir():
+        from slam.io.ece276a import load_ece276a
+
+        numbers = sorted(p.stem[len("Encoders") :] for p in path.glob("Encoders*.npz"))
+        if len(numbers) != 1:
+            raise DataError(
+                f"{path}: expected one EncodersNN.npz in an ECE276A dataset folder, "
+                f"found {len(numbers)}"
+            )
+        log = load_ece276a(path, numbers[0], need=need, name=path.name, lidar=config.lidar)
+        return Source(log, _ground_truth(path))
+    from slam.io.carmen import load_carmen
+
+    return Source(load_carmen(path, name=path.name.split(".")[0], lidar=config.lidar))
+
+
+def default_run_dir(name: str) -> Path:
+    """``runs/<name>-<YYYYmmdd-HHMMSS>`` (with a numeric suffix if it already exists)."""
+    stem = Path(name).name.split(".")[0] or "run"
+    base = Path("runs") / f"{stem}-{datetime.now():%Y%m%d-%H%M%S}"
+    candidate, k = base, 1
+    while candidate.exists():
+        k += 1
+        candidate = base.with_name(f"{base.name}-{k}")
+    return candidate
+
+
+def path_length(poses: F64) -> float:
+    """Length of the polyline through the poses' positions (m)."""
+    if poses.shape[0] < 2:
+        return 0.0
+    return float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
+
+
+def render_map(
+    grid: OccupancyGrid, trajectory: F64, ground_truth: F64 | None = None
+) -> NDArray[np.uint8]:
+    """``map.png``: occupancy in grey, the estimated trajectory in red, ground truth in green."""
+    import cv2
+
+    img = cv2.cvtColor(grid.to_image(), cv2.COLOR_GRAY2BGR)
+    scale = max(1, int(round(800 / max(img.shape[:2]))))
+    if scale > 1:
+        img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+
+    def polyline(poses: F64, colour: tuple[int, int, int]) -> None:
+        px = (grid.world_to_pixel(poses[:, :2]) * scale + scale // 2).astype(np.int32)
+        cv2.polylines(img, [px.reshape(-1, 1, 2)], False, colour, 1, cv2.LINE_AA)
+
+    if ground_truth is not None:
+        polyline(ground_truth, (60, 170, 60))
+    polyline(trajectory, (40, 40, 220))
+    start = (grid.world_to_pixel(trajectory[0, :2]) * scale + scale // 2).astype(int)
+    cv2.circle(img, (int(start[0]), int(start[1])), 4, (220, 120, 20), -1)
+    return img
+
+
+def _peak_rss_mb() -> float:
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
+
+
+def _write_png(path: Path, image: NDArray[np.uint8]) -> None:
+    import cv2
+
+    ok, data = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError(f"{path}: PNG encoding failed")
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data.tobytes())
+
+
+def run(request: RunRequest) -> Path:
+    """Run ``slam run`` end to end; return the run folder."""
+    config = request.config
+    out = request.out or default_run_dir(request.name)
+    if out.exists() and not request.force and any(out.iterdir()):
+        raise FileExistsError(f"{out}: output folder exists and is not empty")
+    wall_start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        source = load_source(request.name, request.data_dir, config, request.progress)
+        result = _estimate(source, config, request.progress)
+    messages = sorted({str(w.message) for w in caught})
+    metrics = result.metrics
+    metrics["warnings"] = messages + source.notes
+    metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
+    metrics["peak_rss_mb"] = _peak_rss_mb()
+    if source.ground_truth is not None:
+        from slam.eval.trajectory import evaluate_against_reference
+
+        gt_times, gt_poses = source.ground_truth
+        ev = evaluate_against_reference(result.times, result.poses, gt_times, gt_poses)
+        metrics["ate_rmse"] = ev["ate_rmse"]
+        metrics["ground_truth"] = ev
+
+    with atomic_dir(out, overwrite=request.force) as tmp:
+        write_text(tmp / "config.toml", dumps(config))
+        write_text(tmp / "trajectory.tum", format_tum(result.times, result.poses))
+        if result.grid is not None:
+            result.grid.save_npz(tmp / "map.npz")
+            gt = None
+            if source.ground_truth is not None:
+                gt = source.ground_truth[1]
+            _write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
+        write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    for message in messages:
+        print(f"slam: warning: {message}", flush=True)
+    return out
+
+
+@dataclass
+class Estimate:
+    """A trajectory, an optional map and the run's metrics."""
+
+    times: F64
+    poses: F64
+    grid: OccupancyGrid | None
+    metrics: dict[str, Any]
+
+
+def _estimate(source: Source, config: Config, progress: bool) -> Estimate:
+    log = source.log
+    method = config.filter.method
+    base: dict[str, Any] = {"dataset": log.name, "method": method, "seed": config.filter.seed}
+    if method == "odometry":
+        from slam.odometry import odometry_trajectory, scan_odometry
+        from slam.particle_filter import ScanSequence, build_map
+
+        start = time.perf_counter()
+        times, poses = odometry_trajectory(log, config.robot)
+        grid = None
+        if log.scans is not None:
+            seq = ScanSequence.from_log(log, config)
+            scan_poses = scan_odometry(log, config.robot)[seq.indices]
+            grid = build_map(seq, scan_poses, np.arange(len(seq)), config)
+        wall = time.perf_counter() - start
+        duration = float(times.max() - times.min()) if times.size else 0.0
+        base.update(
+            poses=int(times.shape[0]),
+            duration_s=round(duration, 3),
+            path_length_m=round(path_length(poses), 3),
+            estimate_wall_s=round(wall, 3),
+        )
+        return Estimate(times, poses, grid, base)
+
+    from slam.particle_filter import ScanSequence, run_slam
+    from slam.progress import ProgressObserver
+
+    seq = ScanSequence.from_log(log, config)
+    observer = ProgressObserver(len(seq), enabled=progress, label=f"{log.name} {method}")
+    try:
+        result, wall = run_slam(seq, config, observer)
+    finally:
+        observer.close()
+    duration = float(seq.times.max() - seq.times.min()) if len(seq) > 1 else 0.0
+    base.update(
+        poses=int(result.times.shape[0]),
+        scans=len(seq),
+        particles=config.filter.particles,
+        duration_s=round(duration, 3),
+        path_length_m=round(path_length(result.poses), 3),
+        estimate_wall_s=round(wall, 3),
+        scans_per_s=round(len(seq) / wall, 1) if wall > 0 else None,
+        real_time_factor=round(duration / wall, 2) if wall > 0 else None,
+        n_eff_mean=round(float(result.n_eff.mean()), 2),
+        n_eff_min=round(float(result.n_eff.min()), 2),
+        resampling_count=int(result.stats.get("resamples", 0)),
+        filter=result.stats,
+        map_shape=list(result.grid.shape),
+        map_resolution=result.grid.resolution,
+        map_origin=[float(v) for v in result.grid.origin],
+    )
+    return Estimate(result.times, result.poses, result.grid, base)
