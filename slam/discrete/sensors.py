@@ -71,7 +71,7 @@ def _colour_labels(world: GridWorld, model: str) -> np.ndarray:
     if unlabelled.any():
         r, c = np.argwhere(unlabelled)[0]
         raise ConfigError(
-            f"sensor {model}: every open cell needs a colour; cell ({r}, {c}) has none"
+            f"{model} sensor: every open cell needs a colour; cell ({r}, {c}) has none"
         )
     return world.labels
 

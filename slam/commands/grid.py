@@ -1,0 +1,226 @@
+"""``slam grid``: grid-world localization with the exact histogram filter.
+
+* ``slam grid list`` — the shipped scenarios (and the Udacity cases when the data is present);
+* ``slam grid run SCENARIO [--json]`` — the posterior after every sense and every move;
+* ``slam grid study [...]`` — random colour maps: observations until one cell holds ≥ 0.999 and
+  how often that cell is the true one; a table and a PNG plot.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.errors import UsageError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``slam grid`` and its sub-commands."""
+    parser = subparsers.add_parser(
+        "grid",
+        help="grid-world localization (exact histogram filter)",
+        description="Grid-world localization: the Bayes filter on cells, computed exactly.",
+    )
+    sub = parser.add_subparsers(dest="grid_command", metavar="SUBCOMMAND")
+    sub.required = True
+
+    p_list = sub.add_parser("list", help="list the shipped scenarios")
+    add_data_dir_argument(p_list)
+    p_list.set_defaults(func=cmd_list)
+
+    p_run = sub.add_parser(
+        "run",
+        help="run a scenario and print the posterior after every step",
+        description="Run a scenario: the posterior after every sense and move, in percent.",
+    )
+    p_run.add_argument(
+        "scenario", help="shipped name (see 'slam grid list'), udacity:<case>, or a TOML file"
+    )
+    p_run.add_argument("--json", action="store_true", help="print the steps as JSON")
+    p_run.add_argument(
+        "--no-stop",
+        action="store_true",
+        help="run every step even after the stopping threshold is reached",
+    )
+    add_data_dir_argument(p_run)
+    p_run.set_defaults(func=cmd_run)
+
+    p_study = sub.add_parser(
+        "study",
+        help="localization statistics on random colour maps (table + PNG)",
+        description="Random n×n colour maps: observations until one cell holds the threshold, "
+        "and how often it is the true cell.",
+    )
+    p_study.add_argument(
+        "--sizes", default="3,5,10,20,50", help="grid sides, comma-separated (default: %(default)s)"
+    )
+    p_study.add_argument(
+        "--errors",
+        default="0.001,0.002,0.005,0.05",
+        help="sensor error probabilities, comma-separated (default: %(default)s)",
+    )
+    p_study.add_argument("--colours", type=int, default=4, help="colours (default: 4)")
+    p_study.add_argument("--trials", type=int, default=20, help="maps per setting (default: 20)")
+    p_study.add_argument(
+        "--max-steps", type=int, default=100, help="observations per trial (default: 100)"
+    )
+    p_study.add_argument(
+        "--threshold", type=float, default=0.999, help="declare at max ≥ this (default: 0.999)"
+    )
+    p_study.add_argument("--seed", type=int, default=0, help="base seed (default: 0)")
+    p_study.add_argument(
+        "--out", type=Path, default=Path("grid-study.png"), help="PNG plot (default: %(default)s)"
+    )
+    p_study.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p_study.add_argument("--quiet", action="store_true", help="no progress bar")
+    p_study.set_defaults(func=cmd_study)
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    """Print the shipped scenarios with their descriptions."""
+    from slam.discrete.scenario import (
+        UDACITY_FILE,
+        load_scenario,
+        load_udacity_cases,
+        shipped_scenarios,
+    )
+
+    for name, path in shipped_scenarios().items():
+        print(f"{name:<16} {load_scenario(path).description}")
+    cases = data_dir_from(args) / UDACITY_FILE
+    if cases.is_file():
+        names = ", ".join(s.name for s in load_udacity_cases(cases))
+        print(f"{'udacity:<case>':<16} Udacity test vectors from {cases}: {names}")
+    else:
+        print(f"{'udacity:<case>':<16} Udacity test vectors (needs {UDACITY_FILE} in --data-dir)")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run one scenario and print its posteriors."""
+    from slam.discrete.scenario import (
+        format_table,
+        posterior_json,
+        resolve_scenario,
+        run_scenario,
+        step_title,
+    )
+    from slam.discrete.world import DIRECTIONS
+
+    data_dir = data_dir_from(args) if args.scenario.startswith("udacity:") else None
+    scenario = resolve_scenario(args.scenario, data_dir)
+    if not scenario.steps:
+        raise UsageError(f"{scenario.source}: the scenario has no steps ([run] steps = [...])")
+    result = run_scenario(scenario, stop_when_localized=not args.no_stop)
+    world = scenario.world
+    if args.json:
+        out = {
+            "scenario": scenario.name,
+            "shape": list(world.shape),
+            "headings": world.headings,
+            "steps": [
+                {
+                    "after": rec.after,
+                    "action": rec.action,
+                    "posterior": posterior_json(rec.posterior, world),
+                }
+                for rec in result.steps
+            ],
+            "localized": list(result.localized_cell) if result.localized_cell else None,
+            "expected_max_error": result.expected_error,
+        }
+        json.dump(out, sys.stdout)
+        print()
+        return 0
+    print(f"Scenario {scenario.name}: {scenario.description}")
+    print(f"World:  {world.describe()}")
+    if scenario.sensor is not None:
+        print(f"Sensor: {scenario.sensor.describe()}")
+    if scenario.motion is not None:
+        print(f"Motion: {scenario.motion.describe()}")
+    for rec in result.steps:
+        print()
+        print(step_title(rec))
+        print(format_table(rec.posterior, world))
+        if world.headings > 1:
+            headings = rec.belief.sum(axis=(1, 2))
+            shares = "  ".join(
+                f"{d} {100 * p:6.2f}" for d, p in zip(DIRECTIONS, headings, strict=True)
+            )
+            print(f"Heading: {shares}")
+    if scenario.threshold is not None:
+        print()
+        if result.localized_cell is not None and result.localized_step is not None:
+            r, c = result.localized_cell
+            share = 100 * result.steps[result.localized_step].posterior[r, c]
+            senses = sum(
+                1 for rec in result.steps[: result.localized_step + 1] if rec.after == "sense"
+            )
+            print(
+                f"Localized: cell ({r}, {c}) holds {share:.2f}% (≥ {100 * scenario.threshold:g}%) "
+                f"after {senses} observations"
+            )
+        else:
+            print(f"Not localized: no cell reached {100 * scenario.threshold:g}%")
+    if result.expected_error is not None:
+        verdict = "ok" if result.expected_error <= 1e-3 else "MISMATCH"
+        print()
+        print(f"Expected posterior: max |difference| = {result.expected_error:.2e} ({verdict})")
+    return 0
+
+
+def _numbers(text: str, kind: type, name: str) -> tuple:
+    try:
+        values = tuple(kind(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise UsageError(f"--{name} {text!r}: expected comma-separated numbers") from None
+    if not values:
+        raise UsageError(f"--{name}: expected at least one value")
+    return values
+
+
+def cmd_study(args: argparse.Namespace) -> int:
+    """Run the study, print the table, write the plot."""
+    import cv2
+
+    from slam.discrete.study import StudyConfig, format_rows, rows_json, run_study, study_figure
+    from slam.io.atomic import atomic_path
+
+    config = StudyConfig(
+        sizes=_numbers(args.sizes, int, "sizes"),
+        errors=_numbers(args.errors, float, "errors"),
+        colours=args.colours,
+        trials=args.trials,
+        max_steps=args.max_steps,
+        threshold=args.threshold,
+        seed=args.seed,
+    )
+    if args.out.suffix.lower() != ".png":
+        raise UsageError(f"--out {args.out}: expected a .png file name")
+    total = len(config.sizes) * len(config.errors) * config.trials
+    bar = None
+    if show_progress(args):
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="trial", desc="grid study")
+    try:
+        rows = run_study(config, bar.update if bar is not None else None)
+    finally:
+        if bar is not None:
+            bar.close()
+    image = study_figure(rows, config)
+    with atomic_path(args.out) as tmp:
+        if not cv2.imwrite(str(tmp), image):
+            raise UsageError(f"{args.out}: OpenCV could not write the PNG")
+    if args.json:
+        json.dump({"rows": rows_json(rows), "plot": str(args.out)}, sys.stdout)
+        print()
+    else:
+        print(format_rows(rows, config))
+        seconds = sum(r.seconds for r in rows)
+        print()
+        print(f"{total} trials in {seconds:.1f} s; plot written to {args.out}")
+    return 0
