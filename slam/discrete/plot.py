@@ -1,7 +1,8 @@
 """Small line charts drawn with OpenCV (no matplotlib): the figures of ``slam grid study``.
 
 :func:`line_chart` draws one panel — axes, ticks, labelled series with markers, a legend — into
-a BGR image; :func:`side_by_side` joins panels. Writing the PNG is the caller's job (through
+a BGR image; :func:`legend_strip` draws one legend for several panels; :func:`side_by_side`
+joins panels. Writing the PNG is the caller's job (through
 :mod:`slam.io.atomic`).
 """
 
@@ -71,8 +72,9 @@ def line_chart(
     size: tuple[int, int] = (560, 420),
     log_x: bool = False,
     y_range: tuple[float, float] | None = None,
+    legend: bool = True,
 ) -> np.ndarray:
-    """One chart panel as a ``(height, width, 3)`` uint8 BGR image."""
+    """One chart panel as a ``(height, width, 3)`` uint8 BGR image (legend top right)."""
     width, height = size
     img = np.full((height, width, 3), 255, np.uint8)
     left, right, top, bottom = 70, 20, 40, 60
@@ -123,7 +125,7 @@ def line_chart(
             cv2.line(img, a, b, colour, 2, cv2.LINE_AA)
         for p in points:
             cv2.circle(img, p, 4, colour, -1, cv2.LINE_AA)
-    if series:
+    if legend:
         widths = [cv2.getTextSize(s.label, FONT, 0.45, 1)[0][0] for s in series]
         box_w, box_h = max(widths) + 54, 18 * len(series) + 8
         x0, y0 = left + pw - box_w - 8, top + 8
@@ -134,6 +136,19 @@ def line_chart(
             ly = y0 + 13 + 18 * i
             cv2.line(img, (x0 + 8, ly), (x0 + 36, ly), colour, 2, cv2.LINE_AA)
             _text(img, s.label, (x0 + 44, ly))
+    return img
+
+
+def legend_strip(labels: Sequence[str], width: int, height: int = 32) -> np.ndarray:
+    """A horizontal legend (series colours in order) to put above a group of panels."""
+    img = np.full((height, width, 3), 255, np.uint8)
+    x = 16
+    for i, label in enumerate(labels):
+        colour = PALETTE_BGR[i % len(PALETTE_BGR)]
+        cv2.line(img, (x, height // 2), (x + 28, height // 2), colour, 2, cv2.LINE_AA)
+        cv2.circle(img, (x + 14, height // 2), 4, colour, -1, cv2.LINE_AA)
+        _text(img, label, (x + 36, height // 2))
+        x += 36 + cv2.getTextSize(label, FONT, 0.45, 1)[0][0] + 28
     return img
 
 

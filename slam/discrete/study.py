@@ -27,7 +27,7 @@ import numpy as np
 
 from slam.discrete.filter import HistogramFilter, localized, sample_motion
 from slam.discrete.motion import UnknownHeading
-from slam.discrete.plot import Series, line_chart, side_by_side
+from slam.discrete.plot import Series, legend_strip, line_chart, side_by_side
 from slam.discrete.sensors import ColourSensor
 from slam.discrete.world import random_colour_world
 from slam.errors import UsageError
@@ -266,43 +266,30 @@ def study_figure(rows: Sequence[StudyRow], config: StudyConfig) -> np.ndarray:
     x_label = "grid side n (n x n cells)"
     t = f"{config.threshold:g}"
     percent = (0.0, 105.0)
+    common = {"log_x": log_x, "legend": False}
     top = side_by_side(
         [
             line_chart(
-                panels["localized"],
-                f"Trials with a cell >= {t} (%)",
-                x_label,
-                "%",
-                log_x=log_x,
-                y_range=percent,
+                panels["localized"], f"Trials with a cell >= {t} (%)", x_label, "%",
+                y_range=percent, **common,
             ),
             line_chart(
-                panels["steps"],
-                f"Observations until a cell >= {t} (median)",
-                x_label,
-                "observations",
-                log_x=log_x,
+                panels["steps"], f"Observations until a cell >= {t} (median)", x_label,
+                "observations", **common,
             ),
         ]
-    )
+    )  # fmt: skip
     bottom = side_by_side(
         [
             line_chart(
-                panels["correct"],
-                "Declared cell is the true one (%)",
-                x_label,
-                "%",
-                log_x=log_x,
-                y_range=percent,
+                panels["correct"], "Declared cell is the true one (%)", x_label, "%",
+                y_range=percent, **common,
             ),
             line_chart(
-                panels["tracked"],
-                "Most probable cell is the true one at the end (%)",
-                x_label,
-                "%",
-                log_x=log_x,
-                y_range=percent,
+                panels["tracked"], "Most probable cell is the true one at the end (%)",
+                x_label, "%", y_range=percent, **common,
             ),
         ]
-    )
-    return np.concatenate([top, bottom], axis=0)
+    )  # fmt: skip
+    labels = [s.label for s in panels["steps"]]
+    return np.concatenate([legend_strip(labels, top.shape[1]), top, bottom], axis=0)
