@@ -98,6 +98,18 @@ def test_bad_scenarios_name_file_and_key(tmp_path, change, message):
         load_scenario(write(tmp_path, text))
 
 
+def test_impossible_observation_names_the_step(tmp_path, capsys):
+    text = VALID.replace("p_correct = 0.9", "p_correct = 1.0").replace(
+        '"sense red", "move E"', '"sense red", "move E", "sense red", "sense green"'
+    )
+    text = text.replace("[run]", "[prior]\nvalues = [[0, 1, 0], [0, 0, 0]]\n[run]")
+    path = write(tmp_path, text)
+    with pytest.raises(DataError, match=r"s.toml: step 3 \(sense green\): belief sums to 0.0"):
+        run_scenario(load_scenario(path))
+    assert main(["grid", "run", str(path)]) == 2
+    assert "step 3 (sense green)" in capsys.readouterr().err
+
+
 def test_valid_scenario_loads(tmp_path):
     scenario = load_scenario(write(tmp_path, VALID))
     assert scenario.world.shape == (2, 3) and scenario.world.open_count == 5

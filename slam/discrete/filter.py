@@ -91,8 +91,8 @@ class HistogramFilter:
     belief: np.ndarray | None = None
     """``(H, R, C)`` current belief; default: uniform over open cells and headings. A ``(R, C)``
     prior is spread evenly over the headings."""
-    _likelihoods: dict = field(default_factory=dict, repr=False)
-    _spare: np.ndarray | None = field(default=None, repr=False)
+    _likelihoods: dict = field(default_factory=dict, init=False, repr=False)
+    _spare: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         for model in (self.sensor, self.motion):

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.discrete.filter import HistogramFilter, localized
+from slam.discrete.filter import HistogramFilter, ImpossibleObservation, localized
 from slam.discrete.motion import (
     DriftMotion,
     HeadingMotion,
@@ -173,10 +173,15 @@ def run_scenario(
     bayes = scenario.make_filter()
     result = RunResult(scenario)
     for i, step in enumerate(scenario.steps):
-        if step.kind == "sense":
-            bayes.update(step.value)
-        else:
-            bayes.predict(step.value)
+        try:
+            if step.kind == "sense":
+                bayes.update(step.value)
+            else:
+                bayes.predict(step.value)
+        except ImpossibleObservation as exc:
+            raise ImpossibleObservation(
+                f"{scenario.source or scenario.name}: step {i} ({step.kind} {step.text}): {exc}"
+            ) from None
         record = StepRecord(i, step.kind, format_observation(scenario, step), bayes.belief.copy())
         result.steps.append(record)
         if on_step is not None:
