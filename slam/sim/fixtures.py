@@ -1,0 +1,125 @@
+"""Test fixture "dataset20 with simulated LiDAR": real encoders, IMU and Kinect times, fake laser.
+
+The real ``Hokuyo20.npz`` is not available here, so :func:`assemble_dataset20_with_sim_lidar`
+links the real ``Encoders20.npz``, ``Imu20.npz`` and ``Kinect20.npz`` into a folder of the caller's
+choosing (a temporary folder: never the repository) and writes a ``Hokuyo20.npz`` simulated at the
+real encoder time stamps along the dead-reckoned path, inside a building grown around that path
+(:func:`slam.sim.world.world_around_path`: corridors containing the path, walls and clutter at a
+clearance from it, a loop wherever the path loops). ``slam run dataset20 --data-dir <data_dir>``
+then exercises the real code path end to end with real encoder and IMU timing.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from slam.config import RobotConfig
+from slam.errors import DataError
+from slam.geometry import compose
+from slam.io.ece276a import load_ece276a
+from slam.io.tum import write_tum
+from slam.odometry import OdometryWarning, dead_reckon_ece276a
+from slam.sim.dataset import save_npz
+from slam.sim.sensors import LidarSpec, NoiseConfig, measure_ranges, true_ranges
+from slam.sim.world import World, world_around_path
+
+REAL_FILES = ("Encoders20.npz", "Imu20.npz", "Kinect20.npz")
+
+
+@dataclass(frozen=True)
+class SimLidarDataset:
+    """Where the assembled dataset lives and what was simulated."""
+
+    data_dir: Path
+    """Data directory to pass as ``--data-dir`` (holds ``ece276a/``)."""
+    folder: Path
+    """``data_dir / "ece276a"``: the linked real files and the simulated ``Hokuyo20.npz``."""
+    world: World
+    """The building the laser was simulated in."""
+    times: np.ndarray
+    """Scan times (the real encoder time stamps)."""
+    poses: np.ndarray
+    """Robot poses at the scan times (the dead-reckoned path the building was grown around)."""
+
+
+def _link(src: Path, dst: Path) -> None:
+    try:
+        os.symlink(src.resolve(), dst)
+    except OSError:
+        shutil.copyfile(src, dst)
+
+
+def assemble_dataset20_with_sim_lidar(
+    ece276a_dir: Path, data_dir: Path, *, seed: int = 0, noise: NoiseConfig | None = None
+) -> SimLidarDataset:
+    """Assemble dataset20 with a simulated ``Hokuyo20.npz`` under ``data_dir / "ece276a"``.
+
+    ``ece276a_dir`` holds the real files (``<data dir>/ece276a``); they are symlinked (copied where
+    links are impossible) into ``data_dir``, which must not be inside the repository. The scans
+    are at the real encoder times (4956 scans at 40 Hz), from the dead-reckoned poses (encoder
+    speed + IMU yaw, :func:`slam.odometry.dead_reckon_ece276a`), with the simulator's default lidar
+    noise unless ``noise`` says otherwise. ``groundtruth.tum`` (those poses) and
+    ``groundtruth_map.npz`` are written beside them.
+    """
+    ece276a_dir = Path(ece276a_dir)
+    missing = [name for name in REAL_FILES if not (ece276a_dir / name).is_file()]
+    if missing:
+        raise DataError(
+            f"{ece276a_dir}: missing {', '.join(missing)}; the dataset20 fixture needs the real "
+            "Encoders20.npz, Imu20.npz and Kinect20.npz"
+        )
+    folder = Path(data_dir) / "ece276a"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in REAL_FILES:
+        target = folder / name
+        if not target.exists():
+            _link(ece276a_dir / name, target)
+
+    log = load_ece276a(ece276a_dir, 20, need=("encoders", "imu"))
+    assert log.encoders is not None
+    with warnings.catch_warnings():
+        # The real IMU stops ~1.7 s before the encoders; the wheels carry the yaw there.
+        warnings.simplefilter("ignore", OdometryWarning)
+        times, poses = dead_reckon_ece276a(log.encoders, log.imu, RobotConfig())
+
+    rng = np.random.default_rng(seed)
+    world = world_around_path(rng, poses[:, :2])
+    noise = NoiseConfig() if noise is None else noise
+    lidar = LidarSpec()
+    laser = compose(poses, np.array([lidar.x, 0.0, 0.0]))
+    ranges, incidence = true_ranges(world, laser, lidar)
+    ranges = measure_ranges(ranges, incidence, rng, noise, lidar)
+
+    def scalar(value: float) -> np.ndarray:
+        return np.array([[value]], dtype=np.float64)
+
+    save_npz(
+        folder / "Hokuyo20.npz",
+        {
+            "angle_min": scalar(lidar.angle_min),
+            "angle_max": scalar(lidar.angle_max),
+            "angle_increment": scalar(lidar.angle_increment),
+            "range_min": scalar(lidar.range_min),
+            "range_max": scalar(lidar.range_max),
+            "ranges": np.ascontiguousarray(ranges.T),
+            "time_stamps": times,
+        },
+    )
+    write_tum(folder / "groundtruth.tum", times, poses)
+    save_npz(
+        folder / "groundtruth_map.npz",
+        {
+            "occupancy": world.occupancy,
+            "labels": world.labels,
+            "interior": world.interior,
+            "resolution": np.float64(world.resolution),
+            "origin": np.asarray(world.origin, dtype=np.float64),
+        },
+    )
+    return SimLidarDataset(Path(data_dir), folder, world, times, poses)
