@@ -43,3 +43,14 @@ def carmen_dir(data_dir: Path) -> Path:
     if not (path / "intel.clf.gz").is_file():
         pytest.skip(f"{path}/intel.clf.gz is absent: CARMEN logs unavailable")
     return path
+
+
+@pytest.fixture(scope="session")
+def dataset20_sim_lidar(ece276a_dir: Path, tmp_path_factory: pytest.TempPathFactory):
+    """dataset20 with simulated LiDAR: the real encoders, IMU and Kinect times linked into a
+    temporary data directory plus a ``Hokuyo20.npz`` simulated along their dead-reckoned path
+    (:func:`slam.sim.fixtures.assemble_dataset20_with_sim_lidar`); skips without the real data.
+    ``.data_dir`` is the ``--data-dir`` for ``slam run dataset20``."""
+    from slam.sim.fixtures import assemble_dataset20_with_sim_lidar
+
+    return assemble_dataset20_with_sim_lidar(ece276a_dir, tmp_path_factory.mktemp("dataset20sim"))
