@@ -161,6 +161,11 @@ class RbpfConfig:
     """At most this many beams are inserted into the particle maps per update."""
     tile: int = 16
     """Tile side (cells) of the copy-on-write particle maps."""
+    resolution: float = 0.0
+    """Cell size of the particle maps (m); 0 uses ``map.resolution``."""
+    field: str = "distance"
+    """Particle-map field: ``"distance"`` (Euclidean distance to the nearest hit) or ``"plane"``
+    (signed point-to-plane distance, with normals from neighbouring beams)."""
     dmax: float = 0.3
     """Truncation of the distance field (m): beams further from any surface carry no gradient."""
     sigmas: tuple[float, ...] = (0.15, 0.075, 0.04)
@@ -175,6 +180,12 @@ class RbpfConfig:
     """Keep the predicted pose when fewer beams than this fraction lie near known surfaces."""
     temperature: float = 10.0
     """Log-likelihoods are divided by this before weighting (beams are not independent)."""
+    proposal_spread: float = 1.0
+    """Particles are drawn around their matched pose with covariance ``proposal_spread ·
+    temperature · H⁻¹`` (``H`` the matcher's Hessian); 0 keeps the matched pose."""
+    refine_passes: int = 1
+    """After the filter, re-register every scan against the map of the final trajectory this
+    many times (removes the jitter the proposal's sampling leaves; 0: off)."""
     skip_insert_below: float = 0.02
     """A hit closer than this (m) to an existing surface adds nothing to a particle's map."""
 
@@ -185,6 +196,7 @@ class RbpfConfig:
             raise ConfigError(f"rbpf.tile: expected at least 2, found {self.tile}")
         if self.temperature <= 0:
             raise ConfigError(f"rbpf.temperature: expected > 0, found {self.temperature}")
+        _check_choice("rbpf.field", self.field, ("distance", "plane"))
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ that +y points up on screen.
 * :class:`OccupancyGrid`: what a run outputs (``map.npz``, ``map.png``); Bresenham log-odds
   updates (hit ``+log 4``, miss along the ray, clamped) through :mod:`slam.kernels.grid`; grows
   on demand.
-* :class:`ParticleMaps`: one truncated distance field per particle, stored as copy-on-write tiles
-  (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
+* :class:`ParticleMaps`: one truncated signed (point-to-plane) distance field per particle, stored
+  as copy-on-write tiles (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from slam.config import MapConfig
 from slam.io.atomic import atomic_path
-from slam.kernels.field import insert_hits, match_particles, recount_tiles
+from slam.kernels.field import insert_hits, match_particles, match_scans, recount_tiles
 from slam.kernels.grid import integrate_rays
 
 F64 = NDArray[np.float64]
@@ -158,10 +158,12 @@ class MatchResult:
     """``(P,)`` log-likelihood of the scan at each refined pose."""
     inliers: F64
     """``(P,)`` fraction of beams within the distance cap of a known surface."""
+    hessian: F64
+    """``(P, 3, 3)`` Gauss-Newton Hessian of the negative log-likelihood at each refined pose."""
 
 
 class ParticleMaps:
-    """One truncated distance-field map per particle, as shared copy-on-write tiles."""
+    """One truncated signed distance-field map per particle, as shared copy-on-write tiles."""
 
     def __init__(
         self,
@@ -173,7 +175,9 @@ class ParticleMaps:
         size_m: float = 40.0,
         grow_margin_m: float = 10.0,
         capacity: int = 1024,
+        signed: bool = False,
     ) -> None:
+        self.signed = bool(signed)
         self.resolution = float(resolution)
         self.dmax = float(dmax)
         self.tile = int(tile)
@@ -182,7 +186,8 @@ class ParticleMaps:
         n = max(int(np.ceil(size_m / tile_m)), 1)
         self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
         self.tables = np.full((particles, n, n), -1, dtype=np.int32)
-        self.pool = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
+        self.dist = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
+        self.plane = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
         self.refcount = np.zeros(capacity, dtype=np.int32)
         self.free_stack = np.arange(capacity - 1, -1, -1, dtype=np.int32)
         self.free_top = np.array([capacity], dtype=np.int64)
@@ -190,7 +195,7 @@ class ParticleMaps:
     @property
     def capacity(self) -> int:
         """Tiles allocated in the pool (used or free)."""
-        return int(self.pool.shape[0])
+        return int(self.dist.shape[0])
 
     @property
     def tiles_in_use(self) -> int:
@@ -200,15 +205,20 @@ class ParticleMaps:
     def memory_bytes(self) -> int:
         """Bytes held by the pool, the tables and the bookkeeping arrays."""
         return int(
-            self.pool.nbytes + self.tables.nbytes + self.refcount.nbytes + self.free_stack.nbytes
+            self.dist.nbytes
+            + self.plane.nbytes
+            + self.tables.nbytes
+            + self.refcount.nbytes
+            + self.free_stack.nbytes
         )
 
     def _grow_pool(self) -> None:
         old = self.capacity
         new = old * 2
-        pool = np.empty((new, self.tile, self.tile), dtype=np.float32)
-        pool[:old] = self.pool
-        self.pool = pool
+        for name in ("dist", "plane"):
+            layer = np.empty((new, self.tile, self.tile), dtype=np.float32)
+            layer[:old] = getattr(self, name)
+            setattr(self, name, layer)
         self.refcount = np.concatenate([self.refcount, np.zeros(new - old, np.int32)])
         top = int(self.free_top[0])
         stack = np.empty(new, dtype=np.int32)
@@ -237,14 +247,15 @@ class ParticleMaps:
         )
         self.origin = self.origin - np.array([left * tile_m, bottom * tile_m])
 
-    def insert(self, poses: F64, hx: F64, hy: F64, skip_below: float) -> None:
-        """Insert hits ``(hx, hy)`` (robot frame) into every particle's map at ``poses``."""
+    def insert(self, poses: F64, hx: F64, hy: F64, nx: F64, ny: F64, skip_below: float) -> None:
+        """Insert hits ``(hx, hy)`` with unit normals ``(nx, ny)`` (robot frame) at ``poses``."""
         if hx.shape[0] == 0:
             return
         start = 0
         while True:
             stopped = insert_hits(
-                self.pool,
+                self.dist,
+                self.plane,
                 self.refcount,
                 self.free_stack,
                 self.free_top,
@@ -257,7 +268,10 @@ class ParticleMaps:
                 poses,
                 hx,
                 hy,
+                nx,
+                ny,
                 skip_below,
+                self.signed,
                 start,
             )
             if stopped < 0:
@@ -288,9 +302,9 @@ class ParticleMaps:
     ) -> MatchResult:
         """Scan-match every particle's predicted pose against its own map and score it."""
         n = poses.shape[0]
-        out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n))
+        out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
         match_particles(
-            self.pool,
+            self.plane,
             self.tables,
             self.tile,
             float(self.origin[0]),
@@ -308,16 +322,61 @@ class ParticleMaps:
             out.poses,
             out.loglik,
             out.inliers,
+            out.hessian,
         )
         return out
 
-    def distance_image(self, particle: int) -> NDArray[np.float32]:
-        """Dense ``(H, W)`` distance field of one particle (``dmax`` where unknown)."""
+    def register(
+        self,
+        poses: F64,
+        ex: F64,
+        ey: F64,
+        counts: NDArray[np.int64],
+        sigmas: F64,
+        z_hit: float,
+        z_rand: float,
+        max_iter: int,
+        min_inliers: float,
+        particle: int = 0,
+    ) -> F64:
+        """Refine many scan poses ``(N, 3)`` against the map of ``particle``.
+
+        Scan ``k``'s endpoints are ``ex[k, :counts[k]]``, ``ey[k, :counts[k]]`` (robot frame).
+        """
+        out = np.empty_like(poses)
+        match_scans(
+            self.plane,
+            self.tables[particle],
+            self.tile,
+            float(self.origin[0]),
+            float(self.origin[1]),
+            self.resolution,
+            self.dmax,
+            np.ascontiguousarray(poses),
+            ex,
+            ey,
+            counts,
+            sigmas,
+            z_hit,
+            z_rand,
+            max_iter,
+            min_inliers,
+            out,
+        )
+        return out
+
+    def layer_image(self, particle: int, layer: str = "dist") -> NDArray[np.float32]:
+        """Dense ``(H, W)`` copy of one particle's ``"dist"`` or ``"plane"`` layer.
+
+        Unknown cells hold ``dmax`` (``dist``) or NaN (``plane``).
+        """
         table = self.tables[particle]
+        source = self.dist if layer == "dist" else self.plane
         nty, ntx = table.shape
         t = self.tile
-        out = np.full((nty * t, ntx * t), self.dmax, dtype=np.float32)
+        fill = self.dmax if layer == "dist" else np.nan
+        out = np.full((nty * t, ntx * t), fill, dtype=np.float32)
         ys, xs = np.nonzero(table >= 0)
         for ty, tx in zip(ys, xs, strict=True):
-            out[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t] = self.pool[table[ty, tx]]
+            out[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t] = source[table[ty, tx]]
         return out

@@ -76,6 +76,11 @@ class ScanSequence:
     def __len__(self) -> int:
         return int(self.times.shape[0])
 
+    @property
+    def num_beams(self) -> int:
+        """Beams per scan (the widest scan when beam counts vary)."""
+        return int(self.ranges.shape[1])
+
     @classmethod
     def from_log(cls, log: Log, config: Config) -> ScanSequence:
         """Select the scans to process (``filter.every``, ``filter.max_scans``) with odometry."""
@@ -114,18 +119,33 @@ class ScanSequence:
 
         With ``max_beams`` the returns are thinned to at most that many, evenly spread.
         """
+        ex, ey, _, _ = self.hits_with_normals(k, max_beams)
+        return ex, ey
+
+    def hits_with_normals(self, k: int, max_beams: int = 0) -> tuple[F64, F64, F64, F64]:
+        """Robot-frame endpoints and unit surface normals ``(ex, ey, nx, ny)`` of scan ``k``.
+
+        See :func:`surface_normals`; normals are estimated before thinning to ``max_beams``.
+        """
         r = self.ranges[k].astype(np.float64)
         a = self.scan_angles(k)
         ok = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min) & (r < self.range_max)
         r = r[ok]
         a = a[ok]
+        lx, ly, lt = self.laser_offset
+        ca, sa = np.cos(lt + a), np.sin(lt + a)
+        ex = lx + r * ca
+        ey = ly + r * sa
+        nx, ny = surface_normals(ex, ey, lx, ly)
         if max_beams and r.size > max_beams:
             pick = np.linspace(0, r.size - 1, max_beams).round().astype(np.int64)
-            r = r[pick]
-            a = a[pick]
-        lx, ly, lt = self.laser_offset
-        c, s = np.cos(lt + a), np.sin(lt + a)
-        return np.ascontiguousarray(lx + r * c), np.ascontiguousarray(ly + r * s)
+            ex, ey, nx, ny = ex[pick], ey[pick], nx[pick], ny[pick]
+        return (
+            np.ascontiguousarray(ex),
+            np.ascontiguousarray(ey),
+            np.ascontiguousarray(nx),
+            np.ascontiguousarray(ny),
+        )
 
     def rays(
         self, k: int, free_range_no_return: float, stride: int = 1
@@ -150,6 +170,50 @@ class ScanSequence:
         c, s = np.cos(lt + a[keep]), np.sin(lt + a[keep])
         ends = np.stack([lx + length[keep] * c, ly + length[keep] * s], axis=1)
         return ends, hit[keep]
+
+
+def surface_normals(
+    ex: F64, ey: F64, sx: float, sy: float, gap: float = 0.1, relative_gap: float = 0.02
+) -> tuple[F64, F64]:
+    """Unit normals at scan endpoints ``(ex, ey)`` (in beam order), facing the sensor ``(sx, sy)``.
+
+    The tangent at a point is the chord between its two neighbours when both are close (closer
+    than ``gap + relative_gap·range``), else the chord to the one close neighbour; points with no
+    close neighbour (isolated returns) face the sensor along their beam.
+    """
+    n = ex.shape[0]
+    bx = sx - ex
+    by = sy - ey
+    rng = np.hypot(bx, by)
+    rng = np.where(rng > 0, rng, 1.0)
+    tx = np.zeros(n)
+    ty = np.zeros(n)
+    if n >= 2:
+        dx = np.diff(ex)
+        dy = np.diff(ey)
+        limit = gap + relative_gap * np.minimum(rng[1:], rng[:-1])
+        close = np.hypot(dx, dy) < limit
+        # chord to the next neighbour (forward) and from the previous one (backward)
+        fwd = np.zeros(n, dtype=bool)
+        bwd = np.zeros(n, dtype=bool)
+        fwd[:-1] = close
+        bwd[1:] = close
+        tx[:-1] += np.where(close, dx, 0.0)
+        ty[:-1] += np.where(close, dy, 0.0)
+        tx[1:] += np.where(close, dx, 0.0)
+        ty[1:] += np.where(close, dy, 0.0)
+        has = fwd | bwd
+    else:
+        has = np.zeros(n, dtype=bool)
+    norm = np.hypot(tx, ty)
+    has &= norm > 1e-9
+    norm = np.where(has, norm, 1.0)
+    nx = np.where(has, -ty / norm, bx / rng)
+    ny = np.where(has, tx / norm, by / rng)
+    flip = nx * bx + ny * by < 0
+    nx = np.where(flip, -nx, nx)
+    ny = np.where(flip, -ny, ny)
+    return nx, ny
 
 
 @dataclass
@@ -363,6 +427,22 @@ def run_classic(seq: ScanSequence, config: Config, observer: Observer | None = N
     )
 
 
+def sample_around(poses: F64, hessian: F64, scale: float, rng: np.random.Generator) -> F64:
+    """Draw one pose per particle from ``N(pose, scale · H⁻¹)`` (the scan-matching proposal).
+
+    ``H`` is each particle's Gauss-Newton Hessian; a tiny ridge keeps it invertible where the
+    scan does not constrain some direction (the spread there is then capped at 1 m / 1 rad).
+    """
+    ridge = np.diag([1.0, 1.0, 1.0]) * 1.0
+    cov = scale * np.linalg.inv(hessian + ridge)
+    cov = 0.5 * (cov + np.transpose(cov, (0, 2, 1)))
+    chol = np.linalg.cholesky(cov + np.eye(3) * 1e-12)
+    noise = rng.standard_normal((poses.shape[0], 3))
+    out = poses + np.einsum("pij,pj->pi", chol, noise)
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
 def _interpolate_between_updates(
     seq: ScanSequence, update_steps: NDArray[np.int64], update_poses: F64
 ) -> F64:
@@ -409,12 +489,13 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
     start = seq.odometry[0]
     maps = ParticleMaps(
         p,
-        config.map.resolution,
+        rc.resolution or config.map.resolution,
         rc.dmax,
         tile=rc.tile,
         center=(float(start[0]), float(start[1])),
         size_m=config.map.initial_size_m,
         grow_margin_m=config.map.grow_margin_m,
+        signed=rc.field == "plane",
     )
     particles = np.tile(start, (p, 1))
     logw = np.zeros(p)
@@ -425,12 +506,12 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         return float(np.sqrt((hx * hx + hy * hy).max())) if hx.size else 0.0
 
     def insert(k: int, poses: F64) -> None:
-        hx, hy = seq.hits(k, rc.insert_beams)
+        hx, hy, nx, ny = seq.hits_with_normals(k, rc.insert_beams)
         r = reach(k) + rc.dmax + 1.0
         lo = poses[:, :2].min(axis=0) - r
         hi = poses[:, :2].max(axis=0) + r
         maps.ensure_contains(lo[0], lo[1], hi[0], hi[1])
-        maps.insert(np.ascontiguousarray(poses), hx, hy, rc.skip_insert_below)
+        maps.insert(np.ascontiguousarray(poses), hx, hy, nx, ny, rc.skip_insert_below)
 
     # the first scan builds the initial map, shared by every particle
     insert(0, particles[:1])
@@ -479,6 +560,10 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
             predicted, ex, ey, sigmas, rc.z_hit, rc.z_rand, rc.max_iterations, rc.min_inliers
         )
         particles = match.poses
+        if rc.proposal_spread > 0:
+            particles = sample_around(
+                particles, match.hessian, rc.proposal_spread * rc.temperature, rng
+            )
         fallbacks += int(np.count_nonzero(match.inliers < rc.min_inliers))
         logw = logw + match.loglik / rc.temperature
         logw -= logw.max()
@@ -525,6 +610,8 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         lineage[u] = update_particles[u][best]
         best = int(update_parents[u][best])
     poses = _interpolate_between_updates(seq, steps, lineage)
+    for _ in range(rc.refine_passes):
+        poses = refine_trajectory(seq, poses, steps, config)
     grid = build_map(seq, poses, steps, config)
     return SlamResult(
         times=seq.times.copy(),
@@ -540,6 +627,60 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
             "peak_tiles": int(peak_tiles),
             "peak_particle_map_mb": round(peak_map_bytes / 2**20, 1),
         },
+    )
+
+
+def refine_trajectory(
+    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], config: Config
+) -> F64:
+    """Re-register every scan against the map built from ``poses`` at the scans ``steps``.
+
+    The filter's trajectory carries the jitter of the proposal's sampling (that is what gives it
+    the diversity to close loops); with the best lineage chosen, one map is built from it and each
+    scan's pose is refined against that map, keeping the global shape and removing the jitter.
+    """
+    rc = config.rbpf
+    res = rc.resolution or config.map.resolution
+    maps = ParticleMaps(
+        1,
+        res,
+        rc.dmax,
+        tile=rc.tile,
+        center=(float(poses[0, 0]), float(poses[0, 1])),
+        size_m=config.map.initial_size_m,
+        grow_margin_m=config.map.grow_margin_m,
+        signed=rc.field == "plane",
+    )
+    reach = 0.0
+    for k in steps:
+        hx, hy, nx, ny = seq.hits_with_normals(int(k), rc.insert_beams)
+        if hx.size == 0:
+            continue
+        reach = max(reach, float(np.sqrt((hx * hx + hy * hy).max())))
+        pose = poses[k : k + 1]
+        r = reach + rc.dmax + 1.0
+        maps.ensure_contains(pose[0, 0] - r, pose[0, 1] - r, pose[0, 0] + r, pose[0, 1] + r)
+        maps.insert(np.ascontiguousarray(pose), hx, hy, nx, ny, rc.skip_insert_below)
+    n = len(seq)
+    width = max(1, min(rc.match_beams or seq.num_beams, seq.num_beams))
+    ex = np.zeros((n, width))
+    ey = np.zeros((n, width))
+    counts = np.zeros(n, dtype=np.int64)
+    for k in range(n):
+        hx, hy = seq.hits(k, width)
+        counts[k] = hx.size
+        ex[k, : hx.size] = hx
+        ey[k, : hy.size] = hy
+    return maps.register(
+        poses,
+        ex,
+        ey,
+        counts,
+        np.asarray(rc.sigmas, np.float64),
+        rc.z_hit,
+        rc.z_rand,
+        rc.max_iterations,
+        rc.min_inliers,
     )
 
 

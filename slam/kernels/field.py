@@ -1,17 +1,27 @@
 """Distance-field kernels for per-particle maps stored as shared, copy-on-write tiles.
 
-Each particle's map is a truncated Euclidean distance field: cell ``c`` holds the distance from
-its centre to the nearest laser hit ever inserted in that particle's map, capped at ``dmax``.
-Hits keep their exact (sub-cell) positions, so the field locates walls more finely than the cell
-size, and bilinear interpolation gives a smooth distance with a gradient that points away from
-the nearest surface, which is what the Gauss-Newton scan matcher follows.
+Each particle's map is a truncated *signed point-to-plane* distance field. For every cell within
+``dmax`` of a laser hit, the hit ``h`` nearest to the cell centre ``c`` (Euclidean distance, kept in
+``dist``) is selected and the cell stores ``(c − h)·n`` in ``plane``, where ``n`` is the surface
+normal at the hit (estimated from the neighbouring beams, pointing towards the sensor). Cells with
+no hit within ``dmax`` hold NaN: unknown. A cell more than one cell size away from its hit along
+the surface (past the end of a wall, beside an isolated return) gets the offset beyond that
+blended in, ``sign(p)·sqrt(p² + (|t| − res)²)`` with ``p`` the plane and ``t`` the tangential
+offset, so a return never stands for a wall it did not see.
+
+Why signed and planar: the plane distance is a linear function of position across a straight
+wall, so bilinear interpolation reproduces it exactly and its zero crossing lies on the wall, to
+sub-cell precision. An unsigned distance field, interpolated, has its minimum at the cell centre
+nearest the wall instead, which biases scan matching by up to half a cell. The gradient of the
+plane distance is the surface normal, so the Gauss-Newton matcher behaves like point-to-plane ICP.
 
 Storage (the layout GMapping uses for its particle maps, made flat for numba):
 
-* ``pool[t]`` is a ``T × T`` tile of distances; ``refcount[t]`` counts the particles using it;
+* ``dist[t]`` and ``plane[t]`` are the two ``T × T`` layers of tile ``t``; ``refcount[t]`` counts
+  the particles using it;
   free tiles are on the stack ``free_stack[:free_top[0]]``;
 * ``tables[p, ty, tx]`` is the tile of particle ``p`` at tile coordinates ``(tx, ty)``, or -1
-  for unknown space (distance ``dmax``);
+  for unknown space;
 * resampling copies only the small tables (children share their parent's tiles); a particle that
   writes to a shared tile copies it first (copy on write), so maps diverge only where particles
   learned something different.
@@ -43,18 +53,20 @@ def cell_distance(
 
 
 @njit(cache=True)
-def distance_at(
-    pool: np.ndarray,
+def plane_distance_at(
+    plane: np.ndarray,
     table: np.ndarray,
     tile: int,
     ox: float,
     oy: float,
     res: float,
-    dmax: float,
     x: float,
     y: float,
 ) -> tuple[float, float, float]:
-    """Bilinearly interpolated distance at world point ``(x, y)`` and its gradient."""
+    """Bilinearly interpolated signed plane distance at ``(x, y)`` and its gradient.
+
+    Returns NaN (and a zero gradient) where any of the four cells around the point is unknown.
+    """
     gx = (x - ox) / res - 0.5
     gy = (y - oy) / res - 0.5
     fx0 = np.floor(gx)
@@ -63,39 +75,52 @@ def distance_at(
     iy = int(fy0)
     fx = gx - fx0
     fy = gy - fy0
-    tx = ix // tile if ix >= 0 else -1
-    ty = iy // tile if iy >= 0 else -1
+    if ix < 0 or iy < 0:
+        return np.nan, 0.0, 0.0
+    tx = ix // tile
+    ty = iy // tile
     lx = ix - tx * tile
     ly = iy - ty * tile
-    if (
-        tx >= 0
-        and ty >= 0
-        and lx < tile - 1
-        and ly < tile - 1
-        and ty < table.shape[0]
-        and tx < table.shape[1]
-    ):
+    nty = table.shape[0]
+    ntx = table.shape[1]
+    if lx < tile - 1 and ly < tile - 1:
+        if ty >= nty or tx >= ntx:
+            return np.nan, 0.0, 0.0
         t = table[ty, tx]
         if t < 0:
-            return dmax, 0.0, 0.0
-        d00 = pool[t, ly, lx]
-        d10 = pool[t, ly, lx + 1]
-        d01 = pool[t, ly + 1, lx]
-        d11 = pool[t, ly + 1, lx + 1]
+            return np.nan, 0.0, 0.0
+        d00 = plane[t, ly, lx]
+        d10 = plane[t, ly, lx + 1]
+        d01 = plane[t, ly + 1, lx]
+        d11 = plane[t, ly + 1, lx + 1]
     else:
-        d00 = cell_distance(pool, table, tile, ix, iy, dmax)
-        d10 = cell_distance(pool, table, tile, ix + 1, iy, dmax)
-        d01 = cell_distance(pool, table, tile, ix, iy + 1, dmax)
-        d11 = cell_distance(pool, table, tile, ix + 1, iy + 1, dmax)
+        d00 = _cell(plane, table, tile, ix, iy)
+        d10 = _cell(plane, table, tile, ix + 1, iy)
+        d01 = _cell(plane, table, tile, ix, iy + 1)
+        d11 = _cell(plane, table, tile, ix + 1, iy + 1)
     d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
+    if np.isnan(d):
+        return np.nan, 0.0, 0.0
     ddx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) / res
     ddy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) / res
     return d, ddx, ddy
 
 
 @njit(cache=True)
+def _cell(layer: np.ndarray, table: np.ndarray, tile: int, ix: int, iy: int) -> float:
+    tx = ix // tile
+    ty = iy // tile
+    if ty >= table.shape[0] or tx >= table.shape[1]:
+        return np.nan
+    t = table[ty, tx]
+    if t < 0:
+        return np.nan
+    return layer[t, iy - ty * tile, ix - tx * tile]
+
+
+@njit(cache=True)
 def normal_equations(
-    pool: np.ndarray,
+    plane: np.ndarray,
     table: np.ndarray,
     tile: int,
     ox: float,
@@ -116,10 +141,10 @@ def normal_equations(
     """One pass over the beams at pose ``(x, y, th)``: cost, Gauss-Newton system, inliers.
 
     The cost is the negative log-likelihood ``Σ −log(z_hit·exp(−d²/2σ²) + z_rand)`` of the
-    endpoints ``(ex, ey)`` (robot frame) in the distance field. ``h`` and ``g`` receive the
-    Gauss-Newton approximation of its Hessian and its gradient, each beam weighted by its
-    responsibility ``γ = z_hit·φ / (z_hit·φ + z_rand)``. Returns the cost and the number of beams
-    closer than ``dmax`` to a known surface.
+    endpoints ``(ex, ey)`` (robot frame), ``d`` the signed plane distance (``dmax`` where unknown).
+    ``h`` and ``g`` receive the Gauss-Newton approximation of its Hessian and its gradient, each
+    beam weighted by its responsibility ``γ = z_hit·φ / (z_hit·φ + z_rand)``. Returns the cost and
+    the number of beams that fall on known cells.
     """
     inv = 0.5 / (sigma * sigma)
     inv_var = 1.0 / (sigma * sigma)
@@ -132,11 +157,12 @@ def normal_equations(
     for b in range(ex.shape[0]):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
-        d, gx, gy = distance_at(pool, table, tile, ox, oy, res, dmax, x + rx, y + ry)
+        d, gx, gy = plane_distance_at(plane, table, tile, ox, oy, res, x + rx, y + ry)
+        if np.isnan(d):
+            cost -= np.log(z_hit * np.exp(-dmax * dmax * inv) + z_rand)
+            continue
         phi = z_hit * np.exp(-d * d * inv)
         cost -= np.log(phi + z_rand)
-        if d >= dmax:
-            continue
         inliers += 1
         wgt = phi / (phi + z_rand) * inv_var
         j2 = -gx * ry + gy * rx
@@ -178,7 +204,7 @@ def _solve3(h: np.ndarray, g: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def match_one(
-    pool: np.ndarray,
+    plane: np.ndarray,
     table: np.ndarray,
     tile: int,
     ox: float,
@@ -211,7 +237,7 @@ def match_one(
     for level in range(sigmas.shape[0]):
         sigma = sigmas[level]
         cost, inliers = normal_equations(
-            pool, table, tile, ox, oy, res, dmax, x, y, th, ex, ey, sigma, z_hit, z_rand, h, g
+            plane, table, tile, ox, oy, res, dmax, x, y, th, ex, ey, sigma, z_hit, z_rand, h, g
         )
         lam = 1e-3
         for _ in range(max_iter):
@@ -223,7 +249,7 @@ def match_one(
             ny = y - step[1]
             nth = th - step[2]
             new_cost, new_inliers = normal_equations(
-                pool, table, tile, ox, oy, res, dmax, nx, ny, nth, ex, ey, sigma, z_hit, z_rand,
+                plane, table, tile, ox, oy, res, dmax, nx, ny, nth, ex, ey, sigma, z_hit, z_rand,
                 hc, gc,
             )  # fmt: skip
             if new_cost < cost:
@@ -246,7 +272,7 @@ def match_one(
 
 @njit(cache=True, parallel=True)
 def match_particles(
-    pool: np.ndarray,
+    plane: np.ndarray,
     tables: np.ndarray,
     tile: int,
     ox: float,
@@ -264,30 +290,36 @@ def match_particles(
     out_poses: np.ndarray,
     out_loglik: np.ndarray,
     out_inliers: np.ndarray,
+    out_hessian: np.ndarray,
 ) -> None:
     """Scan-match every particle against its own map (the proposal), then score it.
 
     For each particle: refine its predicted pose with :func:`match_one`; if fewer than
-    ``min_inliers`` of the beams then lie within ``dmax`` of a known surface the match is not
+    ``min_inliers`` of the beams then fall on known cells (within ``dmax`` of a surface) the match is not
     trusted and the predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at
-    the final pose with the narrowest sigma; ``out_inliers`` the fraction of beams near a surface.
+    the final pose with the narrowest sigma; ``out_inliers`` the fraction of beams near a surface;
+    ``out_hessian`` the Gauss-Newton Hessian of the negative log-likelihood there (its inverse is
+    the covariance of the match, the spread of the proposal).
     """
     sigma = sigmas[sigmas.shape[0] - 1]
     nbeams = max(ex.shape[0], 1)
     for p in prange(poses.shape[0]):
         table = tables[p]
         refined, cost, inliers = match_one(
-            pool, table, tile, ox, oy, res, dmax, poses[p], ex, ey, sigmas, z_hit, z_rand, max_iter
+            plane, table, tile, ox, oy, res, dmax, poses[p], ex, ey, sigmas, z_hit, z_rand, max_iter
         )
         frac = inliers / nbeams
         if frac < min_inliers:
             refined = poses[p].copy()
-            h = np.zeros((3, 3))
-            g = np.zeros(3)
-            cost, inliers = normal_equations(
-                pool, table, tile, ox, oy, res, dmax, refined[0], refined[1], refined[2],
-                ex, ey, sigma, z_hit, z_rand, h, g,
-            )  # fmt: skip
+        h = np.zeros((3, 3))
+        g = np.zeros(3)
+        cost, inliers = normal_equations(
+            plane, table, tile, ox, oy, res, dmax, refined[0], refined[1], refined[2],
+            ex, ey, sigma, z_hit, z_rand, h, g,
+        )  # fmt: skip
+        for a in range(3):
+            for b in range(3):
+                out_hessian[p, a, b] = h[a, b]
         out_poses[p, 0] = refined[0]
         out_poses[p, 1] = refined[1]
         out_poses[p, 2] = refined[2]
@@ -297,7 +329,8 @@ def match_particles(
 
 @njit(cache=True)
 def insert_hits(
-    pool: np.ndarray,
+    dist: np.ndarray,
+    plane: np.ndarray,
     refcount: np.ndarray,
     free_stack: np.ndarray,
     free_top: np.ndarray,
@@ -310,18 +343,23 @@ def insert_hits(
     poses: np.ndarray,
     hx: np.ndarray,
     hy: np.ndarray,
+    nx: np.ndarray,
+    ny: np.ndarray,
     skip_below: float,
+    signed: bool,
     start: int,
 ) -> int:
-    """Insert hit points ``(hx, hy)`` (robot frame) into every particle's map from ``start`` on.
+    """Insert hits ``(hx, hy)`` with normals ``(nx, ny)`` (robot frame) into every particle's map.
 
-    A hit adds nothing new, and is skipped, when the cell it falls in already stores a distance
-    within ``skip_below`` of the hit's own distance to that cell's centre: a surface point about
-    as close is known (this keeps re-observed walls from copying tiles). Otherwise every cell within
-    ``dmax`` of the hit takes ``min(current, distance to the hit)``; a shared tile is copied
-    before its first write, a missing one is allocated. Returns -1 when done, or the index of the
-    particle that ran out of free tiles (the caller grows the pool and calls again from there;
-    re-inserting is harmless because the update is a minimum).
+    Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
+    Euclidean distance (``dist``) and, in ``plane``, its signed plane distance when ``signed``
+    (else the Euclidean distance again: the unsigned field). A hit adds nothing new,
+    and is skipped, when the cell it falls in already knows a hit about as close (within
+    ``skip_below``) as this one: re-observed walls then neither copy tiles nor move the field. A
+    shared tile is copied before its first write, a missing one allocated. Particles from
+    ``start`` on are processed. Returns -1 when done, or the index of the particle that ran out of
+    free tiles (the caller grows the pool and calls again from there; re-inserting is harmless
+    because each cell keeps its nearest hit).
     """
     radius = int(np.ceil(dmax / res))
     ntile_y = tables.shape[1]
@@ -333,10 +371,12 @@ def insert_hits(
         for k in range(hx.shape[0]):
             wx = poses[p, 0] + c * hx[k] - s * hy[k]
             wy = poses[p, 1] + s * hx[k] + c * hy[k]
+            wnx = c * nx[k] - s * ny[k]
+            wny = s * nx[k] + c * ny[k]
             cx = int(np.floor((wx - ox) / res))
             cy = int(np.floor((wy - oy) / res))
             own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
-            if cell_distance(pool, table, tile, cx, cy, dmax) <= own + skip_below:
+            if cell_distance(dist, table, tile, cx, cy, dmax) <= own + skip_below:
                 continue
             for iy in range(cy - radius, cy + radius + 1):
                 if iy < 0 or iy >= ntile_y * tile:
@@ -347,8 +387,8 @@ def insert_hits(
                     if ix < 0 or ix >= ntile_x * tile:
                         continue
                     ccx = ox + (ix + 0.5) * res - wx
-                    dist = np.sqrt(ccx * ccx + ccy * ccy)
-                    if dist >= dmax:
+                    d = np.sqrt(ccx * ccx + ccy * ccy)
+                    if d >= dmax:
                         continue
                     tx = ix // tile
                     t = table[ty, tx]
@@ -358,17 +398,27 @@ def insert_hits(
                         free_top[0] -= 1
                         new = free_stack[free_top[0]]
                         if t < 0:
-                            pool[new, :, :] = dmax
+                            dist[new, :, :] = dmax
+                            plane[new, :, :] = np.nan
                         else:
-                            pool[new, :, :] = pool[t, :, :]
+                            dist[new, :, :] = dist[t, :, :]
+                            plane[new, :, :] = plane[t, :, :]
                             refcount[t] -= 1
                         refcount[new] = 1
                         table[ty, tx] = new
                         t = new
                     ly = iy - ty * tile
                     lx = ix - tx * tile
-                    if dist < pool[t, ly, lx]:
-                        pool[t, ly, lx] = dist
+                    if d < dist[t, ly, lx]:
+                        dist[t, ly, lx] = d
+                        if not signed:
+                            plane[t, ly, lx] = d
+                            continue
+                        normal = ccx * wnx + ccy * wny
+                        beyond = abs(ccy * wnx - ccx * wny) - res
+                        if beyond > 0.0:
+                            normal = np.copysign(np.sqrt(normal * normal + beyond * beyond), normal)
+                        plane[t, ly, lx] = normal
     return -1
 
 
@@ -390,3 +440,43 @@ def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarr
             free_stack[top] = t
             top += 1
     return top
+
+
+@njit(cache=True, parallel=True)
+def match_scans(
+    plane: np.ndarray,
+    table: np.ndarray,
+    tile: int,
+    ox: float,
+    oy: float,
+    res: float,
+    dmax: float,
+    poses: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    counts: np.ndarray,
+    sigmas: np.ndarray,
+    z_hit: float,
+    z_rand: float,
+    max_iter: int,
+    min_inliers: float,
+    out_poses: np.ndarray,
+) -> None:
+    """Register many scans against one map: scan ``k`` has ``counts[k]`` endpoints in row ``k``.
+
+    Each pose is refined with :func:`match_one`; it is kept unchanged when fewer than
+    ``min_inliers`` of its beams then fall on known cells.
+    """
+    for k in prange(poses.shape[0]):
+        n = counts[k]
+        if n == 0:
+            out_poses[k] = poses[k]
+            continue
+        refined, _, inliers = match_one(
+            plane, table, tile, ox, oy, res, dmax, poses[k], ex[k, :n], ey[k, :n], sigmas,
+            z_hit, z_rand, max_iter,
+        )  # fmt: skip
+        if inliers < min_inliers * n:
+            out_poses[k] = poses[k]
+        else:
+            out_poses[k] = refined

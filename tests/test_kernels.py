@@ -1,0 +1,229 @@
+"""Kernel unit tests with numbers: Bresenham, log-odds, correlation, resampling, motion, fields."""
+
+import numpy as np
+import pytest
+
+from slam.kernels.field import plane_distance_at, recount_tiles
+from slam.kernels.grid import bresenham, integrate_rays
+from slam.kernels.motion import sample_motion
+from slam.kernels.resample import effective_sample_size, systematic_resample
+from slam.kernels.scan import correlation, correlation_search
+from slam.mapping import ParticleMaps
+
+
+def reference_line(x0, y0, x1, y1):
+    """Cells of the segment by the textbook error-accumulation Bresenham (Wikipedia 'all cases')."""
+    cells = []
+    dx, dy = abs(x1 - x0), -abs(y1 - y0)
+    sx = 1 if x0 < x1 else -1
+    sy = 1 if y0 < y1 else -1
+    err = dx + dy
+    x, y = x0, y0
+    while True:
+        cells.append((x, y))
+        if x == x1 and y == y1:
+            return cells
+        e2 = 2 * err
+        if e2 >= dy:
+            err += dy
+            x += sx
+        if e2 <= dx:
+            err += dx
+            y += sy
+
+
+ENDS = [
+    (7, 3),
+    (3, 7),
+    (-3, 7),
+    (-7, 3),
+    (-7, -3),
+    (-3, -7),
+    (3, -7),
+    (7, -3),
+    (5, 5),
+    (0, 6),
+    (6, 0),
+    (0, 0),
+]
+
+
+@pytest.mark.parametrize("end", ENDS)
+def test_bresenham_matches_reference_in_every_octant(end):
+    x1, y1 = end
+    ours = [tuple(c) for c in bresenham(0, 0, x1, y1)]
+    ref = reference_line(0, 0, x1, y1)
+    assert ours[0] == (0, 0) and ours[-1] == (x1, y1)
+    assert len(ours) == max(abs(x1), abs(y1)) + 1
+    assert ours == ref
+    if x1 or y1:
+        # 8-connected, and never more than half a cell (along the minor axis) off the ideal line
+        assert np.abs(np.diff(np.array(ours), axis=0)).max() <= 1
+        for x, y in ours:
+            off = abs(x * y1 - y * x1) / max(abs(x1), abs(y1))
+            assert off <= 0.5 + 1e-9
+
+
+@pytest.mark.parametrize("end", ENDS[:8])
+def test_bresenham_both_directions_cover_the_same_length(end):
+    forward = bresenham(0, 0, *end)
+    backward = bresenham(end[0], end[1], 0, 0)
+    assert len(forward) == len(backward)
+    assert tuple(backward[0]) == end and tuple(backward[-1]) == (0, 0)
+
+
+def test_integrate_rays_hits_and_misses_and_clamps():
+    grid = np.zeros((10, 10), dtype=np.float32)
+    # sensor at the centre of cell (1, 1), a ray along +x to cell (6, 1)
+    args = (0.0, 0.0, 1.0, 1.5, 1.5)
+    ex, ey, hit = np.array([6.5]), np.array([1.5]), np.array([True])
+    integrate_rays(grid, *args, ex, ey, hit, 1.0, -0.5, -2.0, 3.0)
+    np.testing.assert_allclose(grid[1, 1:6], -0.5)
+    assert grid[1, 6] == pytest.approx(1.0)
+    assert grid[1, 7] == 0.0 and grid[2, 6] == 0.0
+    for _ in range(10):
+        integrate_rays(grid, *args, ex, ey, hit, 1.0, -0.5, -2.0, 3.0)
+    assert grid[1, 6] == pytest.approx(3.0)  # clamped at l_max
+    np.testing.assert_allclose(grid[1, 1:6], -2.0)  # clamped at l_min
+    # a free-space-only ray (no return) does not mark its end as occupied
+    integrate_rays(
+        grid, *args, np.array([1.5]), np.array([8.5]), np.array([False]), 1.0, -0.5, -2.0, 3.0
+    )
+    assert grid[8, 1] == pytest.approx(-0.5)
+
+
+def test_correlation_counts_endpoints_on_occupied_cells():
+    occupied = np.zeros((20, 20), dtype=np.bool_)
+    occupied[10, 5:15] = True  # a wall along y = 10..11 (cells of 1 m)
+    ex = np.arange(0.0, 10.0) + 0.5  # endpoints in the robot frame
+    ey = np.full(10, 5.5)
+    pose = np.array([5.0, 5.0, 0.0])
+    assert correlation(occupied, 0.0, 0.0, 1.0, pose, ex, ey) == 10
+    assert correlation(occupied, 0.0, 0.0, 1.0, np.array([5.0, 3.0, 0.0]), ex, ey) == 0
+    # a local search from 2 cells below finds the full correlation at dy = +2
+    poses = np.array([[5.0, 3.0, 0.0], [3.0, 5.0, 0.0]])
+    corr = np.empty(2, dtype=np.int64)
+    offsets = np.empty((2, 3))
+    correlation_search(occupied, 0.0, 0.0, 1.0, poses, ex, ey, 2, np.array([0.0]), corr, offsets)
+    assert corr[0] == 10
+    np.testing.assert_allclose(offsets[0], [0.0, 2.0, 0.0])
+    # from 2 cells left, 8 of 10 endpoints are on the wall; the search finds all 10 at dx = +2
+    assert correlation(occupied, 0.0, 0.0, 1.0, poses[1], ex, ey) == 8
+    assert corr[1] == 10
+    np.testing.assert_allclose(offsets[1], [2.0, 0.0, 0.0])
+
+
+def test_effective_sample_size():
+    assert effective_sample_size(np.full(50, 1 / 50)) == pytest.approx(50.0)
+    assert effective_sample_size(np.array([1.0, 0.0, 0.0])) == pytest.approx(1.0)
+    assert effective_sample_size(np.array([0.5, 0.5, 0.0, 0.0])) == pytest.approx(2.0)
+
+
+def test_systematic_resampling_copies_within_one_of_expected():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        w = rng.random(40) ** 3
+        w /= w.sum()
+        idx = systematic_resample(w, rng.random())
+        copies = np.bincount(idx, minlength=40)
+        assert copies.sum() == 40
+        assert np.all(np.abs(copies - 40 * w) < 1.0 + 1e-9)
+        assert np.all(np.diff(idx) >= 0)
+
+
+def test_motion_model_mean_and_covariance():
+    rng = np.random.default_rng(7)
+    n = 200_000
+    poses = np.zeros((n, 3))
+    inc = np.array([1.0, 0.0, 0.2])
+    alphas = np.array([0.1, 0.05, 0.02, 0.1, 0.03])
+    floor = np.array([0.01, 0.01, 0.005])
+    out = sample_motion(poses, inc, rng.standard_normal((n, 3)), alphas, floor)
+    d, a = 1.0, 0.2
+    sx = alphas[0] * d + alphas[1] * a + floor[0]
+    sy = alphas[2] * d + alphas[1] * a + floor[1]
+    st = alphas[3] * a + alphas[4] * d + floor[2]
+    np.testing.assert_allclose(out.mean(axis=0), inc, atol=3e-4)
+    cov = np.cov(out.T)
+    np.testing.assert_allclose(np.diag(cov), [sx**2, sy**2, st**2], rtol=0.02)
+    assert abs(cov[0, 1]) < 2e-5 and abs(cov[0, 2]) < 2e-5
+    # from a rotated start the increment is applied in the robot frame
+    turned = sample_motion(np.array([[1.0, 2.0, np.pi / 2]]), inc, np.zeros((1, 3)), alphas, floor)
+    np.testing.assert_allclose(turned[0], [1.0, 3.0, np.pi / 2 + 0.2])
+
+
+def _wall_maps(particles=3, signed=True):
+    maps = ParticleMaps(particles, 0.05, 0.3, tile=8, size_m=8.0, signed=signed)
+    hy = np.linspace(-1.5, 1.5, 301)
+    hx = np.full_like(hy, 2.0)  # a wall 2 m ahead, along y
+    nx, ny = np.full_like(hx, -1.0), np.zeros_like(hy)  # facing the sensor at the origin
+    maps.insert(np.zeros((1, 3)), hx, hy, nx, ny, 0.0)
+    maps.share_from(0)
+    return maps, hx, hy
+
+
+def test_unsigned_field_is_the_distance_to_the_nearest_hit():
+    maps, _, _ = _wall_maps(signed=False)
+    args = (maps.plane, maps.tables[0], maps.tile, *maps.origin, maps.resolution)
+    d, gx, _ = plane_distance_at(*args, 1.875, 0.0)  # a cell centre 12.5 cm from the wall
+    assert d == pytest.approx(0.125, abs=1e-3) and gx == pytest.approx(-1.0, abs=0.01)
+    d, gx, _ = plane_distance_at(*args, 2.125, 0.0)
+    assert d == pytest.approx(0.125, abs=1e-3) and gx == pytest.approx(1.0, abs=0.01)
+
+
+def test_signed_field_is_exact_across_a_wall():
+    maps, _, _ = _wall_maps()
+    args = (maps.plane, maps.tables[0], maps.tile, *maps.origin, maps.resolution)
+    for x in (1.8, 1.9, 1.987, 2.0, 2.013, 2.1, 2.2):
+        d, gx, gy = plane_distance_at(*args, x, 0.013)
+        assert d == pytest.approx(2.0 - x, abs=1e-5)  # sensor side positive, zero on the wall
+        assert gx == pytest.approx(-1.0, abs=1e-5) and abs(gy) < 1e-5
+    assert np.isnan(plane_distance_at(*args, 0.5, 0.0)[0])  # beyond dmax: unknown
+
+
+def test_tiles_are_shared_until_written():
+    maps, hx, hy = _wall_maps(particles=3)
+    used = maps.tiles_in_use
+    assert np.all(maps.tables[1] == maps.tables[0])
+    # particle 2 sees a new wall: only it gets new tiles, the shared ones stay shared
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, np.pi / 2]])
+    maps.insert(poses, hx, hy, np.full_like(hx, -1.0), np.zeros_like(hy), 0.01)
+    assert np.all(maps.tables[0] == maps.tables[1])
+    assert np.any(maps.tables[2] != maps.tables[0])
+    assert maps.tiles_in_use > used
+    # resampling onto particle 2 frees the tiles only particles 0 and 1 held
+    maps.resample(np.array([2, 2, 2]))
+    assert np.all(maps.tables[0] == maps.tables[2])
+    refcount = np.zeros_like(maps.refcount)
+    stack = np.zeros_like(maps.free_stack)
+    free = recount_tiles(maps.tables, refcount, stack)
+    assert maps.capacity - free == len(np.unique(maps.tables[maps.tables >= 0]))
+
+
+@pytest.mark.parametrize("signed, tolerance", [(True, 1e-3), (False, 0.025)])
+def test_scan_matching_recovers_a_known_offset(signed, tolerance):
+    """The signed field is exact; the unsigned one snaps walls to cell centres (≤ half a cell)."""
+    maps = ParticleMaps(2, 0.05, 0.3, tile=16, size_m=12.0, signed=signed)
+    # a room: four walls of a 6 m x 4 m rectangle, sampled every 2 cm
+    s = np.arange(-3.0, 3.0, 0.02)
+    t = np.arange(-2.0, 2.0, 0.02)
+    hx = np.concatenate([s, s, np.full_like(t, -3.0), np.full_like(t, 3.0)])
+    hy = np.concatenate([np.full_like(s, -2.0), np.full_like(s, 2.0), t, t])
+    nx = np.concatenate([np.zeros_like(s), np.zeros_like(s), np.ones_like(t), -np.ones_like(t)])
+    ny = np.concatenate([np.ones_like(s), -np.ones_like(s), np.zeros_like(t), np.zeros_like(t)])
+    maps.insert(np.zeros((1, 3)), hx, hy, nx, ny, 0.0)
+    maps.share_from(0)
+    # the same room seen from the true pose (0.4, -0.3, 0.1): endpoints in that robot frame
+    true = np.array([0.4, -0.3, 0.1])
+    c, s_ = np.cos(true[2]), np.sin(true[2])
+    dx, dy = hx - true[0], hy - true[1]
+    ex, ey = c * dx + s_ * dy, -s_ * dx + c * dy
+    pick = slice(None, None, 5)
+    start = np.array([[0.48, -0.22, 0.14], [0.35, -0.35, 0.07]])
+    out = maps.match(
+        start, ex[pick].copy(), ey[pick].copy(), np.array([0.15, 0.075, 0.04]), 1.0, 0.05, 10, 0.3
+    )
+    np.testing.assert_allclose(out.poses, np.tile(true, (2, 1)), atol=tolerance)
+    if signed:  # a well-posed match: the Hessian (inverse covariance) is positive definite
+        assert np.all(np.linalg.eigvalsh(out.hessian) > 0)
+    assert np.all(out.inliers > 0.99)
