@@ -35,6 +35,7 @@ from slam.io.atomic import atomic_dir, atomic_path, write_text
 from slam.io.log import Log
 from slam.io.tum import format_tum, read_tum
 from slam.mapping import OccupancyGrid
+from slam.particle_filter import Observer
 
 F64 = NDArray[np.float64]
 
@@ -176,38 +177,41 @@ def _write_png(path: Path, image: NDArray[np.uint8]) -> None:
 
 
 def run(request: RunRequest) -> Path:
-    """Run ``slam run`` end to end; return the run folder."""
+    """Run ``slam run`` end to end; return the run folder.
+
+    The run folder is assembled in a temporary sibling from the start (so observers such as a
+    recorder can write into it while the filter runs) and renamed into place only when every
+    output is written.
+    """
     config = request.config
     out = request.out or default_run_dir(request.name)
     if out.exists() and not request.force and any(out.iterdir()):
         raise FileExistsError(f"{out}: output folder exists and is not empty")
     wall_start = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        source = load_source(request.name, request.data_dir, config, request.progress)
-        result = _estimate(source, config, request.progress)
-    messages = sorted({str(w.message) for w in caught})
-    metrics = result.metrics
-    metrics["warnings"] = messages + source.notes
-    metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
-    metrics["peak_rss_mb"] = _peak_rss_mb()
-    if source.ground_truth is not None:
-        from slam.eval.trajectory import evaluate_against_reference
-
-        gt_times, gt_poses = source.ground_truth
-        ev = evaluate_against_reference(result.times, result.poses, gt_times, gt_poses)
-        metrics["ate_rmse"] = ev["ate_rmse"]
-        metrics["ground_truth"] = ev
-
     with atomic_dir(out, overwrite=request.force) as tmp:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            source = load_source(request.name, request.data_dir, config, request.progress)
+            observers: list[Observer] = []
+            result = _estimate(source, config, request.progress, observers)
+        messages = sorted({str(w.message) for w in caught})
+        metrics = result.metrics
+        metrics["warnings"] = messages + source.notes
+        if source.ground_truth is not None:
+            from slam.eval.trajectory import evaluate_against_reference
+
+            gt_times, gt_poses = source.ground_truth
+            ev = evaluate_against_reference(result.times, result.poses, gt_times, gt_poses)
+            metrics["ate_rmse"] = ev["ate_rmse"]
+            metrics["ground_truth"] = ev
         write_text(tmp / "config.toml", dumps(config))
         write_text(tmp / "trajectory.tum", format_tum(result.times, result.poses))
         if result.grid is not None:
             result.grid.save_npz(tmp / "map.npz")
-            gt = None
-            if source.ground_truth is not None:
-                gt = source.ground_truth[1]
+            gt = None if source.ground_truth is None else source.ground_truth[1]
             _write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
+        metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
+        metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     for message in messages:
         print(f"slam: warning: {message}", flush=True)
@@ -224,7 +228,10 @@ class Estimate:
     metrics: dict[str, Any]
 
 
-def _estimate(source: Source, config: Config, progress: bool) -> Estimate:
+def _estimate(
+    source: Source, config: Config, progress: bool, observers: list[Observer]
+) -> Estimate:
+    """Run the configured method; ``observers`` also watch the filter (with the progress bar)."""
     log = source.log
     method = config.filter.method
     base: dict[str, Any] = {"dataset": log.name, "method": method, "seed": config.filter.seed}
@@ -249,15 +256,15 @@ def _estimate(source: Source, config: Config, progress: bool) -> Estimate:
         )
         return Estimate(times, poses, grid, base)
 
+    from slam.observers import CompositeObserver, ProgressObserver
     from slam.particle_filter import ScanSequence, run_slam
-    from slam.progress import ProgressObserver
 
     seq = ScanSequence.from_log(log, config)
-    observer = ProgressObserver(len(seq), enabled=progress, label=f"{log.name} {method}")
+    bar = ProgressObserver(len(seq), enabled=progress, label=f"{log.name} {method}")
     try:
-        result, wall = run_slam(seq, config, observer)
+        result, wall = run_slam(seq, config, CompositeObserver([bar, *observers]))
     finally:
-        observer.close()
+        bar.close()
     duration = float(seq.times.max() - seq.times.min()) if len(seq) > 1 else 0.0
     base.update(
         poses=int(result.times.shape[0]),

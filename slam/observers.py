@@ -1,0 +1,80 @@
+"""Observers of a running filter: the progress bar, and a composite that feeds several at once.
+
+An observer (see :class:`slam.particle_filter.Observer`) receives a :class:`StepRecord` after every
+processed scan, detailed ones (particles, scan endpoints) every ``detail_every`` steps, and the
+map every ``map_every`` steps. The rerun recorder is another observer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from slam.mapping import OccupancyGrid
+from slam.particle_filter import Observer, StepRecord
+
+
+class ProgressObserver:
+    """A tqdm bar with scans per second and the time left (a no-op when disabled)."""
+
+    detail_every = 0
+    map_every = 0
+
+    def __init__(self, total: int, enabled: bool, label: str = "") -> None:
+        self._bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=total, desc=label, unit="scan", dynamic_ncols=True, mininterval=0.25
+            )
+
+    def on_step(self, record: StepRecord) -> None:
+        """Advance the bar by one scan."""
+        if self._bar is not None:
+            self._bar.update(1)
+
+    def on_map(self, step: int, time: float, grid: OccupancyGrid) -> None:
+        """Maps are not shown in a progress bar."""
+
+    def close(self) -> None:
+        """Finish the bar."""
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _gcd_cadence(values: Sequence[int]) -> int:
+    active = [v for v in values if v > 0]
+    if not active:
+        return 0
+    out = active[0]
+    for v in active[1:]:
+        out = math.gcd(out, v)
+    return out
+
+
+class CompositeObserver:
+    """Feeds every step to several observers, each at its own cadence."""
+
+    def __init__(self, observers: Sequence[Observer]) -> None:
+        self.observers = list(observers)
+        self.detail_every = _gcd_cadence([o.detail_every for o in self.observers])
+        self.map_every = _gcd_cadence([o.map_every for o in self.observers])
+
+    def on_step(self, record: StepRecord) -> None:
+        """Pass the record on; detail fields only to observers whose cadence asks for them."""
+        for observer in self.observers:
+            if record.particles is not None and not (
+                observer.detail_every and record.step % observer.detail_every == 0
+            ):
+                light = StepRecord(**{**record.__dict__, "particles": None, "weights": None})
+                light.endpoints = None
+                observer.on_step(light)
+            else:
+                observer.on_step(record)
+
+    def on_map(self, step: int, time: float, grid: OccupancyGrid) -> None:
+        """Pass the map to observers whose map cadence divides ``step``."""
+        for observer in self.observers:
+            if observer.map_every and step % observer.map_every == 0:
+                observer.on_map(step, time, grid)
