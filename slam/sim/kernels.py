@@ -140,12 +140,18 @@ def _azimuth_table(labels, origin_x, origin_y, resolution, cam, ref, perp, t_min
 
 
 @njit(cache=True, fastmath=_FAST)
-def _cast_ray(rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, height):
+def _cast_ray(rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, height, near2):
     """Where the camera ray ``(rx, ry, rz)`` (world frame, optical z component 1) ends.
 
-    Returns ``(s, kind, side, label)``: ``s`` is the depth (optical z) of the hit, ``kind`` 0 for
-    the floor, 1 for an obstacle face, -1 for nothing within range (``s`` = inf).
+    ``near2`` is the squared distance of the nearest obstacle anywhere in this ray's azimuth
+    range: a floor hit closer than that needs no table lookup. Returns ``(s, kind, side, label)``:
+    ``s`` is the depth (optical z) of the hit, ``kind`` 0 for the floor, 1 for an obstacle face,
+    -1 for nothing within range (``s`` = inf).
     """
+    if rz < 0.0:
+        s_floor = cam[2] / -rz
+        if (rx * rx + ry * ry) * s_floor * s_floor < near2:
+            return s_floor, 0, -1, 0
     along = rx * ref[0] + ry * ref[1]
     wall = math.inf
     wlab = 0
@@ -185,6 +191,35 @@ def _cast_ray(rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, heig
         if cam[2] + s_wall * rz <= height:
             return s_wall, 1, wside, wlab
     return math.inf, -1, -1, 0
+
+
+@njit(cache=True)
+def _column_near2(bx, by, ux, uy, i_lo, i_hi, cy, fy, ref, perp, t_min, inv_step, dist):
+    """Squared distance of the nearest table obstacle over a pixel column's azimuth range.
+
+    The column's rays are ``(bx, by) + yn · (ux, uy)`` horizontally, ``yn = (i − cy)/fy`` for
+    ``i`` in ``[i_lo, i_hi]``; their table index is monotonic in ``yn``, so the two ends bound it.
+    """
+    n = dist.shape[0]
+    k_lo = n
+    k_hi = -1
+    for i in (i_lo, i_hi):
+        yn = (i - cy) / fy
+        rx = bx + ux * yn
+        ry = by + uy * yn
+        along = rx * ref[0] + ry * ref[1]
+        if along <= 0.0:
+            return 0.0
+        f = ((rx * perp[0] + ry * perp[1]) / along - t_min) * inv_step
+        k = int(f)
+        k_lo = min(k_lo, k - 1)
+        k_hi = max(k_hi, k + 2)
+    k_lo = max(k_lo, 0)
+    k_hi = min(k_hi, n - 1)
+    near = math.inf
+    for k in range(k_lo, k_hi + 1):
+        near = min(near, dist[k])
+    return near * near
 
 
 @njit(cache=True)
@@ -261,11 +296,16 @@ def render_disparity(labels, origin_x, origin_y, resolution, rot, cam, intr, dis
     col_x = np.empty(w)
     col_y = np.empty(w)
     col_z = np.empty(w)
+    col_near2 = np.empty(w)
     for j in range(w):
         xn = (j - cx) / fx
         col_x[j] = rot[0, 0] * xn + rot[0, 2]
         col_y[j] = rot[1, 0] * xn + rot[1, 2]
         col_z[j] = rot[2, 0] * xn + rot[2, 2]
+        col_near2[j] = _column_near2(
+            col_x[j], col_y[j], rot[0, 1], rot[1, 1], 0.0, h - 1.0, cy, fy, ref, perp, t_min,
+            inv_step, dist,
+        )  # fmt: skip
     out = np.empty((h, w), dtype=np.uint16)
     depth = np.empty((h, w))
     kind = np.empty((h, w), dtype=np.int8)
@@ -281,7 +321,7 @@ def render_disparity(labels, origin_x, origin_y, resolution, rot, cam, intr, dis
         for j in range(w):
             s, kd, _sd, _lb = _cast_ray(
                 col_x[j] + row_x, col_y[j] + row_y, col_z[j] + row_z, cam, ref, perp, t_min,
-                inv_step, dist, lab, side, height,
+                inv_step, dist, lab, side, height, col_near2[j],
             )  # fmt: skip
             depth[i, j] = s
             kind[i, j] = kd
@@ -339,6 +379,10 @@ def render_rgb(labels, origin_x, origin_y, resolution, rot, cam, intr, align, te
         base_x = rot[0, 0] * xn + rot[0, 2]
         base_y = rot[1, 0] * xn + rot[1, 2]
         base_z = rot[2, 0] * xn + rot[2, 2]
+        near2 = _column_near2(
+            base_x, base_y, rot[0, 1], rot[1, 1], i_lo, i_hi, cy, fy, ref, perp, t_min, inv_step,
+            dist,
+        )  # fmt: skip
         dd = 0.5
         dd_prev = 0.5
         for ri in range(h):
@@ -361,7 +405,7 @@ def render_rgb(labels, origin_x, origin_y, resolution, rot, cam, intr, align, te
                 ry = base_y + rot[1, 1] * yn
                 rz = base_z + rot[2, 1] * yn
                 s, kd, sd, lb = _cast_ray(
-                    rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, height
+                    rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, height, near2
                 )
                 dd_new = numer / s if kd >= 0 else 0.0
                 i_new = (base + k_dd * dd_new) / g
