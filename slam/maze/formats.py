@@ -408,3 +408,46 @@ def maze_from_walls(
         goal = ((a, c), (a, d), (b, c), (b, d))
     maze = Maze(mask, goal=tuple(sorted(goal)), start=start, name=name)
     return validate_maze(maze, name or "maze")
+
+
+# --------------------------------------------------------------------------- finding mazes
+
+
+def locate_maze(name: str | Path, data_dir: Path | None = None, folder: bool = False) -> Path:
+    """The maze file (or, with ``folder``, maze file or folder) that ``name`` designates.
+
+    A path that exists is taken as it is; otherwise ``name`` is looked up in the data directory,
+    under ``<data dir>/maze/`` first, then ``<data dir>/``, also with ``.txt`` appended
+    (``udacity/test_maze_01`` finds ``<data dir>/maze/udacity/test_maze_01.txt``).
+    """
+    path = Path(name)
+    tried = [path]
+    candidates = [path]
+    if data_dir is not None and not path.is_absolute():
+        for base in (Path(data_dir) / "maze", Path(data_dir)):
+            candidates.append(base / path)
+            candidates.append(base / f"{path}.txt")
+    for candidate in candidates:
+        if candidate.is_file() or (folder and candidate.is_dir()):
+            return candidate
+        tried.append(candidate)
+    where = f" or under the data directory {data_dir}" if data_dir is not None else ""
+    raise DataError(
+        f"maze {str(name)!r} not found: no such {'file or folder' if folder else 'file'} here"
+        f"{where} (tried {', '.join(str(t) for t in dict.fromkeys(tried))})"
+    )
+
+
+def locate_mazes(names: Iterable[str | Path], data_dir: Path | None = None) -> list[Path]:
+    """Maze files for ``names``: files as they are, folders expanded to their ``*.txt`` files."""
+    paths: list[Path] = []
+    for name in names:
+        found = locate_maze(name, data_dir, folder=True)
+        if found.is_dir():
+            files = sorted(p for p in found.glob("*.txt") if p.is_file())
+            if not files:
+                raise DataError(f"{found}: folder holds no maze files (*.txt)")
+            paths.extend(files)
+        else:
+            paths.append(found)
+    return paths

@@ -35,7 +35,7 @@ def render_trial(
     """BGR image of ``maze`` and, when given, the trial ``result`` on it."""
     width, height = maze.width, maze.height
     margin = cell // 2
-    legend = 2 * cell if result is not None else 0
+    legend = max(60, 2 * cell) if result is not None else 0
     img = np.full(
         (height * cell + 2 * margin + legend, width * cell + 2 * margin, 3), BACKGROUND, np.uint8
     )
@@ -96,14 +96,26 @@ def render_trial(
             if len(points) > 1:
                 cv2.polylines(img, [points], False, colour, width_px, lineType=cv2.LINE_AA)
         score = "failed" if result.score is None else f"score {result.score:.3f}"
-        runs = ", ".join(f"run {i}: {s} steps" for i, s in enumerate(result.run_steps))
-        text = f"{maze.name} | {result.robot} | {score} | {runs}"
-        scale = cell / 64
-        y_text = height * cell + 2 * margin + cell
-        cv2.putText(
-            img, text, (margin, y_text), cv2.FONT_HERSHEY_SIMPLEX, scale, TEXT, 1, cv2.LINE_AA
-        )
+        runs = ", ".join(f"run {i}: {n} steps" for i, n in enumerate(result.run_steps))
+        lines = [
+            f"{maze.name} | {result.robot} | {score}",
+            runs or (result.failure or ""),
+            "orange: run 0, red: run 1, grey: walls never seen",
+        ]
+        _caption(img, lines, margin, height * cell + 2 * margin, legend)
     return img
+
+
+def _caption(img: NDArray[np.uint8], lines: list[str], x: int, top: int, height: int) -> None:
+    """Write ``lines`` in the band ``top .. top + height``, scaled to fit the image width."""
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    room = img.shape[1] - 2 * x
+    line_h = height / (len(lines) + 0.5)
+    widest = max(cv2.getTextSize(t, font, 1.0, 1)[0][0] for t in lines) or 1
+    scale = min(room / widest, line_h / 30.0)
+    for i, text in enumerate(lines):
+        y = int(top + (i + 1) * line_h)
+        cv2.putText(img, text, (x, y), font, scale, TEXT, 1, cv2.LINE_AA)
 
 
 def write_png(path: Path, image: NDArray[np.uint8]) -> None:
