@@ -176,6 +176,8 @@ class RbpfConfig:
     """Weight of the uniform (unexplained beam) term of the likelihood field model."""
     max_iterations: int = 10
     """Levenberg-Marquardt iterations per sigma level."""
+    tolerance: float = 1e-3
+    """A sigma level ends when a step moves less than this (m, and rad)."""
     min_inliers: float = 0.3
     """Keep the predicted pose when fewer beams than this fraction lie near known surfaces."""
     temperature: float = 10.0
@@ -219,10 +221,61 @@ class ClassicConfig:
 
 @dataclass(frozen=True)
 class TextureConfig:
-    """Floor texture mapping from RGB-D frames."""
+    """Floor texture mapping from RGB-D frames (docs/texture.md)."""
 
     enabled: bool = True
     """Compute the texture map when the dataset has RGB-D frames."""
+    mode: str = "mean"
+    """``"mean"``: running mean of every floor pixel that fell in a cell; ``"latest"``: the mean
+    of the most recent frame that saw the cell."""
+    floor_height: float = 0.1
+    """A point is floor when its height above the floor plane is within ± this (m)."""
+    min_depth: float = 0.4
+    """Nearest depth used (m): the Kinect measures nothing closer."""
+    max_depth: float = 4.0
+    """Farthest depth used (m): beyond, depth quantisation and pose errors blur the texture."""
+    pair_tolerance_s: float = 0.1
+    """An RGB frame is used only with a disparity frame at most this far away in time (s)."""
+    frame_stride: int = 1
+    """Use every k-th RGB frame."""
+    pixel_stride: int = 1
+    """Use every k-th row and column of the disparity image."""
+    motion_compensation: bool = True
+    """Look colours up from the robot pose at the RGB frame's time (the points come from the pose
+    at the disparity frame's time); off: both from the disparity pose."""
+    read_threads: int = 2
+    """Threads decoding PNG frames ahead of the accumulation."""
+    camera_x: float = 0.18
+    """Kinect position ahead of the robot centre (m), course project text."""
+    camera_y: float = 0.005
+    """Kinect position to the left of the robot centre (m)."""
+    camera_z: float = 0.36
+    """Kinect height above the floor (m)."""
+    camera_roll: float = 0.0
+    """Kinect roll (rad)."""
+    camera_pitch: float = 0.36
+    """Kinect pitch (rad), positive looks down."""
+    camera_yaw: float = 0.021
+    """Kinect yaw relative to the robot heading (rad), positive looks left."""
+
+    def __post_init__(self) -> None:
+        _check_choice("texture.mode", self.mode, ("mean", "latest"))
+        if self.floor_height <= 0:
+            raise ConfigError(f"texture.floor_height: expected > 0, found {self.floor_height}")
+        if not 0 <= self.min_depth < self.max_depth:
+            raise ConfigError(
+                "texture.min_depth, texture.max_depth: expected 0 <= min_depth < max_depth, "
+                f"found {self.min_depth}, {self.max_depth}"
+            )
+        if self.pair_tolerance_s < 0:
+            raise ConfigError(
+                f"texture.pair_tolerance_s: expected >= 0, found {self.pair_tolerance_s}"
+            )
+        for name in ("frame_stride", "pixel_stride", "read_threads"):
+            if getattr(self, name) < 1:
+                raise ConfigError(
+                    f"texture.{name}: expected at least 1, found {getattr(self, name)}"
+                )
 
 
 @dataclass(frozen=True)

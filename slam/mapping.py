@@ -162,6 +162,24 @@ class MatchResult:
     """``(P, 3, 3)`` Gauss-Newton Hessian of the negative log-likelihood at each refined pose."""
 
 
+def likelihood_tables(
+    sigmas: F64, z_hit: float, z_rand: float, dmax: float, size: int = 512
+) -> tuple[F64, float]:
+    """Per-sigma tables of the likelihood-field cost and Gauss-Newton weight over ``|d| ∈ [0, dmax]``.
+
+    ``tables[level, 0, i]`` is ``−log(z_hit·exp(−d²/2σ²) + z_rand)`` and ``tables[level, 1, i]``
+    is ``γ/σ²`` with ``γ = z_hit·φ/(z_hit·φ + z_rand)``, at ``d = i·dmax/(size − 1)``; the last
+    entry also stands for unknown cells. Returns the tables and ``1/step``.
+    """
+    d = np.linspace(0.0, dmax, size)
+    out = np.empty((len(sigmas), 2, size))
+    for level, sigma in enumerate(sigmas):
+        phi = z_hit * np.exp(-0.5 * (d / sigma) ** 2)
+        out[level, 0] = -np.log(phi + z_rand)
+        out[level, 1] = phi / (phi + z_rand) / sigma**2
+    return out, (size - 1) / dmax
+
+
 class ParticleMaps:
     """One truncated signed distance-field map per particle, as shared copy-on-write tiles."""
 
@@ -294,13 +312,15 @@ class ParticleMaps:
         poses: F64,
         ex: F64,
         ey: F64,
-        sigmas: F64,
-        z_hit: float,
-        z_rand: float,
+        luts: tuple[F64, float],
         max_iter: int,
+        tolerance: float,
         min_inliers: float,
     ) -> MatchResult:
-        """Scan-match every particle's predicted pose against its own map and score it."""
+        """Scan-match every particle's predicted pose against its own map and score it.
+
+        ``luts`` comes from :func:`likelihood_tables`.
+        """
         n = poses.shape[0]
         out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
         match_particles(
@@ -310,14 +330,13 @@ class ParticleMaps:
             float(self.origin[0]),
             float(self.origin[1]),
             self.resolution,
-            self.dmax,
             np.ascontiguousarray(poses),
             ex,
             ey,
-            sigmas,
-            z_hit,
-            z_rand,
+            luts[0],
+            luts[1],
             max_iter,
+            tolerance,
             min_inliers,
             out.poses,
             out.loglik,
@@ -332,10 +351,9 @@ class ParticleMaps:
         ex: F64,
         ey: F64,
         counts: NDArray[np.int64],
-        sigmas: F64,
-        z_hit: float,
-        z_rand: float,
+        luts: tuple[F64, float],
         max_iter: int,
+        tolerance: float,
         min_inliers: float,
         particle: int = 0,
     ) -> F64:
@@ -351,15 +369,14 @@ class ParticleMaps:
             float(self.origin[0]),
             float(self.origin[1]),
             self.resolution,
-            self.dmax,
             np.ascontiguousarray(poses),
             ex,
             ey,
             counts,
-            sigmas,
-            z_hit,
-            z_rand,
+            luts[0],
+            luts[1],
             max_iter,
+            tolerance,
             min_inliers,
             out,
         )

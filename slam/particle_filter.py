@@ -44,7 +44,7 @@ from slam.io.log import Log
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
-from slam.mapping import OccupancyGrid, ParticleMaps
+from slam.mapping import OccupancyGrid, ParticleMaps, likelihood_tables
 from slam.odometry import scan_odometry
 
 F64 = NDArray[np.float64]
@@ -485,7 +485,7 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
     p = fc.particles
     alphas = np.asarray(fc.motion_alphas, np.float64)
     floor = np.asarray(fc.motion_floor, np.float64)
-    sigmas = np.asarray(rc.sigmas, np.float64)
+    luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     start = seq.odometry[0]
     maps = ParticleMaps(
         p,
@@ -556,9 +556,7 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         lo = predicted[:, :2].min(axis=0) - r
         hi = predicted[:, :2].max(axis=0) + r
         maps.ensure_contains(lo[0], lo[1], hi[0], hi[1])
-        match = maps.match(
-            predicted, ex, ey, sigmas, rc.z_hit, rc.z_rand, rc.max_iterations, rc.min_inliers
-        )
+        match = maps.match(predicted, ex, ey, luts, rc.max_iterations, rc.tolerance, rc.min_inliers)
         particles = match.poses
         if rc.proposal_spread > 0:
             particles = sample_around(
@@ -671,16 +669,9 @@ def refine_trajectory(
         counts[k] = hx.size
         ex[k, : hx.size] = hx
         ey[k, : hy.size] = hy
+    luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     return maps.register(
-        poses,
-        ex,
-        ey,
-        counts,
-        np.asarray(rc.sigmas, np.float64),
-        rc.z_hit,
-        rc.z_rand,
-        rc.max_iterations,
-        rc.min_inliers,
+        poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers
     )
 
 

@@ -8,7 +8,7 @@ from slam.kernels.grid import bresenham, integrate_rays
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation, correlation_search
-from slam.mapping import ParticleMaps
+from slam.mapping import ParticleMaps, likelihood_tables
 
 
 def reference_line(x0, y0, x1, y1):
@@ -111,6 +111,16 @@ def test_correlation_counts_endpoints_on_occupied_cells():
     assert correlation(occupied, 0.0, 0.0, 1.0, poses[1], ex, ey) == 8
     assert corr[1] == 10
     np.testing.assert_allclose(offsets[1], [2.0, 0.0, 0.0])
+
+
+def test_likelihood_tables_match_the_formula():
+    tables, step_inv = likelihood_tables(np.array([0.1, 0.05]), 1.0, 0.05, 0.3, size=301)
+    assert step_inv == pytest.approx(1000.0)
+    d = 0.07
+    i = 70
+    assert tables[1, 0, i] == pytest.approx(-np.log(np.exp(-0.5 * (d / 0.05) ** 2) + 0.05))
+    phi = np.exp(-0.5 * (d / 0.1) ** 2)
+    assert tables[0, 1, i] == pytest.approx(phi / (phi + 0.05) / 0.01)
 
 
 def test_effective_sample_size():
@@ -220,9 +230,8 @@ def test_scan_matching_recovers_a_known_offset(signed, tolerance):
     ex, ey = c * dx + s_ * dy, -s_ * dx + c * dy
     pick = slice(None, None, 5)
     start = np.array([[0.48, -0.22, 0.14], [0.35, -0.35, 0.07]])
-    out = maps.match(
-        start, ex[pick].copy(), ey[pick].copy(), np.array([0.15, 0.075, 0.04]), 1.0, 0.05, 10, 0.3
-    )
+    luts = likelihood_tables(np.array([0.15, 0.075, 0.04]), 1.0, 0.05, maps.dmax)
+    out = maps.match(start, ex[pick].copy(), ey[pick].copy(), luts, 20, 1e-5, 0.3)
     np.testing.assert_allclose(out.poses, np.tile(true, (2, 1)), atol=tolerance)
     if signed:  # a well-posed match: the Hessian (inverse covariance) is positive definite
         assert np.all(np.linalg.eigvalsh(out.hessian) > 0)

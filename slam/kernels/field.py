@@ -119,6 +119,18 @@ def _cell(layer: np.ndarray, table: np.ndarray, tile: int, ix: int, iy: int) -> 
 
 
 @njit(cache=True)
+def _lookup(row: np.ndarray, step_inv: float, d: float) -> float:
+    """Linear interpolation in a table sampled at ``|d| = 0, 1/step_inv, 2/step_inv, ...``."""
+    u = abs(d) * step_inv
+    last = row.shape[0] - 1
+    if u >= last:
+        return row[last]
+    i = int(u)
+    f = u - i
+    return row[i] + f * (row[i + 1] - row[i])
+
+
+@njit(cache=True)
 def normal_equations(
     plane: np.ndarray,
     table: np.ndarray,
@@ -126,45 +138,44 @@ def normal_equations(
     ox: float,
     oy: float,
     res: float,
-    dmax: float,
     x: float,
     y: float,
     th: float,
     ex: np.ndarray,
     ey: np.ndarray,
-    sigma: float,
-    z_hit: float,
-    z_rand: float,
+    cost_row: np.ndarray,
+    weight_row: np.ndarray,
+    step_inv: float,
     h: np.ndarray,
     g: np.ndarray,
 ) -> tuple[float, int]:
     """One pass over the beams at pose ``(x, y, th)``: cost, Gauss-Newton system, inliers.
 
-    The cost is the negative log-likelihood ``Σ −log(z_hit·exp(−d²/2σ²) + z_rand)`` of the
-    endpoints ``(ex, ey)`` (robot frame), ``d`` the signed plane distance (``dmax`` where unknown).
-    ``h`` and ``g`` receive the Gauss-Newton approximation of its Hessian and its gradient, each
-    beam weighted by its responsibility ``γ = z_hit·φ / (z_hit·φ + z_rand)``. Returns the cost and
-    the number of beams that fall on known cells.
+    The cost is the negative log-likelihood of the endpoints ``(ex, ey)`` (robot frame) under the
+    likelihood-field model, ``Σ −log(z_hit·exp(−d²/2σ²) + z_rand)`` with ``d`` the field value at
+    the endpoint (the cap ``dmax`` where unknown). ``h`` and ``g`` receive the Gauss-Newton
+    approximation of its Hessian and its gradient, each beam weighted by its responsibility
+    ``γ/σ²`` with ``γ = z_hit·φ / (z_hit·φ + z_rand)``. Both functions of ``|d|`` come from tables
+    (``cost_row``, ``weight_row``; see :func:`slam.mapping.likelihood_tables`), which avoids an
+    ``exp`` and a ``log`` per beam. Returns the cost and the number of beams on known cells.
     """
-    inv = 0.5 / (sigma * sigma)
-    inv_var = 1.0 / (sigma * sigma)
     c = np.cos(th)
     s = np.sin(th)
     h[:, :] = 0.0
     g[:] = 0.0
     cost = 0.0
     inliers = 0
+    unknown = cost_row[cost_row.shape[0] - 1]
     for b in range(ex.shape[0]):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
         d, gx, gy = plane_distance_at(plane, table, tile, ox, oy, res, x + rx, y + ry)
         if np.isnan(d):
-            cost -= np.log(z_hit * np.exp(-dmax * dmax * inv) + z_rand)
+            cost += unknown
             continue
-        phi = z_hit * np.exp(-d * d * inv)
-        cost -= np.log(phi + z_rand)
+        cost += _lookup(cost_row, step_inv, d)
         inliers += 1
-        wgt = phi / (phi + z_rand) * inv_var
+        wgt = _lookup(weight_row, step_inv, d)
         j2 = -gx * ry + gy * rx
         h[0, 0] += wgt * gx * gx
         h[0, 1] += wgt * gx * gy
@@ -210,21 +221,21 @@ def match_one(
     ox: float,
     oy: float,
     res: float,
-    dmax: float,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
-    sigmas: np.ndarray,
-    z_hit: float,
-    z_rand: float,
+    luts: np.ndarray,
+    step_inv: float,
     max_iter: int,
+    tolerance: float,
 ) -> tuple[np.ndarray, float, int]:
-    """Refine ``pose`` so the endpoints ``(ex, ey)`` (robot frame) fit the distance field.
+    """Refine ``pose`` so the endpoints ``(ex, ey)`` (robot frame) fit the field.
 
     Levenberg-Marquardt on the negative log-likelihood (see :func:`normal_equations`), level by
-    level through ``sigmas`` from wide to narrow so the first levels pull in from further away.
-    Each iteration costs one pass over the beams: a step that does not lower the cost is undone
-    and the damping raised. Returns the refined pose, its cost at the last sigma and its inliers.
+    level through the likelihood tables ``luts[level]`` (wide sigma to narrow) so the first levels
+    pull in from further away. Each iteration costs one pass over the beams: a step that does not
+    lower the cost is undone and the damping raised; a level ends when a step moves less than
+    ``tolerance`` (m or rad). Returns the refined pose, its cost at the last level and its inliers.
     """
     x, y, th = pose[0], pose[1], pose[2]
     h = np.zeros((3, 3))
@@ -234,10 +245,11 @@ def match_one(
     hd = np.zeros((3, 3))
     cost = 0.0
     inliers = 0
-    for level in range(sigmas.shape[0]):
-        sigma = sigmas[level]
+    for level in range(luts.shape[0]):
+        cost_row = luts[level, 0]
+        weight_row = luts[level, 1]
         cost, inliers = normal_equations(
-            plane, table, tile, ox, oy, res, dmax, x, y, th, ex, ey, sigma, z_hit, z_rand, h, g
+            plane, table, tile, ox, oy, res, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g
         )
         lam = 1e-3
         for _ in range(max_iter):
@@ -249,15 +261,19 @@ def match_one(
             ny = y - step[1]
             nth = th - step[2]
             new_cost, new_inliers = normal_equations(
-                plane, table, tile, ox, oy, res, dmax, nx, ny, nth, ex, ey, sigma, z_hit, z_rand,
-                hc, gc,
+                plane, table, tile, ox, oy, res, nx, ny, nth, ex, ey, cost_row, weight_row,
+                step_inv, hc, gc,
             )  # fmt: skip
             if new_cost < cost:
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
                 h[:, :] = hc
                 g[:] = gc
                 lam = max(lam * 0.3, 1e-7)
-                if abs(step[0]) < 5e-4 and abs(step[1]) < 5e-4 and abs(step[2]) < 5e-4:
+                if (
+                    abs(step[0]) < tolerance
+                    and abs(step[1]) < tolerance
+                    and abs(step[2]) < tolerance
+                ):
                     break
             else:
                 lam *= 10.0
@@ -278,14 +294,13 @@ def match_particles(
     ox: float,
     oy: float,
     res: float,
-    dmax: float,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
-    sigmas: np.ndarray,
-    z_hit: float,
-    z_rand: float,
+    luts: np.ndarray,
+    step_inv: float,
     max_iter: int,
+    tolerance: float,
     min_inliers: float,
     out_poses: np.ndarray,
     out_loglik: np.ndarray,
@@ -295,18 +310,18 @@ def match_particles(
     """Scan-match every particle against its own map (the proposal), then score it.
 
     For each particle: refine its predicted pose with :func:`match_one`; if fewer than
-    ``min_inliers`` of the beams then fall on known cells (within ``dmax`` of a surface) the match is not
-    trusted and the predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at
-    the final pose with the narrowest sigma; ``out_inliers`` the fraction of beams near a surface;
+    ``min_inliers`` of the beams then fall on known cells the match is not trusted and the
+    predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at the final pose
+    under the last (narrowest) table; ``out_inliers`` the fraction of beams on known cells;
     ``out_hessian`` the Gauss-Newton Hessian of the negative log-likelihood there (its inverse is
     the covariance of the match, the spread of the proposal).
     """
-    sigma = sigmas[sigmas.shape[0] - 1]
+    last = luts.shape[0] - 1
     nbeams = max(ex.shape[0], 1)
     for p in prange(poses.shape[0]):
         table = tables[p]
         refined, cost, inliers = match_one(
-            plane, table, tile, ox, oy, res, dmax, poses[p], ex, ey, sigmas, z_hit, z_rand, max_iter
+            plane, table, tile, ox, oy, res, poses[p], ex, ey, luts, step_inv, max_iter, tolerance
         )
         frac = inliers / nbeams
         if frac < min_inliers:
@@ -314,8 +329,8 @@ def match_particles(
         h = np.zeros((3, 3))
         g = np.zeros(3)
         cost, inliers = normal_equations(
-            plane, table, tile, ox, oy, res, dmax, refined[0], refined[1], refined[2],
-            ex, ey, sigma, z_hit, z_rand, h, g,
+            plane, table, tile, ox, oy, res, refined[0], refined[1], refined[2],
+            ex, ey, luts[last, 0], luts[last, 1], step_inv, h, g,
         )  # fmt: skip
         for a in range(3):
             for b in range(3):
@@ -450,15 +465,14 @@ def match_scans(
     ox: float,
     oy: float,
     res: float,
-    dmax: float,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
     counts: np.ndarray,
-    sigmas: np.ndarray,
-    z_hit: float,
-    z_rand: float,
+    luts: np.ndarray,
+    step_inv: float,
     max_iter: int,
+    tolerance: float,
     min_inliers: float,
     out_poses: np.ndarray,
 ) -> None:
@@ -473,8 +487,8 @@ def match_scans(
             out_poses[k] = poses[k]
             continue
         refined, _, inliers = match_one(
-            plane, table, tile, ox, oy, res, dmax, poses[k], ex[k, :n], ey[k, :n], sigmas,
-            z_hit, z_rand, max_iter,
+            plane, table, tile, ox, oy, res, poses[k], ex[k, :n], ey[k, :n], luts, step_inv,
+            max_iter, tolerance,
         )  # fmt: skip
         if inliers < min_inliers * n:
             out_poses[k] = poses[k]
