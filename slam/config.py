@@ -160,7 +160,7 @@ class RbpfConfig:
     insert_beams: int = 1081
     """At most this many beams are inserted into the particle maps per update."""
     tile: int = 16
-    """Tile side (cells) of the copy-on-write particle maps."""
+    """Tile side (cells, a power of two) of the copy-on-write particle maps."""
     resolution: float = 0.0
     """Cell size of the particle maps (m); 0 uses ``map.resolution``."""
     field: str = "distance"
@@ -182,10 +182,10 @@ class RbpfConfig:
     """Keep the predicted pose when fewer beams than this fraction lie near known surfaces."""
     temperature: float = 10.0
     """Log-likelihoods are divided by this before weighting (beams are not independent)."""
-    proposal_spread: float = 1.0
+    proposal_spread: float = 0.3
     """Particles are drawn around their matched pose with covariance ``proposal_spread ·
     temperature · H⁻¹`` (``H`` the matcher's Hessian); 0 keeps the matched pose."""
-    refine_passes: int = 1
+    refine_passes: int = 3
     """After the filter, re-register every scan against the map of the final trajectory this
     many times (removes the jitter the proposal's sampling leaves; 0: off)."""
     skip_insert_below: float = 0.02
@@ -194,8 +194,8 @@ class RbpfConfig:
     def __post_init__(self) -> None:
         if not self.sigmas or any(s <= 0 for s in self.sigmas):
             raise ConfigError(f"rbpf.sigmas: expected positive numbers, found {self.sigmas}")
-        if self.tile < 2:
-            raise ConfigError(f"rbpf.tile: expected at least 2, found {self.tile}")
+        if self.tile < 2 or self.tile & (self.tile - 1):
+            raise ConfigError(f"rbpf.tile: expected a power of two (8, 16, 32), found {self.tile}")
         if self.temperature <= 0:
             raise ConfigError(f"rbpf.temperature: expected > 0, found {self.temperature}")
         _check_choice("rbpf.field", self.field, ("distance", "plane"))

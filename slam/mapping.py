@@ -198,7 +198,10 @@ class ParticleMaps:
         self.signed = bool(signed)
         self.resolution = float(resolution)
         self.dmax = float(dmax)
+        if tile < 2 or tile & (tile - 1):
+            raise ValueError(f"tile: expected a power of two, found {tile}")
         self.tile = int(tile)
+        self.shift = int(tile).bit_length() - 1
         self.grow_margin_m = float(grow_margin_m)
         tile_m = self.tile * self.resolution
         n = max(int(np.ceil(size_m / tile_m)), 1)
@@ -278,7 +281,7 @@ class ParticleMaps:
                 self.free_stack,
                 self.free_top,
                 self.tables,
-                self.tile,
+                self.shift,
                 float(self.origin[0]),
                 float(self.origin[1]),
                 self.resolution,
@@ -326,10 +329,10 @@ class ParticleMaps:
         match_particles(
             self.plane,
             self.tables,
-            self.tile,
+            self.shift,
             float(self.origin[0]),
             float(self.origin[1]),
-            self.resolution,
+            1.0 / self.resolution,
             np.ascontiguousarray(poses),
             ex,
             ey,
@@ -365,10 +368,10 @@ class ParticleMaps:
         match_scans(
             self.plane,
             self.tables[particle],
-            self.tile,
+            self.shift,
             float(self.origin[0]),
             float(self.origin[1]),
-            self.resolution,
+            1.0 / self.resolution,
             np.ascontiguousarray(poses),
             ex,
             ey,

@@ -174,7 +174,7 @@ def _wall_maps(particles=3, signed=True):
 
 def test_unsigned_field_is_the_distance_to_the_nearest_hit():
     maps, _, _ = _wall_maps(signed=False)
-    args = (maps.plane, maps.tables[0], maps.tile, *maps.origin, maps.resolution)
+    args = (maps.plane, maps.tables[0], maps.shift, *maps.origin, 1.0 / maps.resolution)
     d, gx, _ = plane_distance_at(*args, 1.875, 0.0)  # a cell centre 12.5 cm from the wall
     assert d == pytest.approx(0.125, abs=1e-3) and gx == pytest.approx(-1.0, abs=0.01)
     d, gx, _ = plane_distance_at(*args, 2.125, 0.0)
@@ -183,7 +183,7 @@ def test_unsigned_field_is_the_distance_to_the_nearest_hit():
 
 def test_signed_field_is_exact_across_a_wall():
     maps, _, _ = _wall_maps()
-    args = (maps.plane, maps.tables[0], maps.tile, *maps.origin, maps.resolution)
+    args = (maps.plane, maps.tables[0], maps.shift, *maps.origin, 1.0 / maps.resolution)
     for x in (1.8, 1.9, 1.987, 2.0, 2.013, 2.1, 2.2):
         d, gx, gy = plane_distance_at(*args, x, 0.013)
         assert d == pytest.approx(2.0 - x, abs=1e-5)  # sensor side positive, zero on the wall

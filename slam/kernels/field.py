@@ -37,38 +37,43 @@ from numba import njit, prange
 
 @njit(cache=True)
 def cell_distance(
-    pool: np.ndarray, table: np.ndarray, tile: int, ix: int, iy: int, dmax: float
+    pool: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int, dmax: float
 ) -> float:
-    """Distance stored at cell ``(ix, iy)`` of one particle's map (``dmax`` where unknown)."""
+    """Distance stored at cell ``(ix, iy)`` of one particle's map (``dmax`` where unknown).
+
+    Tiles are ``2**shift`` cells wide (shifts and masks are much cheaper than divisions here).
+    """
     if ix < 0 or iy < 0:
         return dmax
-    tx = ix // tile
-    ty = iy // tile
+    tx = ix >> shift
+    ty = iy >> shift
     if ty >= table.shape[0] or tx >= table.shape[1]:
         return dmax
     t = table[ty, tx]
     if t < 0:
         return dmax
-    return pool[t, iy - ty * tile, ix - tx * tile]
+    mask = (1 << shift) - 1
+    return pool[t, iy & mask, ix & mask]
 
 
 @njit(cache=True)
 def plane_distance_at(
     plane: np.ndarray,
     table: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
-    res: float,
+    inv_res: float,
     x: float,
     y: float,
 ) -> tuple[float, float, float]:
     """Bilinearly interpolated signed plane distance at ``(x, y)`` and its gradient.
 
     Returns NaN (and a zero gradient) where any of the four cells around the point is unknown.
+    ``inv_res`` is ``1 / resolution``; tiles are ``2**shift`` cells wide.
     """
-    gx = (x - ox) / res - 0.5
-    gy = (y - oy) / res - 0.5
+    gx = (x - ox) * inv_res - 0.5
+    gy = (y - oy) * inv_res - 0.5
     fx0 = np.floor(gx)
     fy0 = np.floor(gy)
     ix = int(fx0)
@@ -77,13 +82,14 @@ def plane_distance_at(
     fy = gy - fy0
     if ix < 0 or iy < 0:
         return np.nan, 0.0, 0.0
-    tx = ix // tile
-    ty = iy // tile
-    lx = ix - tx * tile
-    ly = iy - ty * tile
+    mask = (1 << shift) - 1
+    tx = ix >> shift
+    ty = iy >> shift
+    lx = ix & mask
+    ly = iy & mask
     nty = table.shape[0]
     ntx = table.shape[1]
-    if lx < tile - 1 and ly < tile - 1:
+    if lx < mask and ly < mask:
         if ty >= nty or tx >= ntx:
             return np.nan, 0.0, 0.0
         t = table[ty, tx]
@@ -94,28 +100,29 @@ def plane_distance_at(
         d01 = plane[t, ly + 1, lx]
         d11 = plane[t, ly + 1, lx + 1]
     else:
-        d00 = _cell(plane, table, tile, ix, iy)
-        d10 = _cell(plane, table, tile, ix + 1, iy)
-        d01 = _cell(plane, table, tile, ix, iy + 1)
-        d11 = _cell(plane, table, tile, ix + 1, iy + 1)
+        d00 = _cell(plane, table, shift, ix, iy)
+        d10 = _cell(plane, table, shift, ix + 1, iy)
+        d01 = _cell(plane, table, shift, ix, iy + 1)
+        d11 = _cell(plane, table, shift, ix + 1, iy + 1)
     d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
     if np.isnan(d):
         return np.nan, 0.0, 0.0
-    ddx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) / res
-    ddy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) / res
+    ddx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) * inv_res
+    ddy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) * inv_res
     return d, ddx, ddy
 
 
 @njit(cache=True)
-def _cell(layer: np.ndarray, table: np.ndarray, tile: int, ix: int, iy: int) -> float:
-    tx = ix // tile
-    ty = iy // tile
+def _cell(layer: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int) -> float:
+    tx = ix >> shift
+    ty = iy >> shift
     if ty >= table.shape[0] or tx >= table.shape[1]:
         return np.nan
     t = table[ty, tx]
     if t < 0:
         return np.nan
-    return layer[t, iy - ty * tile, ix - tx * tile]
+    mask = (1 << shift) - 1
+    return layer[t, iy & mask, ix & mask]
 
 
 @njit(cache=True)
@@ -134,10 +141,10 @@ def _lookup(row: np.ndarray, step_inv: float, d: float) -> float:
 def normal_equations(
     plane: np.ndarray,
     table: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
-    res: float,
+    inv_res: float,
     x: float,
     y: float,
     th: float,
@@ -169,7 +176,7 @@ def normal_equations(
     for b in range(ex.shape[0]):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
-        d, gx, gy = plane_distance_at(plane, table, tile, ox, oy, res, x + rx, y + ry)
+        d, gx, gy = plane_distance_at(plane, table, shift, ox, oy, inv_res, x + rx, y + ry)
         if np.isnan(d):
             cost += unknown
             continue
@@ -217,10 +224,10 @@ def _solve3(h: np.ndarray, g: np.ndarray) -> np.ndarray:
 def match_one(
     plane: np.ndarray,
     table: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
-    res: float,
+    inv_res: float,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -249,7 +256,22 @@ def match_one(
         cost_row = luts[level, 0]
         weight_row = luts[level, 1]
         cost, inliers = normal_equations(
-            plane, table, tile, ox, oy, res, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g
+            plane,
+            table,
+            shift,
+            ox,
+            oy,
+            inv_res,
+            x,
+            y,
+            th,
+            ex,
+            ey,
+            cost_row,
+            weight_row,
+            step_inv,
+            h,
+            g,
         )
         lam = 1e-3
         for _ in range(max_iter):
@@ -261,7 +283,7 @@ def match_one(
             ny = y - step[1]
             nth = th - step[2]
             new_cost, new_inliers = normal_equations(
-                plane, table, tile, ox, oy, res, nx, ny, nth, ex, ey, cost_row, weight_row,
+                plane, table, shift, ox, oy, inv_res, nx, ny, nth, ex, ey, cost_row, weight_row,
                 step_inv, hc, gc,
             )  # fmt: skip
             if new_cost < cost:
@@ -290,10 +312,10 @@ def match_one(
 def match_particles(
     plane: np.ndarray,
     tables: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
-    res: float,
+    inv_res: float,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -321,7 +343,19 @@ def match_particles(
     for p in prange(poses.shape[0]):
         table = tables[p]
         refined, cost, inliers = match_one(
-            plane, table, tile, ox, oy, res, poses[p], ex, ey, luts, step_inv, max_iter, tolerance
+            plane,
+            table,
+            shift,
+            ox,
+            oy,
+            inv_res,
+            poses[p],
+            ex,
+            ey,
+            luts,
+            step_inv,
+            max_iter,
+            tolerance,
         )
         frac = inliers / nbeams
         if frac < min_inliers:
@@ -329,7 +363,7 @@ def match_particles(
         h = np.zeros((3, 3))
         g = np.zeros(3)
         cost, inliers = normal_equations(
-            plane, table, tile, ox, oy, res, refined[0], refined[1], refined[2],
+            plane, table, shift, ox, oy, inv_res, refined[0], refined[1], refined[2],
             ex, ey, luts[last, 0], luts[last, 1], step_inv, h, g,
         )  # fmt: skip
         for a in range(3):
@@ -350,7 +384,7 @@ def insert_hits(
     free_stack: np.ndarray,
     free_top: np.ndarray,
     tables: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
     res: float,
@@ -377,6 +411,8 @@ def insert_hits(
     because each cell keeps its nearest hit).
     """
     radius = int(np.ceil(dmax / res))
+    tile = 1 << shift
+    mask = tile - 1
     ntile_y = tables.shape[1]
     ntile_x = tables.shape[2]
     for p in range(start, poses.shape[0]):
@@ -391,13 +427,13 @@ def insert_hits(
             cx = int(np.floor((wx - ox) / res))
             cy = int(np.floor((wy - oy) / res))
             own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
-            if cell_distance(dist, table, tile, cx, cy, dmax) <= own + skip_below:
+            if cell_distance(dist, table, shift, cx, cy, dmax) <= own + skip_below:
                 continue
             for iy in range(cy - radius, cy + radius + 1):
                 if iy < 0 or iy >= ntile_y * tile:
                     continue
                 ccy = oy + (iy + 0.5) * res - wy
-                ty = iy // tile
+                ty = iy >> shift
                 for ix in range(cx - radius, cx + radius + 1):
                     if ix < 0 or ix >= ntile_x * tile:
                         continue
@@ -405,7 +441,7 @@ def insert_hits(
                     d = np.sqrt(ccx * ccx + ccy * ccy)
                     if d >= dmax:
                         continue
-                    tx = ix // tile
+                    tx = ix >> shift
                     t = table[ty, tx]
                     if t < 0 or refcount[t] > 1:
                         if free_top[0] == 0:
@@ -422,8 +458,8 @@ def insert_hits(
                         refcount[new] = 1
                         table[ty, tx] = new
                         t = new
-                    ly = iy - ty * tile
-                    lx = ix - tx * tile
+                    ly = iy & mask
+                    lx = ix & mask
                     if d < dist[t, ly, lx]:
                         dist[t, ly, lx] = d
                         if not signed:
@@ -461,10 +497,10 @@ def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarr
 def match_scans(
     plane: np.ndarray,
     table: np.ndarray,
-    tile: int,
+    shift: int,
     ox: float,
     oy: float,
-    res: float,
+    inv_res: float,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -487,7 +523,7 @@ def match_scans(
             out_poses[k] = poses[k]
             continue
         refined, _, inliers = match_one(
-            plane, table, tile, ox, oy, res, poses[k], ex[k, :n], ey[k, :n], luts, step_inv,
+            plane, table, shift, ox, oy, inv_res, poses[k], ex[k, :n], ey[k, :n], luts, step_inv,
             max_iter, tolerance,
         )  # fmt: skip
         if inliers < min_inliers * n:
