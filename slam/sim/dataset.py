@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 import zipfile
 from collections import deque
@@ -55,7 +56,7 @@ from slam.sim.sensors import (
 )
 from slam.sim.world import WALL, World
 
-SIM_VERSION = 1
+SIM_VERSION = 2
 """Version of the generator; bump it whenever outputs change for the same options."""
 START_TIME = 1_600_000_000.0
 """Unix time of the simulated robot's start (s)."""
@@ -144,12 +145,15 @@ def simulate_log(options: SimOptions) -> SimulatedLog:
     timings["scene_s"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    enc_t = sample_times(rng, traj.t0 + 0.01, traj.t_end, options.wheels.rate_hz, noise.time_jitter)
+    # Encoders and IMU bracket the scans and frames (with jitter): odometry never extrapolates.
+    enc_t = sample_times(
+        rng, traj.t0 - 0.01, traj.t_end + 0.045, options.wheels.rate_hz, noise.time_jitter
+    )
     counts = simulate_encoders(traj, enc_t, rng, noise, options.wheels)
     timings["encoders_s"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    imu_t = sample_times(rng, traj.t0 - 0.02, traj.t_end + 0.02, IMU_RATE_HZ, noise.time_jitter / 2)
+    imu_t = sample_times(rng, traj.t0 - 0.05, traj.t_end + 0.08, IMU_RATE_HZ, noise.time_jitter / 2)
     gyro, accel = simulate_imu(traj, imu_t, rng, noise)
     timings["imu_s"] = time.perf_counter() - clock
 
@@ -286,6 +290,7 @@ def write_dataset(log: SimulatedLog, folder: Path, progress: bool = False) -> di
 def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
     traj = log.scene.trajectory
     world = log.world
+    # 100 Hz from the start, plus every sensor time (the robot stands still outside [t0, t_end]).
     grid = traj.t0 + np.arange(int(np.floor(traj.duration * GROUND_TRUTH_RATE_HZ)) + 1) / (
         GROUND_TRUTH_RATE_HZ
     )
@@ -293,7 +298,6 @@ def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
     if log.disparity_time is not None:
         parts += [log.disparity_time, log.rgb_time]
     times = np.unique(np.concatenate(parts))
-    times = times[(times >= traj.t0) & (times <= traj.t_end)]
     (folder / "groundtruth.tum").write_text(format_tum(times, traj.pose_at(times)))
     save_npz(
         folder / "groundtruth_map.npz",
@@ -435,6 +439,7 @@ def generate_dataset(
     """Simulate and write a dataset into ``out`` atomically; return its summary with timings."""
     clock = time.perf_counter()
     with atomic_dir(Path(out), overwrite=overwrite) as tmp:
+        os.chmod(tmp, 0o755)  # the temporary folder is private; the dataset is ordinary data
         log = simulate_log(options)
         summary = write_dataset(log, tmp, progress=progress)
     summary["timings"]["total_s"] = time.perf_counter() - clock

@@ -66,6 +66,7 @@ def ensure_demo(cache_dir: Path, *, progress: bool = False, rgbd: bool = True) -
         from slam.sim.dataset import simulate_log
 
         write_dataset(simulate_log(demo_options(rgbd)), staging, progress=progress)
+        os.chmod(staging, 0o755)  # mkdtemp makes it private; the cache is ordinary data
         try:
             os.rename(staging, target)
         except OSError:

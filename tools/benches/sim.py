@@ -5,6 +5,7 @@
   (scene, encoders, IMU, lidar, Kinect rendering, PNG writing overlapped in 2 threads).
 * ``demo_rgbd_20hz`` — the same at the course logs' Kinect rate (20 Hz).
 * ``kinect_frame`` — one disparity and one RGB frame: render and PNG-encode times (best of 5).
+* ``noise_free_accuracy`` — the acceptance figures of the noise-free demo (docs/sim.md).
 
 numba kernels are compiled (or loaded from the cache) by a short warm-up run first. The machine's
 load average is reported with each figure: the shared 2-core machine is rarely idle.
@@ -100,6 +101,82 @@ def kinect_frame() -> dict:
     }
 
 
+def noise_free_accuracy() -> dict:
+    """The acceptance figures on the noise-free demo (Kinect at 2 Hz to keep it short): dead
+    reckoning vs ground truth, scan endpoints on occupied cells, floor pixels on the right colour."""
+    from slam.config import load_config
+    from slam.geometry import interpolate_poses, wrap_angle
+    from slam.io.ece276a import load_ece276a
+    from slam.io.tum import read_tum
+    from slam.kinect import KinectModel
+    from slam.odometry import dead_reckon_ece276a
+    from slam.sim.dataset import SimOptions, generate_dataset
+    from slam.sim.sensors import LidarSpec, NoiseConfig
+
+    tmp = Path(tempfile.mkdtemp(prefix="slam-sim-acc-"))
+    try:
+        folder = tmp / "demo"
+        generate_dataset(
+            folder, SimOptions(scenario="demo", seed=20, rgbd_rate=2.0, noise=NoiseConfig.off())
+        )
+        log = load_ece276a(folder, 20, need=("encoders", "imu", "scans", "kinect"))
+        gt_t, gt = read_tum(folder / "groundtruth.tum")
+        times, poses = dead_reckon_ece276a(log.encoders, log.imu, load_config("demo").robot)
+        truth = interpolate_poses(gt_t, gt, times)
+        err = np.hypot(*(poses[:, :2] - truth[:, :2]).T)
+        length = float(np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T)))
+
+        with np.load(folder / "groundtruth_map.npz") as f:
+            occ, res, origin = f["occupancy"], float(f["resolution"]), f["origin"]
+        scan_poses = interpolate_poses(gt_t, gt, log.scans.time)
+        lx = scan_poses[:, 0] + LidarSpec().x * np.cos(scan_poses[:, 2])
+        ly = scan_poses[:, 1] + LidarSpec().x * np.sin(scan_poses[:, 2])
+        r = log.scans.ranges.astype(np.float64)
+        hit = r < log.scans.no_return
+        ang = scan_poses[:, 2:3] + log.scans.angles[None, :]
+        col = np.floor((lx[:, None] + r * np.cos(ang) - origin[0]) / res)[hit].astype(int)
+        row = np.floor((ly[:, None] + r * np.sin(ang) - origin[1]) / res)[hit].astype(int)
+        on_occupied = float(np.mean(occ[row, col] == 1))
+
+        with np.load(folder / "groundtruth_texture.npz") as f:
+            texture, t_res, t_origin = f["rgb"], float(f["resolution"]), f["origin"]
+        model = KinectModel()
+        rgbd = log.rgbd
+        matched = total = 0
+        for k in range(len(rgbd.disparity_time)):
+            pose = interpolate_poses(gt_t, gt, rgbd.disparity_time[k : k + 1])[0]
+            disparity, rgb = rgbd.load_disparity(k), rgbd.load_rgb(k)
+            points, valid = model.disparity_to_world(disparity, pose)
+            i, j = np.nonzero(valid & (np.abs(points[..., 2]) < 0.03))
+            ri, rj = model.rgb_coordinates(i, j, model.disparity_to_dd(disparity[i, j]))
+            ri, rj = np.rint(ri).astype(int), np.rint(rj).astype(int)
+            ok = (ri >= 0) & (ri < 480) & (rj >= 0) & (rj < 640)
+            p = points[i[ok], j[ok]]
+            tc = np.floor((p[:, 0] - t_origin[0]) / t_res).astype(int)
+            tr = np.floor((p[:, 1] - t_origin[1]) / t_res).astype(int)
+            diff = np.abs(rgb[ri[ok], rj[ok]].astype(int) - texture[tr, tc].astype(int))
+            matched += int(np.count_nonzero(diff.max(axis=1) <= 2))
+            total += int(ok.sum())
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {
+        "path_length_m": round(length, 2),
+        "dead_reckoning_max_error_m": round(float(err.max()), 5),
+        "dead_reckoning_final_error_m": round(float(err[-1]), 5),
+        "dead_reckoning_max_yaw_error_rad": round(
+            float(np.abs(wrap_angle(poses[:, 2] - truth[:, 2])).max()), 6
+        ),
+        "scan_endpoints_on_occupied": round(on_occupied, 5),
+        "floor_pixels": total,
+        "floor_pixels_right_colour": round(matched / max(total, 1), 4),
+    }
+
+
 def benches() -> dict:
     """The simulator's benches."""
-    return {"demo_full": demo_full, "demo_rgbd_20hz": demo_rgbd_20hz, "kinect_frame": kinect_frame}
+    return {
+        "demo_full": demo_full,
+        "demo_rgbd_20hz": demo_rgbd_20hz,
+        "kinect_frame": kinect_frame,
+        "noise_free_accuracy": noise_free_accuracy,
+    }
