@@ -8,6 +8,8 @@ atomically (it appears complete or not at all):
 * ``trajectory.tum`` — one pose per processed scan (per encoder reading for ``odometry`` on
   ECE276A logs);
 * ``map.npz``, ``map.png`` — log-odds grid (resolution, origin) and a picture with the trajectory;
+* ``texture.npz``, ``texture.png``, ``texture_overlay.png`` — the floor texture on the map's
+  grid when the log has RGB-D frames (:mod:`slam.texture`, off with ``--no-texture``);
 * ``metrics.json``  — sizes, timings (wall, scans/s, real-time factor, peak memory), filter
   diagnostics, and ATE/RPE when the dataset has a ground-truth trajectory.
 
@@ -194,6 +196,9 @@ def run(request: RunRequest) -> Path:
             source = load_source(request.name, request.data_dir, config, request.progress)
             observers: list[Observer] = []
             result = _estimate(source, config, request.progress, observers)
+            from slam.texture import run_stage
+
+            result.metrics.update(run_stage(source.log, result, config, tmp, request.progress))
         messages = sorted({str(w.message) for w in caught})
         metrics = result.metrics
         metrics["warnings"] = messages + source.notes

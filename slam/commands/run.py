@@ -18,7 +18,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Run SLAM on NAME: a dataset of the registry (slam data list), 'demo' (a simulated "
             "dataset20-scale log generated on first use, with ground truth), or a path to a "
             "CARMEN log or an ECE276A dataset folder. Writes config.toml, trajectory.tum, "
-            "map.npz, map.png and metrics.json to the run folder."
+            "map.npz, map.png, metrics.json and, with RGB-D frames, texture.png/npz to the run "
+            "folder."
         ),
     )
     parser.add_argument("name", metavar="NAME", help="dataset name, 'demo', or a path")
@@ -36,6 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="random seed")
     parser.add_argument("--every", type=int, help="process every k-th scan")
     parser.add_argument("--max-scans", type=int, help="stop after this many scans")
+    parser.add_argument(
+        "--no-texture", action="store_true", help="skip the floor texture (RGB-D) stage"
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing run folder")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_data_dir_argument(parser)
@@ -55,6 +59,8 @@ def overrides_from(args: argparse.Namespace) -> list[str]:
         value = getattr(args, flag, None)
         if value is not None:
             out.append(f"{key}={value!r}" if isinstance(value, str) else f"{key}={value}")
+    if getattr(args, "no_texture", False):
+        out.append("texture.enabled=false")
     return [o.replace("'", '"') for o in out]
 
 
@@ -85,5 +91,7 @@ def run_command(args: argparse.Namespace) -> int:
         summary.append(f"{metrics['real_time_factor']:.1f}x real time")
     if "ate_rmse" in metrics:
         summary.append(f"ATE RMSE {metrics['ate_rmse']:.3f} m")
+    if "frames_used" in metrics.get("texture", {}):
+        summary.append(f"texture from {metrics['texture']['frames_used']} frames")
     print(f"{out}: {', '.join(summary)}")
     return 0
