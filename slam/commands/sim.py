@@ -1,6 +1,6 @@
 """``slam sim NAME --out DIR``: write a simulated dataset in the ECE276A format, with ground truth.
 
-NAME is a scenario (``demo``: dataset20-sized, 124 s; ``small``: a 40 s loop). The folder gets
+NAME is a scenario (``demo``: dataset20-sized, 124 s; ``small``: a 45 s loop). The folder gets
 ``EncodersNN.npz``, ``ImuNN.npz``, ``HokuyoNN.npz``, ``KinectNN.npz`` and ``dataRGBD/`` exactly
 like the course's logs, plus ``groundtruth.tum``, ``groundtruth_map.npz``/``.png``,
 ``groundtruth_texture.npz``/``.png`` and ``simulation.json``. The same options give byte-identical

@@ -6,8 +6,8 @@ along the bottom corridor heading +x, makes a detour into some rooms (through th
 the room, back out), goes once around the ring corridor counter-clockwise and drives a few metres
 past the start again, so every log closes a loop.
 
-* ``demo``: the size of the course's dataset20 (≈124 s at 40 Hz, ≈4960 scans), a 25 × 25 m floor
-  with 5–8 rooms;
+* ``demo``: the size of the course's dataset20 (≈124 s at 40 Hz, ≈4960 scans), a floor of about
+  18 × 22 m with 4–8 rooms;
 * ``small``: a short loop (45 s) around a one-room block, for tests and quick experiments.
 """
 
@@ -57,7 +57,7 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {
     "demo": Scenario(
         name="demo",
-        description="dataset20-sized log (124 s) in a ring building with 5-8 rooms",
+        description="dataset20-sized log (124 s) in a ring building with 4-8 rooms",
         duration=124.0,
         spec=RingSpec(),
         seed=20,
@@ -235,7 +235,7 @@ def generate_scene(
     # and its speed and cuts the log short (or lets the robot stand at the end).
     trajectory, info = drive(route.waypoints, route.radii, scenario.duration, t0, scenario.limits)
     if duration != scenario.duration:
-        trajectory, _ = drive(
+        trajectory, info = drive(
             route.waypoints, route.radii, duration, t0, scenario.limits,
             cruise=info["cruise_speed"],
         )  # fmt: skip
