@@ -284,6 +284,23 @@ class VizConfig:
 
     record: bool = True
     """Write ``recording.rrd`` in the run folder."""
+    map_every: int = 200
+    """Scans between snapshots of the live occupancy map (0: only the final map)."""
+    detail_every: int = 10
+    """Scans between logged particle sets, scan endpoints and scans/s values (0: never)."""
+    scan_points: int = 180
+    """At most this many endpoints (evenly spread) of a logged scan."""
+    map_levels: int = 16
+    """Grey levels of the logged map images (fewer levels make smaller recordings)."""
+
+    def __post_init__(self) -> None:
+        for name in ("map_every", "detail_every"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"viz.{name}: expected 0 or more, found {getattr(self, name)}")
+        if self.scan_points < 1:
+            raise ConfigError(f"viz.scan_points: expected at least 1, found {self.scan_points}")
+        if not 2 <= self.map_levels <= 256:
+            raise ConfigError(f"viz.map_levels: expected 2..256, found {self.map_levels}")
 
 
 @dataclass(frozen=True)

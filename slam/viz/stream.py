@@ -1,0 +1,221 @@
+"""Recording streams, the viewer process, and reading recordings back.
+
+* :func:`open_stream` makes a dedicated :class:`rerun.RecordingStream` (never the global one, so
+  runs and tests are isolated) writing to a file and/or streaming to a viewer, with the
+  wall-clock ``log_time`` timeline disabled (recordings of the same inputs are then identical,
+  which the golden-recording test relies on);
+* :func:`set_time` sets the two timelines of every recording: ``scan`` (a sequence) and ``time``
+  (the log's timestamps: absolute when they look like Unix seconds, else a duration);
+* :func:`spawn_viewer` starts a native viewer listening on 127.0.0.1 only and returns the URL to
+  stream to; :func:`viewer_command` is the command line of ``slam view``;
+* :func:`summarize` reads a recording back with :class:`rerun.chunk.RrdReader`: entities, their
+  timelines, row counts and archetype fields (what the tests check).
+
+Rerun's servers bind every interface unless told otherwise: every command built here passes
+``--bind 127.0.0.1``. Usage analytics are turned off for every viewer process started here.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+
+from slam.errors import DataError, UsageError
+
+APPLICATION_ID = "slam"
+"""Application id of every recording (the viewer groups recordings by it)."""
+
+LOOPBACK = "127.0.0.1"
+"""The only address a viewer or web server started by slam listens on."""
+
+UNIX_SECONDS = 1e8
+"""Log times above this (1973) are Unix timestamps; smaller ones are durations from a start."""
+
+
+def open_stream(
+    path: Path | None,
+    *,
+    name: str,
+    viewer_url: str | None = None,
+    recording_id: str | None = None,
+    blueprint: rr.blueprint.BlueprintLike | None = None,
+) -> rr.RecordingStream:
+    """A new recording stream writing to ``path`` and/or streaming to ``viewer_url``.
+
+    ``recording_id`` defaults to a fresh UUID; pass a fixed one for reproducible files.
+    ``blueprint`` is sent as the default layout.
+    """
+    rec = rr.RecordingStream(
+        APPLICATION_ID,
+        recording_id=recording_id or str(uuid.uuid4()),
+        send_properties=False,
+    )
+    rec.set_log_time_enabled(False)
+    sinks: list = []
+    if path is not None:
+        sinks.append(rr.FileSink(str(path)))
+    if viewer_url is not None:
+        sinks.append(rr.GrpcSink(url=viewer_url))
+    if not sinks:
+        raise ValueError("open_stream: give a file path, a viewer URL or both")
+    rec.set_sinks(*sinks, default_blueprint=blueprint)
+    rec.send_recording_name(name)
+    return rec
+
+
+def close_stream(rec: rr.RecordingStream) -> None:
+    """Flush everything logged and close the stream's file and connections."""
+    rec.flush()
+    rec.disconnect()
+
+
+def set_time(rec: rr.RecordingStream, scan: int, stamp: float | None = None) -> None:
+    """Set the ``scan`` sequence and, when known, the ``time`` timeline (log seconds)."""
+    rec.set_time("scan", sequence=int(scan))
+    if stamp is not None:
+        if stamp > UNIX_SECONDS:
+            rec.set_time("time", timestamp=float(stamp))
+        else:
+            rec.set_time("time", duration=float(stamp))
+
+
+def time_columns(scans: NDArray[np.int64], stamps: NDArray[np.float64]) -> list[rr.TimeColumn]:
+    """The ``scan`` and ``time`` index columns of rows sent with ``send_columns``."""
+    columns = [rr.TimeColumn("scan", sequence=np.asarray(scans, dtype=np.int64))]
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if stamps.size and stamps[0] > UNIX_SECONDS:
+        columns.append(rr.TimeColumn("time", timestamp=stamps))
+    elif stamps.size:
+        columns.append(rr.TimeColumn("time", duration=stamps))
+    return columns
+
+
+def rerun_executable() -> list[str]:
+    """The ``rerun`` command line tool of this environment (shipped with rerun-sdk)."""
+    return [sys.executable, "-m", "rerun_cli"]
+
+
+def viewer_env() -> dict[str, str]:
+    """The environment of viewer processes: ours, with usage analytics off."""
+    env = dict(os.environ)
+    env.setdefault("RERUN_ANALYTICS", "0")
+    env.setdefault("RERUN_TELEMETRY", "0")
+    return env
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((LOOPBACK, 0))
+        return int(s.getsockname()[1])
+
+
+def grpc_url(port: int) -> str:
+    """The URL an SDK streams to for a viewer listening on ``port`` of 127.0.0.1."""
+    return f"rerun+http://{LOOPBACK}:{port}/proxy"
+
+
+def wait_for_port(port: int, timeout_s: float, process: subprocess.Popen | None = None) -> bool:
+    """Whether something accepts connections on 127.0.0.1:``port`` within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if process is not None and process.poll() is not None:
+            return False
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.settimeout(0.2)
+            if s.connect_ex((LOOPBACK, port)) == 0:
+                return True
+        time.sleep(0.1)
+    return False
+
+
+def spawn_viewer(port: int | None = None, timeout_s: float = 20.0) -> tuple[subprocess.Popen, str]:
+    """Start a native viewer listening on 127.0.0.1; return the process and the URL to stream to.
+
+    Raises :class:`~slam.errors.UsageError` when the viewer does not come up (for example on a
+    machine without a display).
+    """
+    port = port or free_port()
+    cmd = [*rerun_executable(), "--bind", LOOPBACK, "--port", str(port), "--expect-data-soon"]
+    process = subprocess.Popen(  # its own session: the viewer outlives the run
+        cmd,
+        env=viewer_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    if not wait_for_port(port, timeout_s, process):
+        if process.poll() is None:
+            process.terminate()
+        raise UsageError(
+            f"--viewer: the rerun viewer did not start listening on {LOOPBACK}:{port} "
+            f"(exit code {process.poll()}); is there a display? The run still writes "
+            "recording.rrd: open it later with 'slam view RUN_DIR --web'"
+        )
+    return process, grpc_url(port)
+
+
+def viewer_command(
+    recording: Path, web: bool = False, port: int | None = None, web_port: int | None = None
+) -> list[str]:
+    """Command line of ``slam view``: the native viewer, or the web viewer served on 127.0.0.1."""
+    cmd = [*rerun_executable(), "--bind", LOOPBACK]
+    if web:
+        cmd += ["--serve-web", "--web-viewer-port", str(web_port or 9090)]
+    if port is not None:
+        cmd += ["--port", str(port)]
+    return [*cmd, str(recording)]
+
+
+def web_url(web_port: int, grpc_port: int) -> str:
+    """Address of the web viewer served by :func:`viewer_command` with ``web=True``."""
+    proxy = grpc_url(grpc_port).replace(":", "%3A").replace("/", "%2F").replace("+", "%2B")
+    return f"http://{LOOPBACK}:{web_port}/?url={proxy}"
+
+
+@dataclass
+class EntitySummary:
+    """What a recording holds for one entity."""
+
+    rows: int = 0
+    """Temporal rows (one per log call on a timeline)."""
+    static_rows: int = 0
+    """Static rows."""
+    timelines: set[str] = field(default_factory=set)
+    """Timelines its temporal rows are indexed by."""
+    fields: set[str] = field(default_factory=set)
+    """Logged fields as ``Archetype:field`` (e.g. ``Points2D:positions``)."""
+
+
+def summarize(path: Path) -> dict[str, EntitySummary]:
+    """Entities of the first recording in the ``.rrd`` file ``path`` (entity path → summary)."""
+    from rerun.chunk import RrdReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: recording not found")
+    try:
+        chunks = RrdReader(path).stream().to_chunks()
+    except Exception as exc:  # the reader raises plain exceptions on corrupt files
+        raise DataError(f"{path}: not a readable rerun recording ({exc})") from None
+    out: dict[str, EntitySummary] = {}
+    for chunk in chunks:
+        entry = out.setdefault(chunk.entity_path, EntitySummary())
+        names = chunk.to_record_batch().schema.names
+        entry.fields.update(n for n in names if ":" in n)
+        if chunk.is_static:
+            entry.static_rows += chunk.num_rows
+        else:
+            entry.rows += chunk.num_rows
+            entry.timelines.update(chunk.timeline_names)
+    return out
