@@ -58,6 +58,8 @@ class RunRequest:
     """Replace an existing run folder."""
     progress: bool = False
     """Show a progress bar."""
+    viewer: bool = False
+    """Stream the recording live to a spawned rerun viewer (:mod:`slam.viz`)."""
 
 
 @dataclass
@@ -195,6 +197,10 @@ def run(request: RunRequest) -> Path:
             warnings.simplefilter("always")
             source = load_source(request.name, request.data_dir, config, request.progress)
             observers: list[Observer] = []
+            from slam.viz.recorder import start_recording
+
+            recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
+            observers.extend([recorder] if recorder is not None else [])
             result = _estimate(source, config, request.progress, observers)
             from slam.texture import run_stage
 
@@ -215,6 +221,8 @@ def run(request: RunRequest) -> Path:
             result.grid.save_npz(tmp / "map.npz")
             gt = None if source.ground_truth is None else source.ground_truth[1]
             _write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
+        if recorder is not None:  # last: the recording logs the texture when there is one
+            metrics["recording"] = recorder.finish(result.times, result.poses, result.grid, tmp)
         metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
         metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")

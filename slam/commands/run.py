@@ -40,6 +40,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-texture", action="store_true", help="skip the floor texture (RGB-D) stage"
     )
+    parser.add_argument(
+        "--viewer", action="store_true", help="stream the run live to a rerun viewer (127.0.0.1)"
+    )
+    parser.add_argument(
+        "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing run folder")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_data_dir_argument(parser)
@@ -61,6 +67,8 @@ def overrides_from(args: argparse.Namespace) -> list[str]:
             out.append(f"{key}={value!r}" if isinstance(value, str) else f"{key}={value}")
     if getattr(args, "no_texture", False):
         out.append("texture.enabled=false")
+    if getattr(args, "no_record", False):
+        out.append("viz.record=false")
     return [o.replace("'", '"') for o in out]
 
 
@@ -82,6 +90,7 @@ def run_command(args: argparse.Namespace) -> int:
             out=args.out,
             force=args.force,
             progress=show_progress(args),
+            viewer=getattr(args, "viewer", False),
         )
     )
     metrics = json.loads((out / "metrics.json").read_text())
