@@ -151,9 +151,9 @@ class FilterConfig:
 class RbpfConfig:
     """The default method: Rao-Blackwellised particles, each with its own distance-field map."""
 
-    update_distance: float = 0.1
+    update_distance: float = 0.2
     """Run a filter update after this much travel since the last one (m)."""
-    update_angle: float = 0.05
+    update_angle: float = 0.1
     """... or after this much rotation (rad). Scans in between move particles by odometry only."""
     match_beams: int = 360
     """At most this many beams (evenly spread) are used for scan matching and weighting."""
