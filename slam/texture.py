@@ -175,7 +175,9 @@ def pair_frames(
     if rgb_available is not None:
         present = np.asarray(rgb_available, dtype=bool)[candidates]
         missing = candidates[~present]
-        plan.skip("missing_rgb", missing.size, f"RGB frame {missing[0] + 1}" if missing.size else "")
+        plan.skip(
+            "missing_rgb", missing.size, f"RGB frame {missing[0] + 1}" if missing.size else ""
+        )
         candidates = candidates[present]
     usable = np.arange(disparity_time.size, dtype=np.int64)
     if disparity_available is not None:
@@ -486,6 +488,15 @@ class TextureResult:
     warnings: list[str]
 
 
+def warm_up() -> None:
+    """Compile (or load from numba's cache) :func:`accumulate_frame` for the frame types
+    :class:`~slam.io.log.RgbdIndex` returns, so that timings measure throughput only."""
+    config = TextureConfig()
+    acc = TextureAccumulator((1, 1), 1.0, np.zeros(2), config)
+    rgb = np.zeros((1, 1, 3), dtype=np.uint8)[:, :, ::-1]  # load_rgb's BGR→RGB view
+    acc.add_frame(np.zeros((1, 1), dtype=np.uint16), rgb, np.zeros(3), np.zeros(3))
+
+
 def _read_pair(index: RgbdIndex, model: KinectModel, k_rgb: int, k_disp: int) -> tuple:
     """Load one frame pair; ``(rgb, disparity, None, None)`` or ``(.., reason, message)``."""
     try:
@@ -520,6 +531,7 @@ def build_texture(
     """
     times = np.asarray(times, dtype=np.float64)
     poses = np.asarray(poses, dtype=np.float64)
+    warm_up()
     start = time.perf_counter()
     time_range = (float(times.min()), float(times.max())) if times.size else (0.0, -1.0)
     plan = plan_frames(index, config, time_range)
@@ -543,7 +555,10 @@ def build_texture(
             while submitted < n and len(pending) < window:
                 pending.append(
                     pool.submit(
-                        _read_pair, index, model, int(plan.rgb[submitted]),
+                        _read_pair,
+                        index,
+                        model,
+                        int(plan.rgb[submitted]),
                         int(plan.disparity[submitted]),
                     )  # fmt: skip
                 )
@@ -1030,3 +1045,96 @@ def update_metrics(path: Path, figures: dict[str, Any]) -> None:
         raise DataError(f"{path}: expected a JSON object, found {type(metrics).__name__}")
     metrics["texture"] = figures
     write_text(path, json.dumps(metrics, indent=2) + "\n")
+
+
+# ------------------------------------------------------------------------- finished runs
+
+
+RUN_FILES = ("config.toml", "trajectory.tum", "map.npz")
+"""What ``slam texture RUN_DIR`` reads from a run folder."""
+
+
+def load_run_log(name: str, data_dir: Path, config: Config) -> Log:
+    """The Kinect stream of dataset ``name``: ``demo`` (the cached simulated demo), a registry
+    dataset, or a path to an ECE276A dataset folder."""
+    from slam.io import registry
+    from slam.io.ece276a import load_ece276a
+
+    if name == "demo":
+        from slam.io.datadir import resolve_cache_dir
+        from slam.sim.demo import DEMO_NUMBER, ensure_demo
+
+        folder = ensure_demo(resolve_cache_dir(data_dir))
+        return load_ece276a(folder, DEMO_NUMBER, need=("kinect",), name="demo", lidar=config.lidar)
+    if name in registry.load_registry():
+        return registry.load_dataset(name, data_dir, need=("kinect",), config=config)
+    path = Path(name)
+    if path.is_dir():
+        numbers = sorted(p.stem[len("Kinect") :] for p in path.glob("Kinect*.npz"))
+        if len(numbers) != 1:
+            raise DataError(
+                f"{path}: expected one KinectNN.npz in an ECE276A dataset folder, "
+                f"found {len(numbers)}"
+            )
+        return load_ece276a(path, numbers[0], need=("kinect",), name=path.name, lidar=config.lidar)
+    from slam.errors import UsageError
+
+    raise UsageError(
+        f"dataset {name!r} is neither 'demo', a registry dataset (slam data list) nor an ECE276A "
+        "folder; give the dataset folder with --dataset PATH"
+    )
+
+
+def recompute_run(
+    run_dir: Path,
+    data_dir: Path,
+    *,
+    mode: str | None = None,
+    dataset: str | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Recompute the texture of a finished run from its ``trajectory.tum`` and ``map.npz`` and the
+    dataset named in its ``config.toml`` (or ``dataset``); rewrite ``texture.npz``,
+    ``texture.png``, ``texture_overlay.png`` and the ``"texture"`` key of ``metrics.json``, each
+    atomically. Returns the texture figures.
+    """
+    import dataclasses
+
+    from slam.config import load_config
+    from slam.errors import UsageError
+    from slam.io.tum import read_tum
+
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise DataError(f"{run_dir}: run folder not found")
+    missing = [n for n in RUN_FILES if not (run_dir / n).is_file()]
+    if missing:
+        raise DataError(
+            f"{run_dir}: not a finished run folder, missing {', '.join(missing)} "
+            "(expected the output of `slam run`)"
+        )
+    config = load_config("", run_dir / "config.toml")
+    if mode is not None:
+        if mode not in TEXTURE_MODES:
+            raise UsageError(f"--mode: expected one of {', '.join(TEXTURE_MODES)}, found {mode!r}")
+        config = dataclasses.replace(config, texture=dataclasses.replace(config.texture, mode=mode))
+    name = dataset or config.dataset
+    if not name:
+        raise DataError(f"{run_dir / 'config.toml'}: no 'dataset' key; give --dataset")
+    times, poses = read_tum(run_dir / "trajectory.tum")
+    arrays = _load_npz(run_dir / "map.npz", ("log_odds", "resolution", "origin"))
+    log_odds = np.asarray(arrays["log_odds"], dtype=np.float32)
+    if log_odds.ndim != 2:
+        raise DataError(f"{run_dir / 'map.npz'}: log_odds must be 2-D, found {log_odds.shape}")
+    grid = OccupancyGrid.from_arrays(
+        log_odds, float(arrays["resolution"]), np.asarray(arrays["origin"]).reshape(2), config.map
+    )
+    log = load_run_log(name, data_dir, config)
+    if log.rgbd is None:
+        raise DataError(f"dataset {name}: no Kinect frames (KinectNN.npz)")
+    why = images_missing(log)
+    if why is not None:
+        raise DataError(f"dataset {name}: RGB-D image folders {why}")
+    figures = texture_stage(log, times, poses, grid, config, run_dir, progress)
+    update_metrics(run_dir / "metrics.json", figures)
+    return figures
