@@ -1,0 +1,116 @@
+"""Texture-mapping benches: frames per second of the whole stage and of its parts.
+
+* ``demo_ground_truth_path`` — the texture of the demo dataset (``slam run demo``'s data, taken
+  from the cache, generated there on first use) along its true path on a 40 m map at 0.05 m:
+  frames/s of the stage (PNG decoding in ``texture.read_threads`` threads + the projection
+  kernel), CPU milliseconds per frame, and the acceptance figures (colour error, coverage).
+* ``kernel_frame`` — the projection/accumulation kernel alone on one in-memory frame pair of a
+  flat floor (307 200 pixels), best of 20.
+* ``png_decode`` — reading one RGB and one disparity PNG of the demo (``RgbdIndex.load_*``),
+  best of 20.
+
+The machine's load average is reported with each figure: the shared 2-core machine is rarely idle.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+from benches._util import best_of, data_dir
+
+
+def _demo_log():
+    from slam.io.datadir import resolve_cache_dir
+    from slam.io.ece276a import load_ece276a
+    from slam.sim.demo import DEMO_NUMBER, ensure_demo
+
+    folder = ensure_demo(resolve_cache_dir(data_dir()))
+    return folder, load_ece276a(folder, DEMO_NUMBER, need=("kinect",), name="demo")
+
+
+def demo_ground_truth_path() -> dict:
+    """The whole stage on the demo along the true path, with its accuracy figures."""
+    import warnings
+
+    from slam.config import MapConfig, TextureConfig
+    from slam.mapping import OccupancyGrid
+    from slam.texture import build_texture, evaluate_texture, load_ground_truth, warm_up
+
+    folder, log = _demo_log()
+    gt = load_ground_truth(Path(folder))
+    config = TextureConfig()
+    warm_up()
+    load = os.getloadavg()[0]
+    cpu = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = build_texture(log.rgbd, gt.times, gt.poses, OccupancyGrid(MapConfig()), config)
+    cpu = time.process_time() - cpu
+    used = int(result.used.sum())
+    start = time.perf_counter()
+    figures = evaluate_texture(result.texture, gt, result.plan.disparity_time[result.used], config)
+    return {
+        "frames_used": used,
+        "frames_skipped": int(sum(result.plan.skipped.values())),
+        "wall_s": round(result.wall_s, 3),
+        "frames_per_s": round(used / result.wall_s, 1),
+        "cpu_ms_per_frame": round(1000 * cpu / max(used, 1), 2),
+        "read_threads": config.read_threads,
+        "colour_mae": figures["colour_mae"],
+        "coverage": figures["coverage"],
+        "swept_area_m2": figures["swept_area_m2"],
+        "evaluation_s": round(time.perf_counter() - start, 3),
+        "load_average_at_start": round(load, 2),
+    }
+
+
+def kernel_frame() -> dict:
+    """The kernel alone on one analytic floor frame."""
+    from slam.config import TextureConfig
+    from slam.kinect import KinectModel
+    from slam.texture import TextureAccumulator
+
+    model = KinectModel()
+    i, j = model.pixel_grid()
+    rays = model.pixel_rays(i, j) @ model.rotation.T
+    with np.errstate(divide="ignore"):
+        depth = np.where(rays[..., 2] < 0, model.z / -rays[..., 2], np.inf)
+    disparity = model.encode_disparity(depth)
+    rgb = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)[:, :, ::-1]
+    acc = TextureAccumulator((800, 800), 0.05, np.array([-20.0, -20.0]), TextureConfig())
+    pose_d, pose_r = np.array([1.0, 2.0, 0.3]), np.array([1.01, 2.0, 0.31])
+    acc.add_frame(disparity, rgb, pose_d, pose_r)  # compile / load from cache
+    load = os.getloadavg()[0]
+    seconds, added = best_of(lambda: acc.add_frame(disparity, rgb, pose_d, pose_r), 20)
+    return {
+        "kernel_ms": round(seconds * 1000, 3),
+        "floor_samples": int(added),
+        "ns_per_pixel": round(seconds * 1e9 / disparity.size, 2),
+        "load_average_at_start": round(load, 2),
+    }
+
+
+def png_decode() -> dict:
+    """Decoding one RGB and one disparity PNG of the demo."""
+    _, log = _demo_log()
+    index = log.rgbd
+    load = os.getloadavg()[0]
+    rgb_s, _ = best_of(lambda: index.load_rgb(100), 20)
+    disp_s, _ = best_of(lambda: index.load_disparity(100), 20)
+    return {
+        "rgb_png_ms": round(rgb_s * 1000, 3),
+        "disparity_png_ms": round(disp_s * 1000, 3),
+        "load_average_at_start": round(load, 2),
+    }
+
+
+def benches() -> dict:
+    """The texture benches."""
+    return {
+        "demo_ground_truth_path": demo_ground_truth_path,
+        "kernel_frame": kernel_frame,
+        "png_decode": png_decode,
+    }
