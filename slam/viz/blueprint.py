@@ -41,8 +41,11 @@ def world_flip() -> rr.Transform3D:
     return rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def history(*paths: str) -> dict[str, rrb.VisibleTimeRanges]:
-    """Overrides that show everything logged at ``paths`` up to the time cursor."""
+def history(
+    *paths: str, timelines: tuple[str, ...] = TIMELINES
+) -> dict[str, rrb.VisibleTimeRanges]:
+    """Overrides that show everything logged at ``paths`` up to the time cursor on ``timelines``
+    (name only timelines the recording has: the viewer shows nothing for an unknown one)."""
     ranges = rrb.VisibleTimeRanges(
         [
             rr.VisibleTimeRange(
@@ -50,17 +53,18 @@ def history(*paths: str) -> dict[str, rrb.VisibleTimeRanges]:
                 start=rr.TimeRangeBoundary.infinite(),
                 end=rr.TimeRangeBoundary.cursor_relative(),
             )
-            for timeline in TIMELINES
+            for timeline in timelines
         ]
     )
     return {f"/{path}": ranges for path in paths}
 
 
-def _panels() -> list:
+def _panels(timeline: str) -> list:
+    """Side panels collapsed; the time panel on ``timeline``, following the latest data."""
     return [
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="scan", play_state="following"),
+        rrb.TimePanel(state="collapsed", timeline=timeline, play_state="following"),
     ]
 
 
@@ -83,7 +87,7 @@ def run_blueprint() -> rrb.Blueprint:
     layout = rrb.Horizontal(
         rrb.Tabs(map_view, texture_view, active_tab=0), series, column_shares=[3, 2]
     )
-    return rrb.Blueprint(layout, *_panels(), collapse_panels=False)
+    return rrb.Blueprint(layout, *_panels("scan"))
 
 
 def grid_blueprint() -> rrb.Blueprint:
@@ -93,16 +97,19 @@ def grid_blueprint() -> rrb.Blueprint:
         rrb.TimeSeriesView(name="max probability", origin="/metrics"),
         column_shares=[3, 2],
     )
-    return rrb.Blueprint(layout, *_panels())
+    return rrb.Blueprint(layout, *_panels("step"))
 
 
 def maze_blueprint() -> rrb.Blueprint:
     """``slam maze run``: walls as known to the robot, its path, the true walls faintly."""
     layout = rrb.Horizontal(
         rrb.Spatial2DView(
-            name="maze", origin="/", contents=["+ /maze/**"], overrides=history("maze/path")
+            name="maze",
+            origin="/",
+            contents=["+ /maze/**"],
+            overrides=history("maze/path/run0", "maze/path/run1", timelines=("step",)),
         ),
-        rrb.TimeSeriesView(name="known walls", origin="/metrics"),
+        rrb.TimeSeriesView(name="known sides", origin="/metrics"),
         column_shares=[3, 2],
     )
-    return rrb.Blueprint(layout, *_panels())
+    return rrb.Blueprint(layout, *_panels("step"))

@@ -51,8 +51,8 @@ F64 = NDArray[np.float64]
 RECORDING_NAME = "recording.rrd"
 """File name of the recording in a run folder."""
 
-BATCH_ROWS = 32
-"""Per-scan rows are buffered and sent this many at a time (a live viewer lags by as many)."""
+BATCH_ROWS = 64
+"""Rows are buffered and sent every this many scans (a live viewer lags by as many)."""
 
 RATE_WINDOW = 10
 """scans/s is measured over the last this-many ``detail_every`` windows (smooths skipped scans)."""
@@ -121,6 +121,9 @@ class RunRecorder:
         self.maps = 0
         self._last_xy: F64 | None = None
         self._rows: list[tuple[float, ...]] = []
+        self._particles: list[tuple[int, float, F64, NDArray[np.uint8]]] = []
+        self._scans: list[tuple[int, float, F64]] = []
+        self._rates: list[tuple[int, float, float]] = []
         self._last: tuple[int, float] = (0, 0.0)
         self._rate_marks: deque[tuple[int, float]] = deque(maxlen=RATE_WINDOW)
         start = time.perf_counter()
@@ -168,58 +171,71 @@ class RunRecorder:
 
     # -- the Observer protocol
     def on_step(self, record: StepRecord) -> None:
-        """Buffer the pose, N_eff and max weight (sent in batches); log details on their steps."""
+        """Buffer the scan's rows; they are sent in batches of :data:`BATCH_ROWS` scans."""
         start = time.perf_counter()
-        self._rows.append(
-            (record.step, record.time, *record.pose[:3], record.n_eff, record.max_weight)
-        )
-        if record.particles is not None or record.endpoints is not None:
-            set_time(self.rec, record.step, record.time)
+        step, stamp = record.step, record.time
+        self._rows.append((step, stamp, *record.pose[:3], record.n_eff, record.max_weight))
         if record.particles is not None and record.weights is not None:
-            self.rec.log(
-                bp.PARTICLES,
-                rr.Points2D(record.particles[:, :2], colors=weight_colours(record.weights)),
-            )
+            colours = weight_colours(record.weights)
+            self._particles.append((step, stamp, record.particles[:, :2].copy(), colours))
         if record.endpoints is not None:
-            self.rec.log(bp.SCAN, rr.Points2D(thin(record.endpoints, self.config.scan_points)))
-        if self.detail_every and record.step % self.detail_every == 0:
+            self._scans.append((step, stamp, thin(record.endpoints, self.config.scan_points)))
+        if self.detail_every and step % self.detail_every == 0:
             now = self.clock()
             marks = self._rate_marks
             if marks and now > marks[0][1]:
-                rate = (record.step - marks[0][0]) / (now - marks[0][1])
-                set_time(self.rec, record.step, record.time)
-                self.rec.log(bp.SCANS_PER_S, rr.Scalars(rate))
-            marks.append((record.step, now))
-        self._last = (record.step, record.time)
+                self._rates.append((step, stamp, (step - marks[0][0]) / (now - marks[0][1])))
+            marks.append((step, now))
+        self._last = (step, stamp)
         self.steps += 1
         if len(self._rows) >= BATCH_ROWS:
             self._send_rows()
         self.spent_s += time.perf_counter() - start
 
     def _send_rows(self) -> None:
-        """Send the buffered per-scan rows: one trajectory segment, pose and scalars per scan."""
-        if not self._rows:
-            return
-        rows = np.asarray(self._rows, dtype=np.float64)
-        self._rows = []
-        index = time_columns(rows[:, 0].astype(np.int64), rows[:, 1])
-        xy = rows[:, 2:4]
-        prev = np.vstack([xy[:1] if self._last_xy is None else self._last_xy[None], xy[:-1]])
-        self._last_xy = xy[-1].copy()
+        """Send the buffered rows, one ``send_columns`` per entity: per scan a trajectory
+        segment, the pose, N_eff and max weight; particles, scan endpoints and rates."""
         rec = self.rec
-        rec.send_columns(
-            bp.TRAJECTORY, indexes=index, columns=rr.LineStrips2D.columns(
-                strips=np.stack([prev, xy], axis=1)
-            ),
-        )  # fmt: skip
-        heading = 0.5 * np.stack([np.cos(rows[:, 4]), np.sin(rows[:, 4])], axis=1)
-        rec.send_columns(
-            bp.ROBOT, indexes=index, columns=rr.Arrows2D.columns(origins=xy, vectors=heading)
-        )
-        rec.send_columns(bp.N_EFF, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 5]))
-        rec.send_columns(
-            bp.MAX_WEIGHT, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 6])
-        )
+        if self._rows:
+            rows = np.asarray(self._rows, dtype=np.float64)
+            self._rows = []
+            index = time_columns(rows[:, 0].astype(np.int64), rows[:, 1])
+            xy = rows[:, 2:4]
+            prev = np.vstack([xy[:1] if self._last_xy is None else self._last_xy[None], xy[:-1]])
+            self._last_xy = xy[-1].copy()
+            segments = rr.LineStrips2D.columns(strips=np.stack([prev, xy], axis=1))
+            rec.send_columns(bp.TRAJECTORY, indexes=index, columns=segments)
+            heading = 0.5 * np.stack([np.cos(rows[:, 4]), np.sin(rows[:, 4])], axis=1)
+            arrows = rr.Arrows2D.columns(origins=xy, vectors=heading)
+            rec.send_columns(bp.ROBOT, indexes=index, columns=arrows)
+            rec.send_columns(
+                bp.N_EFF, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 5])
+            )
+            rec.send_columns(
+                bp.MAX_WEIGHT, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 6])
+            )
+        if self._particles:
+            steps, stamps, points, colours = zip(*self._particles, strict=True)
+            self._particles = []
+            columns = rr.Points2D.columns(
+                positions=np.concatenate(points), colors=np.concatenate(colours)
+            ).partition([len(p) for p in points])
+            rec.send_columns(bp.PARTICLES, indexes=time_columns(steps, stamps), columns=columns)
+        if self._scans:
+            steps, stamps, points = zip(*self._scans, strict=True)
+            self._scans = []
+            columns = rr.Points2D.columns(positions=np.concatenate(points)).partition(
+                [len(p) for p in points]
+            )
+            rec.send_columns(bp.SCAN, indexes=time_columns(steps, stamps), columns=columns)
+        if self._rates:
+            steps, stamps, rates = zip(*self._rates, strict=True)
+            self._rates = []
+            rec.send_columns(
+                bp.SCANS_PER_S,
+                indexes=time_columns(steps, stamps),
+                columns=rr.Scalars.columns(scalars=np.asarray(rates)),
+            )
 
     def on_map(self, step: int, time_s: float, grid: OccupancyGrid) -> None:
         """Log a snapshot of the live map when ``viz.map_every`` scans have passed since the last.

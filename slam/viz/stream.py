@@ -73,6 +73,16 @@ def open_stream(
     return rec
 
 
+def check_recording_path(path: Path) -> Path:
+    """``path`` if a recording can be written there (a ``.rrd`` name in an existing folder)."""
+    path = Path(path)
+    if path.suffix != ".rrd":
+        raise UsageError(f"--record {path}: expected a file name ending in .rrd")
+    if not path.parent.is_dir():
+        raise UsageError(f"--record {path}: folder {path.parent} does not exist")
+    return path
+
+
 def close_stream(rec: rr.RecordingStream) -> None:
     """Flush everything logged and close the stream's file and connections."""
     rec.flush()

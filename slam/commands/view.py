@@ -1,0 +1,104 @@
+"""``slam view RUN_DIR``: open a run's recording in the rerun viewer.
+
+* ``slam view RUN_DIR`` — the native viewer on ``RUN_DIR/recording.rrd`` (or on a ``.rrd`` file);
+* ``slam view RUN_DIR --web`` — serve the web viewer on 127.0.0.1 and print its URL; it runs
+  until interrupted (Ctrl-C).
+
+Every server it starts listens on 127.0.0.1 only (rerun's own default is every interface).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from slam.errors import DataError, UsageError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``view`` sub-command."""
+    parser = subparsers.add_parser(
+        "view",
+        help="open a run's recording.rrd in the rerun viewer (native, or web with --web)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "run_dir", metavar="RUN_DIR", type=Path, help="run folder (or a .rrd recording)"
+    )
+    parser.add_argument(
+        "--web", action="store_true", help="serve the web viewer on 127.0.0.1 and print its URL"
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        help="with --web: HTTP port of the web viewer (default 9090); otherwise the native "
+        "viewer's gRPC port (default: a free one)",
+    )
+    parser.set_defaults(func=view_command)
+
+
+def find_recording(path: Path) -> Path:
+    """``path/recording.rrd`` for a run folder, ``path`` itself for a ``.rrd`` file."""
+    from slam.viz.recorder import RECORDING_NAME
+
+    if path.is_dir():
+        rrd = path / RECORDING_NAME
+        if not rrd.is_file():
+            raise DataError(
+                f"{path}: no {RECORDING_NAME} in this folder (runs record unless --no-record; "
+                "'slam grid run --record FILE' and 'slam maze run --record FILE' write elsewhere)"
+            )
+        return rrd
+    if path.is_file():
+        if path.suffix != ".rrd":
+            raise UsageError(f"{path}: expected a run folder or a .rrd file")
+        return path
+    raise DataError(f"{path}: no such run folder or recording")
+
+
+def _check_port(port: int | None) -> None:
+    if port is not None and not 1 <= port <= 65535:
+        raise UsageError(f"--port {port}: expected 1..65535")
+
+
+def view_command(args: argparse.Namespace) -> int:
+    """Start the viewer on the recording; with ``--web`` print the URL and serve until stopped."""
+    from slam.viz.stream import free_port, viewer_command, viewer_env, wait_for_port, web_url
+
+    rrd = find_recording(args.run_dir)
+    _check_port(args.port)
+    if not args.web:
+        cmd = viewer_command(rrd, port=args.port or free_port())
+        return subprocess.run(cmd, env=viewer_env(), check=False).returncode
+    web_port = args.port or 9090
+    grpc_port = free_port()
+    cmd = viewer_command(rrd, web=True, port=grpc_port, web_port=web_port)
+    process = subprocess.Popen(cmd, env=viewer_env(), stdout=subprocess.DEVNULL)
+
+    def stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        if not wait_for_port(web_port, 30.0, process):
+            raise UsageError(
+                f"--web: the web viewer did not start on 127.0.0.1:{web_port} (is the port "
+                "taken? choose another with --port)"
+            )
+        print(f"web viewer: {web_url(web_port, grpc_port)}", flush=True)
+        print("serving on 127.0.0.1 only; press Ctrl-C to stop", file=sys.stderr, flush=True)
+        return process.wait()
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
