@@ -41,6 +41,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p_run.add_argument("--json", action="store_true", help="print the steps as JSON")
     p_run.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="also write a rerun recording (.rrd): the posterior heat map after every step",
+    )
+    p_run.add_argument(
         "--no-stop",
         action="store_true",
         help="run every step even after the stopping threshold is reached",
@@ -115,6 +121,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not scenario.steps:
         raise UsageError(f"{scenario.source}: the scenario has no steps ([run] steps = [...])")
     result = run_scenario(scenario, stop_when_localized=not args.no_stop)
+    if args.record is not None:
+        from slam.viz.grid import record_grid_run
+        from slam.viz.stream import check_recording_path
+
+        record_grid_run(result, check_recording_path(args.record))
     world = scenario.world
     if args.json:
         out = {

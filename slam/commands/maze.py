@@ -61,6 +61,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument(
         "--json", action="store_true", help="JSON with the per-step history and wall knowledge"
     )
+    run.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="also write a rerun recording (.rrd): known walls and the path after every step",
+    )
     run.set_defaults(func=run_maze)
 
     bench = sub.add_parser("bench", help="many mazes: score against the lower bound")
@@ -131,6 +137,11 @@ def run_maze(args: argparse.Namespace) -> int:
     maze = _load(args)
     optimal = optimal_plan(maze)
     result = trial(maze, args.robot, **_options(args.set))
+    if getattr(args, "record", None) is not None:
+        from slam.viz.maze import record_maze_trial
+        from slam.viz.stream import check_recording_path
+
+        record_maze_trial(result, check_recording_path(args.record))
     bound = lower_bound(optimal.steps, result.exploration_weight)
     if args.json:
         out = result.to_dict(history=True)
