@@ -1025,11 +1025,13 @@ def run_stage(
     log: Log, estimate: Any, config: Config, out_dir: Path, progress: bool = False
 ) -> dict[str, Any]:
     """The texture stage as ``slam run`` calls it, on an estimate with ``times``, ``poses`` and
-    ``grid``: ``{"texture": figures}``, or ``{}`` when the stage does not apply (disabled, no
-    RGB-D stream, or no map to align with)."""
+    ``grid``: ``{"texture": figures}``, or ``{}`` when the stage does not apply (disabled, or no
+    RGB-D stream); without a map (dead reckoning without scans) the figures say it was skipped."""
     grid = getattr(estimate, "grid", None)
-    if not config.texture.enabled or log.rgbd is None or grid is None:
+    if not config.texture.enabled or log.rgbd is None:
         return {}
+    if grid is None:
+        return {"texture": {"skipped": "no occupancy map to put the texture on"}}
     figures = texture_stage(log, estimate.times, estimate.poses, grid, config, out_dir, progress)
     return {"texture": figures}
 

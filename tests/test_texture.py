@@ -347,3 +347,23 @@ def test_pictures_have_the_size_of_map_png():
     grey = int(grid.to_image()[239 - 105, 55])
     assert grey < 5 and over[(239 - 105) * 3, 55 * 3].tolist() == [grey] * 3
     assert over[0, 0].tolist() == [127, 127, 127]  # unknown stays grey
+
+
+def test_run_stage_applies_only_with_frames_a_map_and_the_stage_enabled(tmp_path):
+    import dataclasses
+    from types import SimpleNamespace
+
+    from slam.config import Config
+    from slam.io.log import Log, RgbdIndex
+    from slam.texture import run_stage
+
+    index = RgbdIndex(np.zeros(0), np.zeros(0), tmp_path, tmp_path, "rgb_{}.png", "d_{}.png")
+    estimate = SimpleNamespace(times=np.zeros(1), poses=np.zeros((1, 3)), grid=None)
+    config = Config()
+    off = dataclasses.replace(config, texture=TextureConfig(enabled=False))
+    assert run_stage(Log("x", "ece276a", rgbd=index), estimate, off, tmp_path) == {}
+    assert run_stage(Log("x", "ece276a"), estimate, config, tmp_path) == {}
+    assert run_stage(Log("x", "ece276a", rgbd=index), estimate, config, tmp_path) == {
+        "texture": {"skipped": "no occupancy map to put the texture on"}
+    }
+    assert not list(tmp_path.iterdir())
