@@ -264,9 +264,11 @@ def plan_frames(
         disparity_available=available["disparity"],
         time_range=time_range,
     )
-    if "missing_rgb" in plan.skipped:
-        k = int(plan.examples["missing_rgb"].split()[-1]) - 1
-        plan.examples["missing_rgb"] = str(index.rgb_path(k))
+    if "missing_rgb" in plan.skipped:  # name the first missing file in the warning
+        strided = np.arange(0, index.rgb_time.size, config.frame_stride)
+        plan.examples["missing_rgb"] = str(
+            index.rgb_path(int(strided[~available["rgb"][strided]][0]))
+        )
     plan.count_mismatch = mismatch
     return plan
 
@@ -560,7 +562,7 @@ def build_texture(
                         model,
                         int(plan.rgb[submitted]),
                         int(plan.disparity[submitted]),
-                    )  # fmt: skip
+                    )
                 )
                 submitted += 1
             rgb, disparity, reason, message = pending.popleft().result()
