@@ -3,7 +3,7 @@
 Reads the run's ``trajectory.tum``, ``map.npz`` and ``config.toml`` (whose ``dataset`` names the
 log: ``demo``, a registry dataset, or give the folder with ``--dataset``), projects the dataset's
 RGB-D frames along the trajectory, and rewrites ``texture.npz``, ``texture.png``,
-``texture_overlay.png`` and the ``"texture"`` figures of ``metrics.json`` (each atomically).
+``texture_overlay.png`` and the texture figures of ``metrics.json`` (each atomically).
 """
 
 from __future__ import annotations
