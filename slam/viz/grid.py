@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from slam.discrete.scenario import RunResult
 from slam.io.atomic import atomic_path
 from slam.viz.blueprint import grid_blueprint
+from slam.viz.images import as_image
 from slam.viz.stream import close_stream, open_stream
 
 POSTERIOR = "grid/posterior"
@@ -83,14 +84,14 @@ def _write_grid(result: RunResult, path: Path, recording_id: str | None = None) 
     rec.log(
         WORLD,
         rr.Transform3D(translation=[cols + 1.0, 0.0, 0.0]),
-        rr.Image(world_colours(world.labels, world.palette, world.blocked)),
+        as_image(world_colours(world.labels, world.palette, world.blocked)),
         static=True,
     )
     rec.log(MAX_PROBABILITY, rr.SeriesLines(names="max probability"), static=True)
     for record in result.steps:
         posterior = record.posterior
         rec.set_time("step", sequence=record.index)
-        rec.log(POSTERIOR, rr.Image(heat_map(posterior, world.blocked)))
+        rec.log(POSTERIOR, as_image(heat_map(posterior, world.blocked)))
         rec.log(MAX_PROBABILITY, rr.Scalars(float(posterior.max())))
         rec.log(STEPS, rr.TextLog(f"{record.after} {record.action}"))
     close_stream(rec)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 from numpy.typing import NDArray
 
 from slam.mapping import OccupancyGrid
@@ -31,6 +32,25 @@ class PlacedImage:
     """World position of the lower-left corner of pixel (0, 0) (m)."""
     cell: float
     """Side of one pixel (m)."""
+
+
+def as_image(pixels: NDArray[np.uint8], draw_order: float | None = None) -> rr.Image:
+    """``rr.Image`` of ``(H, W)`` grey, ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA uint8 pixels.
+
+    The shape is given explicitly: rerun drops unit dimensions of arrays, which would turn a
+    one-row image (a 1D grid world) into a column.
+    """
+    pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
+    h, w = pixels.shape[:2]
+    model = {2: "L"}.get(pixels.ndim) or {3: "RGB", 4: "RGBA"}[pixels.shape[2]]
+    return rr.Image(
+        bytes=pixels.tobytes(),
+        width=w,
+        height=h,
+        color_model=model,
+        datatype="U8",
+        draw_order=draw_order,
+    )
 
 
 def observed_box(known: NDArray[np.bool_], margin: int = 1) -> tuple[int, int, int, int] | None:

@@ -43,7 +43,7 @@ from slam.config import Config, VizConfig
 from slam.mapping import OccupancyGrid
 from slam.particle_filter import StepRecord
 from slam.viz import blueprint as bp
-from slam.viz.images import PlacedImage, occupancy_image, texture_image
+from slam.viz.images import PlacedImage, as_image, occupancy_image, texture_image
 from slam.viz.stream import close_stream, open_stream, set_time, spawn_viewer, time_columns
 
 F64 = NDArray[np.float64]
@@ -72,7 +72,7 @@ def log_placed(rec: rr.RecordingStream, path: str, image: PlacedImage, draw_orde
     rec.log(
         path,
         rr.Transform3D(translation=[x, y, 0.0], scale=[image.cell, image.cell, 1.0]),
-        rr.Image(image.pixels, draw_order=draw_order),
+        as_image(image.pixels, draw_order),
     )
 
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 import socket
 import subprocess
-import sys
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -111,8 +110,20 @@ def time_columns(scans: NDArray[np.int64], stamps: NDArray[np.float64]) -> list[
 
 
 def rerun_executable() -> list[str]:
-    """The ``rerun`` command line tool of this environment (shipped with rerun-sdk)."""
-    return [sys.executable, "-m", "rerun_cli"]
+    """The ``rerun`` binary shipped with rerun-sdk (``$RERUN_CLI_PATH`` overrides it).
+
+    The binary itself, not ``python -m rerun_cli``: that wrapper drops the exit code and leaves
+    the binary running when it is terminated.
+    """
+    override = os.environ.get("RERUN_CLI_PATH")
+    if override:
+        return [override]
+    import rerun_cli
+
+    binary = Path(rerun_cli.__file__).parent / "rerun"
+    if not binary.is_file():
+        raise UsageError(f"{binary}: the rerun binary of rerun-sdk is missing (reinstall it)")
+    return [str(binary)]
 
 
 def viewer_env() -> dict[str, str]:
