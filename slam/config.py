@@ -155,9 +155,9 @@ class RbpfConfig:
     """Run a filter update after this much travel since the last one (m)."""
     update_angle: float = 0.1
     """... or after this much rotation (rad). Scans in between move particles by odometry only."""
-    match_beams: int = 360
+    match_beams: int = 180
     """At most this many beams (evenly spread) are used for scan matching and weighting."""
-    insert_beams: int = 1081
+    insert_beams: int = 360
     """At most this many beams are inserted into the particle maps per update."""
     tile: int = 16
     """Tile side (cells, a power of two) of the copy-on-write particle maps."""
@@ -186,8 +186,8 @@ class RbpfConfig:
     """Particles are drawn around their matched pose with covariance ``proposal_spread ·
     temperature · H⁻¹`` (``H`` the matcher's Hessian); 0 keeps the matched pose."""
     refine_passes: int = 3
-    """After the filter, re-register every scan against the map of the final trajectory this
-    many times (removes the jitter the proposal's sampling leaves; 0: off)."""
+    """After the filter, re-register the update scans of the final lineage against the map they
+    build this many times (removes the jitter the proposal's sampling leaves; 0: off)."""
     skip_insert_below: float = 0.02
     """A hit closer than this (m) to an existing surface adds nothing to a particle's map."""
 

@@ -21,7 +21,14 @@ from numpy.typing import NDArray
 
 from slam.config import MapConfig
 from slam.io.atomic import atomic_path
-from slam.kernels.field import insert_hits, match_particles, match_scans, recount_tiles
+from slam.kernels.field import (
+    claim_tiles,
+    match_particles,
+    match_scans,
+    recount_tiles,
+    select_new_hits,
+    splat_hits,
+)
 from slam.kernels.grid import integrate_rays
 
 F64 = NDArray[np.float64]
@@ -269,36 +276,36 @@ class ParticleMaps:
         self.origin = self.origin - np.array([left * tile_m, bottom * tile_m])
 
     def insert(self, poses: F64, hx: F64, hy: F64, nx: F64, ny: F64, skip_below: float) -> None:
-        """Insert hits ``(hx, hy)`` with unit normals ``(nx, ny)`` (robot frame) at ``poses``."""
+        """Insert hits ``(hx, hy)`` with unit normals ``(nx, ny)`` (robot frame) at ``poses``.
+
+        Three kernels: which hits add something (parallel), copy-on-write of the tiles they touch
+        (serial, cheap), then the distance updates (parallel: each particle writes only tiles it
+        owns alone).
+        """
         if hx.shape[0] == 0:
             return
+        poses = np.ascontiguousarray(poses)
+        ox, oy = float(self.origin[0]), float(self.origin[1])
+        keep = np.empty((poses.shape[0], hx.shape[0]), dtype=np.bool_)
+        select_new_hits(
+            self.dist, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
+            poses, hx, hy, skip_below, keep,
+        )  # fmt: skip
         start = 0
         while True:
-            stopped = insert_hits(
-                self.dist,
-                self.plane,
-                self.refcount,
-                self.free_stack,
-                self.free_top,
-                self.tables,
-                self.shift,
-                float(self.origin[0]),
-                float(self.origin[1]),
-                self.resolution,
-                self.dmax,
-                poses,
-                hx,
-                hy,
-                nx,
-                ny,
-                skip_below,
-                self.signed,
-                start,
-            )
+            stopped = claim_tiles(
+                self.dist, self.plane, self.refcount, self.free_stack, self.free_top,
+                self.tables, self.shift, ox, oy, self.resolution, self.dmax, poses, hx, hy,
+                keep, start,
+            )  # fmt: skip
             if stopped < 0:
-                return
+                break
             self._grow_pool()
             start = stopped
+        splat_hits(
+            self.dist, self.plane, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
+            poses, hx, hy, nx, ny, keep, self.signed,
+        )  # fmt: skip
 
     def share_from(self, particle: int) -> None:
         """Make every particle's map the map of ``particle`` (shared tiles)."""

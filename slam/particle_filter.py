@@ -114,31 +114,48 @@ class ScanSequence:
         """Beam angles of scan ``k``."""
         return self.angles if self.angles.ndim == 1 else self.angles[k]
 
+    def endpoints(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Robot-frame endpoints ``(ex, ey)``, each ``(N, B)`` float32, NaN where not a return.
+
+        Computed once for the whole sequence (vectorised) and cached.
+        """
+        cached = self.__dict__.get("_endpoints")
+        if cached is None:
+            r = self.ranges
+            a = self.angles if self.angles.ndim == 2 else self.angles[None, :]
+            ok = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min) & (r < self.range_max)
+            lx, ly, lt = self.laser_offset
+            rr = np.where(ok, r, np.nan).astype(np.float32)
+            ex = (lx + rr * np.cos(lt + a)).astype(np.float32)
+            ey = (ly + rr * np.sin(lt + a)).astype(np.float32)
+            cached = (ex, ey)
+            object.__setattr__(self, "_endpoints", cached)
+        return cached
+
     def hits(self, k: int, max_beams: int = 0) -> tuple[F64, F64]:
         """Robot-frame endpoints ``(ex, ey)`` of the obstacle returns of scan ``k``.
 
         With ``max_beams`` the returns are thinned to at most that many, evenly spread.
         """
-        ex, ey, _, _ = self.hits_with_normals(k, max_beams)
-        return ex, ey
+        ex_all, ey_all = self.endpoints()
+        valid = np.flatnonzero(~np.isnan(ex_all[k]))
+        if max_beams and valid.size > max_beams:
+            valid = valid[np.linspace(0, valid.size - 1, max_beams).round().astype(np.int64)]
+        return (
+            np.ascontiguousarray(ex_all[k, valid], dtype=np.float64),
+            np.ascontiguousarray(ey_all[k, valid], dtype=np.float64),
+        )
 
     def hits_with_normals(self, k: int, max_beams: int = 0) -> tuple[F64, F64, F64, F64]:
         """Robot-frame endpoints and unit surface normals ``(ex, ey, nx, ny)`` of scan ``k``.
 
         See :func:`surface_normals`; normals are estimated before thinning to ``max_beams``.
         """
-        r = self.ranges[k].astype(np.float64)
-        a = self.scan_angles(k)
-        ok = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min) & (r < self.range_max)
-        r = r[ok]
-        a = a[ok]
-        lx, ly, lt = self.laser_offset
-        ca, sa = np.cos(lt + a), np.sin(lt + a)
-        ex = lx + r * ca
-        ey = ly + r * sa
+        ex, ey = self.hits(k)
+        lx, ly, _ = self.laser_offset
         nx, ny = surface_normals(ex, ey, lx, ly)
-        if max_beams and r.size > max_beams:
-            pick = np.linspace(0, r.size - 1, max_beams).round().astype(np.int64)
+        if max_beams and ex.size > max_beams:
+            pick = np.linspace(0, ex.size - 1, max_beams).round().astype(np.int64)
             ex, ey, nx, ny = ex[pick], ey[pick], nx[pick], ny[pick]
         return (
             np.ascontiguousarray(ex),
@@ -506,7 +523,7 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         return float(np.sqrt((hx * hx + hy * hy).max())) if hx.size else 0.0
 
     def insert(k: int, poses: F64) -> None:
-        hx, hy, nx, ny = seq.hits_with_normals(k, rc.insert_beams)
+        hx, hy, nx, ny = _hits_for_insert(seq, k, rc.insert_beams, maps.signed)
         r = reach(k) + rc.dmax + 1.0
         lo = poses[:, :2].min(axis=0) - r
         hi = poses[:, :2].max(axis=0) + r
@@ -607,9 +624,9 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
     for u in range(len(steps) - 1, -1, -1):
         lineage[u] = update_particles[u][best]
         best = int(update_parents[u][best])
-    poses = _interpolate_between_updates(seq, steps, lineage)
     for _ in range(rc.refine_passes):
-        poses = refine_trajectory(seq, poses, steps, config)
+        lineage = refine_trajectory(seq, lineage, steps, config)
+    poses = _interpolate_between_updates(seq, steps, lineage)
     grid = build_map(seq, poses, steps, config)
     return SlamResult(
         times=seq.times.copy(),
@@ -628,14 +645,25 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
     )
 
 
+def _hits_for_insert(
+    seq: ScanSequence, k: int, max_beams: int, normals: bool
+) -> tuple[F64, F64, F64, F64]:
+    """Hits of scan ``k`` to insert into particle maps, with normals only if the field is signed."""
+    if normals:
+        return seq.hits_with_normals(k, max_beams)
+    hx, hy = seq.hits(k, max_beams)
+    return hx, hy, hx, hy  # the unsigned field ignores normals
+
+
 def refine_trajectory(
     seq: ScanSequence, poses: F64, steps: NDArray[np.int64], config: Config
 ) -> F64:
-    """Re-register every scan against the map built from ``poses`` at the scans ``steps``.
+    """Re-register the scans ``steps`` (taken at ``poses``) against the map they build together.
 
-    The filter's trajectory carries the jitter of the proposal's sampling (that is what gives it
-    the diversity to close loops); with the best lineage chosen, one map is built from it and each
-    scan's pose is refined against that map, keeping the global shape and removing the jitter.
+    The filter's lineage carries the jitter of the proposal's sampling (that is what gives the
+    filter the diversity to close loops); with the best lineage chosen, one map is built from its
+    scans and each of them is registered against that map again, which keeps the global shape and
+    removes the jitter. Returns the refined poses ``(len(steps), 3)``.
     """
     rc = config.rbpf
     res = rc.resolution or config.map.resolution
@@ -650,25 +678,23 @@ def refine_trajectory(
         signed=rc.field == "plane",
     )
     reach = 0.0
-    for k in steps:
-        hx, hy, nx, ny = seq.hits_with_normals(int(k), rc.insert_beams)
+    for pose, k in zip(poses, steps, strict=True):
+        hx, hy, nx, ny = _hits_for_insert(seq, int(k), rc.insert_beams, maps.signed)
         if hx.size == 0:
             continue
         reach = max(reach, float(np.sqrt((hx * hx + hy * hy).max())))
-        pose = poses[k : k + 1]
         r = reach + rc.dmax + 1.0
-        maps.ensure_contains(pose[0, 0] - r, pose[0, 1] - r, pose[0, 0] + r, pose[0, 1] + r)
-        maps.insert(np.ascontiguousarray(pose), hx, hy, nx, ny, rc.skip_insert_below)
-    n = len(seq)
+        maps.ensure_contains(pose[0] - r, pose[1] - r, pose[0] + r, pose[1] + r)
+        maps.insert(np.ascontiguousarray(pose[None, :]), hx, hy, nx, ny, rc.skip_insert_below)
     width = max(1, min(rc.match_beams or seq.num_beams, seq.num_beams))
-    ex = np.zeros((n, width))
-    ey = np.zeros((n, width))
-    counts = np.zeros(n, dtype=np.int64)
-    for k in range(n):
-        hx, hy = seq.hits(k, width)
-        counts[k] = hx.size
-        ex[k, : hx.size] = hx
-        ey[k, : hy.size] = hy
+    ex = np.zeros((len(steps), width))
+    ey = np.zeros((len(steps), width))
+    counts = np.zeros(len(steps), dtype=np.int64)
+    for i, k in enumerate(steps):
+        hx, hy = seq.hits(int(k), width)
+        counts[i] = hx.size
+        ex[i, : hx.size] = hx
+        ey[i, : hy.size] = hy
     luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     return maps.register(
         poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers

@@ -26,12 +26,18 @@ def resolve_data_dir(cli_value: str | Path | None = None) -> Path:
 
 
 def _writable(folder: Path) -> bool:
+    """Whether ``folder`` (or its first existing ancestor) is meant to be written to.
+
+    Besides ``os.access`` (which says yes to root for anything), the folder's permission bits
+    must grant someone write access: a data directory shared read-only (``r-xr-xr-x``) is left
+    alone even by root.
+    """
     probe = folder
     while not probe.exists():
         if probe.parent == probe:
             return False
         probe = probe.parent
-    return os.access(probe, os.W_OK)
+    return os.access(probe, os.W_OK) and bool(probe.stat().st_mode & 0o222)
 
 
 def resolve_cache_dir(data_dir: Path) -> Path:

@@ -376,8 +376,49 @@ def match_particles(
         out_loglik[p] = -cost
 
 
+@njit(cache=True, parallel=True)
+def select_new_hits(
+    dist: np.ndarray,
+    tables: np.ndarray,
+    shift: int,
+    ox: float,
+    oy: float,
+    res: float,
+    dmax: float,
+    poses: np.ndarray,
+    hx: np.ndarray,
+    hy: np.ndarray,
+    skip_below: float,
+    keep: np.ndarray,
+) -> None:
+    """Mark in ``keep[p, k]`` the hits that add something to particle ``p``'s map.
+
+    A hit adds nothing, and is not kept, when the cell it falls in already knows a hit about as
+    close (within ``skip_below``) as this one, or when the previous hit of the same scan fell in
+    the same cell: re-observed walls then neither copy tiles nor move the field.
+    """
+    for p in prange(poses.shape[0]):
+        table = tables[p]
+        c = np.cos(poses[p, 2])
+        s = np.sin(poses[p, 2])
+        last_x = -(1 << 30)
+        last_y = -(1 << 30)
+        for k in range(hx.shape[0]):
+            wx = poses[p, 0] + c * hx[k] - s * hy[k]
+            wy = poses[p, 1] + s * hx[k] + c * hy[k]
+            cx = int(np.floor((wx - ox) / res))
+            cy = int(np.floor((wy - oy) / res))
+            if cx == last_x and cy == last_y:
+                keep[p, k] = False
+                continue
+            last_x = cx
+            last_y = cy
+            own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
+            keep[p, k] = cell_distance(dist, table, shift, cx, cy, dmax) > own + skip_below
+
+
 @njit(cache=True)
-def insert_hits(
+def claim_tiles(
     dist: np.ndarray,
     plane: np.ndarray,
     refcount: np.ndarray,
@@ -392,27 +433,17 @@ def insert_hits(
     poses: np.ndarray,
     hx: np.ndarray,
     hy: np.ndarray,
-    nx: np.ndarray,
-    ny: np.ndarray,
-    skip_below: float,
-    signed: bool,
+    keep: np.ndarray,
     start: int,
 ) -> int:
-    """Insert hits ``(hx, hy)`` with normals ``(nx, ny)`` (robot frame) into every particle's map.
+    """Give each particle exclusive tiles under the footprint of its kept hits (serial).
 
-    Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
-    Euclidean distance (``dist``) and, in ``plane``, its signed plane distance when ``signed``
-    (else the Euclidean distance again: the unsigned field). A hit adds nothing new,
-    and is skipped, when the cell it falls in already knows a hit about as close (within
-    ``skip_below``) as this one: re-observed walls then neither copy tiles nor move the field. A
-    shared tile is copied before its first write, a missing one allocated. Particles from
-    ``start`` on are processed. Returns -1 when done, or the index of the particle that ran out of
-    free tiles (the caller grows the pool and calls again from there; re-inserting is harmless
-    because each cell keeps its nearest hit).
+    A missing tile is allocated (distance ``dmax``, plane unknown); a shared one is copied and
+    the particle's reference moved to the copy (copy on write). Particles from ``start`` on are
+    processed. Returns -1 when done, or the index of the particle that ran out of free tiles (the
+    caller grows the pool and calls again from there).
     """
     radius = int(np.ceil(dmax / res))
-    tile = 1 << shift
-    mask = tile - 1
     ntile_y = tables.shape[1]
     ntile_x = tables.shape[2]
     for p in range(start, poses.shape[0]):
@@ -420,45 +451,88 @@ def insert_hits(
         c = np.cos(poses[p, 2])
         s = np.sin(poses[p, 2])
         for k in range(hx.shape[0]):
+            if not keep[p, k]:
+                continue
+            wx = poses[p, 0] + c * hx[k] - s * hy[k]
+            wy = poses[p, 1] + s * hx[k] + c * hy[k]
+            cx = int(np.floor((wx - ox) / res))
+            cy = int(np.floor((wy - oy) / res))
+            ty0 = max(cy - radius, 0) >> shift
+            ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
+            tx0 = max(cx - radius, 0) >> shift
+            tx1 = min(cx + radius, (ntile_x << shift) - 1) >> shift
+            for ty in range(ty0, ty1 + 1):
+                for tx in range(tx0, tx1 + 1):
+                    t = table[ty, tx]
+                    if t >= 0 and refcount[t] == 1:
+                        continue
+                    if free_top[0] == 0:
+                        return p
+                    free_top[0] -= 1
+                    new = free_stack[free_top[0]]
+                    if t < 0:
+                        dist[new, :, :] = dmax
+                        plane[new, :, :] = np.nan
+                    else:
+                        dist[new, :, :] = dist[t, :, :]
+                        plane[new, :, :] = plane[t, :, :]
+                        refcount[t] -= 1
+                    refcount[new] = 1
+                    table[ty, tx] = new
+    return -1
+
+
+@njit(cache=True, parallel=True)
+def splat_hits(
+    dist: np.ndarray,
+    plane: np.ndarray,
+    tables: np.ndarray,
+    shift: int,
+    ox: float,
+    oy: float,
+    res: float,
+    dmax: float,
+    poses: np.ndarray,
+    hx: np.ndarray,
+    hy: np.ndarray,
+    nx: np.ndarray,
+    ny: np.ndarray,
+    keep: np.ndarray,
+    signed: bool,
+) -> None:
+    """Write the kept hits into the particles' (exclusively owned) tiles, in parallel.
+
+    Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
+    Euclidean distance (``dist``) and, in ``plane``, its signed plane distance when ``signed``
+    (else the Euclidean distance again: the unsigned field). Must follow :func:`claim_tiles`.
+    """
+    radius = int(np.ceil(dmax / res))
+    mask = (1 << shift) - 1
+    ny_cells = tables.shape[1] << shift
+    nx_cells = tables.shape[2] << shift
+    for p in prange(poses.shape[0]):
+        table = tables[p]
+        c = np.cos(poses[p, 2])
+        s = np.sin(poses[p, 2])
+        for k in range(hx.shape[0]):
+            if not keep[p, k]:
+                continue
             wx = poses[p, 0] + c * hx[k] - s * hy[k]
             wy = poses[p, 1] + s * hx[k] + c * hy[k]
             wnx = c * nx[k] - s * ny[k]
             wny = s * nx[k] + c * ny[k]
             cx = int(np.floor((wx - ox) / res))
             cy = int(np.floor((wy - oy) / res))
-            own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
-            if cell_distance(dist, table, shift, cx, cy, dmax) <= own + skip_below:
-                continue
-            for iy in range(cy - radius, cy + radius + 1):
-                if iy < 0 or iy >= ntile_y * tile:
-                    continue
+            for iy in range(max(cy - radius, 0), min(cy + radius + 1, ny_cells)):
                 ccy = oy + (iy + 0.5) * res - wy
                 ty = iy >> shift
-                for ix in range(cx - radius, cx + radius + 1):
-                    if ix < 0 or ix >= ntile_x * tile:
-                        continue
+                ly = iy & mask
+                for ix in range(max(cx - radius, 0), min(cx + radius + 1, nx_cells)):
                     ccx = ox + (ix + 0.5) * res - wx
                     d = np.sqrt(ccx * ccx + ccy * ccy)
                     if d >= dmax:
                         continue
-                    tx = ix >> shift
-                    t = table[ty, tx]
-                    if t < 0 or refcount[t] > 1:
-                        if free_top[0] == 0:
-                            return p
-                        free_top[0] -= 1
-                        new = free_stack[free_top[0]]
-                        if t < 0:
-                            dist[new, :, :] = dmax
-                            plane[new, :, :] = np.nan
-                        else:
-                            dist[new, :, :] = dist[t, :, :]
-                            plane[new, :, :] = plane[t, :, :]
-                            refcount[t] -= 1
-                        refcount[new] = 1
-                        table[ty, tx] = new
-                        t = new
-                    ly = iy & mask
+                    t = table[ty, ix >> shift]
                     lx = ix & mask
                     if d < dist[t, ly, lx]:
                         dist[t, ly, lx] = d
@@ -470,7 +544,6 @@ def insert_hits(
                         if beyond > 0.0:
                             normal = np.copysign(np.sqrt(normal * normal + beyond * beyond), normal)
                         plane[t, ly, lx] = normal
-    return -1
 
 
 @njit(cache=True)
