@@ -22,6 +22,7 @@ import socket
 import subprocess
 import time
 import uuid
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -226,7 +227,9 @@ def summarize(path: Path) -> dict[str, EntitySummary]:
     if not path.is_file():
         raise DataError(f"{path}: recording not found")
     try:
-        chunks = RrdReader(path).stream().to_chunks()
+        with warnings.catch_warnings():  # files streamed by a viewer have no footer: fine here
+            warnings.filterwarnings("ignore", message="RRD file has no footer")
+            chunks = RrdReader(path).stream().to_chunks()
     except Exception as exc:  # the reader raises plain exceptions on corrupt files
         raise DataError(f"{path}: not a readable rerun recording ({exc})") from None
     out: dict[str, EntitySummary] = {}

@@ -1,0 +1,148 @@
+"""``slam view`` and ``slam run --viewer``: viewers and servers listen on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from slam.cli import main
+from slam.viz import blueprint as bp
+from slam.viz.stream import free_port, rerun_executable, summarize, wait_for_port
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    """A run folder holding the golden scripted recording."""
+    spec = importlib.util.spec_from_file_location(
+        "make_viz_reference", ROOT / "tools" / "make_viz_reference.py"
+    )
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    folder = tmp_path_factory.mktemp("run")
+    tool.write_reference(folder / "recording.rrd")
+    return folder
+
+
+def listeners(port: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) of the sockets listening on ``port``."""
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not Path(table).is_file():
+            continue
+        for line in Path(table).read_text().splitlines()[1:]:
+            fields = line.split()
+            address, hex_port = fields[1].rsplit(":", 1)
+            if fields[3] == "0A" and int(hex_port, 16) == port:
+                found.add(address)
+    return found
+
+
+LOOPBACK_HEX = "0100007F"
+
+
+def test_view_errors_are_one_line(tmp_path, capsys):
+    assert main(["view", str(tmp_path / "nowhere")]) == 2
+    assert "no such run folder or recording" in capsys.readouterr().err
+    assert main(["view", str(tmp_path)]) == 2
+    assert "no recording.rrd in this folder" in capsys.readouterr().err
+    other = tmp_path / "notes.txt"
+    other.write_text("x")
+    assert main(["view", str(other)]) == 2
+    assert "expected a run folder or a .rrd file" in capsys.readouterr().err
+    assert main(["view", str(tmp_path), "--web", "--port", "70000"]) == 2
+
+
+@pytest.mark.skipif(not Path("/proc/net/tcp").is_file(), reason="needs Linux /proc/net/tcp")
+def test_view_web_serves_on_loopback_and_prints_the_url(recording):
+    port = free_port()
+    env = dict(os.environ, RERUN_ANALYTICS="0")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "slam", "view", str(recording), "--web", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        line = process.stdout.readline()
+        assert line.startswith(f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A"), line
+        grpc_port = int(line.split("%3A")[-1].split("%2F")[0])
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as response:
+            assert response.status == 200
+            assert b"<html" in response.read().lower()
+        assert listeners(port) == {LOOPBACK_HEX}
+        assert listeners(grpc_port) == {LOOPBACK_HEX}
+    finally:
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=20)
+    # the server went with it
+    deadline = time.monotonic() + 10
+    while listeners(port) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not listeners(port)
+
+
+def _stand_in_viewer(tmp_path: Path) -> Path:
+    """An executable that runs rerun with the given arguments plus ``--save live.rrd``."""
+    (real,) = rerun_executable()
+    script = tmp_path / "fake-rerun"
+    script.write_text(
+        "#!/bin/sh\n"
+        f'echo "$@" > "{tmp_path}/args.txt"\n'
+        f'echo $$ > "{tmp_path}/pid.txt"\n'
+        f'exec "{real}" "$@" --save "{tmp_path}/live.rrd"\n'
+    )
+    script.chmod(0o755)
+    return script
+
+
+def test_run_viewer_streams_live_to_a_viewer_on_loopback(tmp_path, monkeypatch):
+    """``--viewer`` spawns the viewer bound to 127.0.0.1 and streams to it while the run writes
+    its own recording. The viewer is a stand-in: the real rerun binary with ``--save`` (a gRPC
+    server writing what it receives, no window)."""
+    log = tmp_path / "small"
+    assert main(["sim", "small", "--out", str(log), "--duration", "4", "--no-rgbd", "--quiet"]) == 0
+    monkeypatch.setenv("RERUN_CLI_PATH", str(_stand_in_viewer(tmp_path)))
+    out = tmp_path / "run"
+    code = main(
+        ["run", str(log), "--out", str(out), "--particles", "4", "--max-scans", "40",
+         "--viewer", "--quiet"]
+    )  # fmt: skip
+    assert code == 0
+    args = (tmp_path / "args.txt").read_text().split()
+    assert args[args.index("--bind") + 1] == "127.0.0.1"
+    port = int(args[args.index("--port") + 1])
+    assert listeners(port) == {LOOPBACK_HEX}
+    pid = int((tmp_path / "pid.txt").read_text())
+    os.kill(pid, signal.SIGINT)  # the viewer outlives the run; stop our stand-in
+    deadline = time.monotonic() + 20
+    while listeners(port) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    live = summarize(tmp_path / "live.rrd")
+    saved = summarize(out / "recording.rrd")
+    for entity in (bp.TRAJECTORY, bp.N_EFF, bp.PARTICLES):
+        assert live[f"/{entity}"].rows == saved[f"/{entity}"].rows, entity
+    assert live[f"/{bp.TRAJECTORY}"].rows == 40
+
+
+def test_a_viewer_that_never_listens_is_a_usage_error(tmp_path, monkeypatch):
+    from slam.errors import UsageError
+    from slam.viz.stream import spawn_viewer
+
+    script = tmp_path / "broken-rerun"
+    script.write_text("#!/bin/sh\nexit 3\n")
+    script.chmod(0o755)
+    monkeypatch.setenv("RERUN_CLI_PATH", str(script))
+    with pytest.raises(UsageError, match="did not start listening on 127.0.0.1"):
+        spawn_viewer(timeout_s=5)
+    assert wait_for_port(free_port(), 0.3) is False
