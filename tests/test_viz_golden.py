@@ -1,5 +1,6 @@
 """Golden recording: the scripted run of tools/make_viz_reference.py must reproduce
-``data/reference/viz/scripted-run.rrd`` exactly (``rerun rrd compare``; log time is off).
+``data/reference/viz/scripted-run.rrd`` exactly (``rerun rrd compare --unordered``: the same
+chunks, rows and values; log time is off and batching does not depend on timing).
 
 When the recording layout changes on purpose, regenerate the reference with
 ``uv run python tools/make_viz_reference.py`` and commit it.
@@ -30,7 +31,8 @@ def _tool():
 
 def _compare(a: Path, b: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [*rerun_executable(), "rrd", "compare", str(a), str(b)],
+        # --unordered: chunks are compared as sets (rerun writes them in no fixed order)
+        [*rerun_executable(), "rrd", "compare", "--unordered", str(a), str(b)],
         env=viewer_env(),
         capture_output=True,
         text=True,

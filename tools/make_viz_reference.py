@@ -5,7 +5,7 @@ The recording comes from a scripted run fed straight to :class:`slam.viz.recorde
 (no filter, no simulator, so the reference changes only when the recording format does): 40
 scans along a circle of radius 2 m, 8 particles, 36-beam scans, a small occupancy map with a
 wall, a 4×4 texture, a ground-truth circle. The recording id and the scans/s clock are fixed,
-log time is off: the same code writes the same content. ``tests/test_viz_golden.py`` rebuilds
+log time is off, batches do not depend on timing: the same code writes the same content. ``tests/test_viz_golden.py`` rebuilds
 it and compares with ``rerun rrd compare``; after an intended change of the recording layout run
 
     uv run python tools/make_viz_reference.py
@@ -15,6 +15,7 @@ and commit the new file (about 50 KB).
 
 from __future__ import annotations
 
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -46,13 +47,23 @@ def scripted_poses(steps: int = STEPS) -> np.ndarray:
 
 def write_reference(path: Path) -> Path:
     """Write the scripted recording to ``path`` (a ``.rrd`` file); return ``path``."""
+    import rerun as rr
+
     from slam.config import MapConfig, VizConfig
     from slam.mapping import OccupancyGrid
     from slam.particle_filter import StepRecord
     from slam.viz.recorder import RunRecorder
 
     viz = VizConfig(map_every=10, detail_every=5, scan_points=24, map_levels=16)
-    recorder = RunRecorder(path, viz, name="golden", recording_id=RECORDING_ID, clock=FakeClock())
+    recorder = RunRecorder(
+        path,
+        viz,
+        name="golden",
+        recording_id=RECORDING_ID,
+        clock=FakeClock(),
+        batch_seconds=math.inf,
+        batcher_config=rr.ChunkBatcherConfig.NEVER(),
+    )
     poses = scripted_poses()
     times = 1000.0 + 0.1 * np.arange(STEPS)
     recorder.log_ground_truth(poses + np.array([0.02, -0.02, 0.0]))

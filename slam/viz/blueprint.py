@@ -59,6 +59,14 @@ def history(
     return {f"/{path}": ranges for path in paths}
 
 
+def whole_run() -> rrb.TimeAxis:
+    """Time axis of a plot showing the whole run, not a window around the time cursor."""
+    everything = rr.TimeRange(
+        start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite()
+    )
+    return rrb.TimeAxis(view_range=everything)
+
+
 def _panels(timeline: str) -> list:
     """Side panels collapsed; the time panel on ``timeline``, following the latest data."""
     return [
@@ -80,9 +88,14 @@ def run_blueprint() -> rrb.Blueprint:
         name="texture", origin="/", contents=[f"+ /{TEXTURE}", f"+ /{TRAJECTORY_FINAL}"]
     )
     series = rrb.Vertical(
-        rrb.TimeSeriesView(name="N_eff", origin=f"/{N_EFF}"),
-        rrb.TimeSeriesView(name="max weight", origin=f"/{MAX_WEIGHT}"),
-        rrb.TimeSeriesView(name="scans/s", origin=f"/{SCANS_PER_S}"),
+        *(
+            rrb.TimeSeriesView(name=name, origin=f"/{path}", axis_x=whole_run())
+            for name, path in (
+                ("N_eff", N_EFF),
+                ("max weight", MAX_WEIGHT),
+                ("scans/s", SCANS_PER_S),
+            )
+        )
     )
     layout = rrb.Horizontal(
         rrb.Tabs(map_view, texture_view, active_tab=0), series, column_shares=[3, 2]
@@ -94,7 +107,7 @@ def grid_blueprint() -> rrb.Blueprint:
     """``slam grid run``: the posterior heat map beside the probability of the best cell."""
     layout = rrb.Horizontal(
         rrb.Spatial2DView(name="posterior", origin="/grid"),
-        rrb.TimeSeriesView(name="max probability", origin="/metrics"),
+        rrb.TimeSeriesView(name="max probability", origin="/metrics", axis_x=whole_run()),
         column_shares=[3, 2],
     )
     return rrb.Blueprint(layout, *_panels("step"))
@@ -109,7 +122,7 @@ def maze_blueprint() -> rrb.Blueprint:
             contents=["+ /maze/**"],
             overrides=history("maze/path/run0", "maze/path/run1", timelines=("step",)),
         ),
-        rrb.TimeSeriesView(name="known sides", origin="/metrics"),
+        rrb.TimeSeriesView(name="known sides", origin="/metrics", axis_x=whole_run()),
         column_shares=[3, 2],
     )
     return rrb.Blueprint(layout, *_panels("step"))

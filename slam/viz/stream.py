@@ -49,16 +49,20 @@ def open_stream(
     viewer_url: str | None = None,
     recording_id: str | None = None,
     blueprint: rr.blueprint.BlueprintLike | None = None,
+    batcher_config: rr.ChunkBatcherConfig | None = None,
 ) -> rr.RecordingStream:
     """A new recording stream writing to ``path`` and/or streaming to ``viewer_url``.
 
     ``recording_id`` defaults to a fresh UUID; pass a fixed one for reproducible files.
-    ``blueprint`` is sent as the default layout.
+    ``blueprint`` is sent as the default layout. ``batcher_config`` sets how rerun groups logged
+    rows into chunks (default: by time and size; ``NEVER`` makes the chunks, and so the file,
+    independent of timing).
     """
     rec = rr.RecordingStream(
         APPLICATION_ID,
         recording_id=recording_id or str(uuid.uuid4()),
         send_properties=False,
+        batcher_config=batcher_config,
     )
     rec.set_log_time_enabled(False)
     sinks: list = []
