@@ -121,6 +121,34 @@ def test_map_image_is_placed_at_its_lower_left_corner(scripted):
     assert final["width"] * 0.1 > 5.0 and final["height"] * 0.1 > 2.6
 
 
+def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_path):
+    from slam.config import MapConfig
+    from slam.mapping import OccupancyGrid
+    from slam.particle_filter import StepRecord
+    from slam.viz.recorder import RunRecorder
+
+    recorder = RunRecorder(tmp_path / "r.rrd", VizConfig(map_every=4, detail_every=2))
+    assert recorder.map_every == 0  # the filter's own live map is not requested
+    wall = np.stack([np.linspace(-1, 1, 50), np.full(50, 2.0)], axis=1)
+    for k in range(9):
+        record = StepRecord(k, k, float(k), np.array([0.0, 0.0, 0.0]), 5.0, 0.2, True, False)
+        if k % 2 == 0:
+            record.endpoints = wall
+        recorder.on_step(record)
+    grid = OccupancyGrid(MapConfig(), center=(0.0, 0.0))
+    grid.integrate(np.zeros(2), wall, np.ones(50, dtype=bool))
+    recorder.on_map(9, 9.0, grid)  # not due: the last snapshot was at 8
+    recorder.on_map(13, 13.0, grid)  # due (≥ 12)
+    recorder.finish(np.arange(9.0), np.zeros((9, 3)), None)
+    snapshots = rows(tmp_path / "r.rrd", bp.MAP, "Image:format")
+    assert [i for i, _ in snapshots] == [4, 8, 13]
+    # the preview holds the wall: occupied (dark) pixels in the top rows of the image
+    (_, buffer) = rows(tmp_path / "r.rrd", bp.MAP, "Image:buffer")[0]
+    fmt = snapshots[0][1][0]
+    pixels = np.frombuffer(bytes(buffer[0]), dtype=np.uint8).reshape(fmt["height"], fmt["width"])
+    assert pixels.min() < 60 and pixels.max() > 200
+
+
 def test_texture_is_rgba_with_unseen_cells_transparent(scripted):
     (_, buffer) = rows(scripted, bp.TEXTURE, "Image:buffer")[0]
     (_, fmt) = rows(scripted, bp.TEXTURE, "Image:format")[0]

@@ -4,9 +4,11 @@
 The recording comes from a scripted run fed straight to :class:`slam.viz.recorder.RunRecorder`
 (no filter, no simulator, so the reference changes only when the recording format does): 40
 scans along a circle of radius 2 m, 8 particles, 36-beam scans, a small occupancy map with a
-wall, a 4×4 texture, a ground-truth circle. The recording id and the scans/s clock are fixed,
-log time is off, batches do not depend on timing: the same code writes the same content. ``tests/test_viz_golden.py`` rebuilds
-it and compares with ``rerun rrd compare``; after an intended change of the recording layout run
+wall (the final map; the snapshots are the recorder's preview of the logged scans), a 4×4
+texture, a ground-truth circle. The recording id and the scans/s clock are fixed, log time is
+off, batches do not depend on timing: the same code writes the same content.
+``tests/test_viz_golden.py`` rebuilds it and compares with ``rerun rrd compare``; after an
+intended change of the recording layout run
 
     uv run python tools/make_viz_reference.py
 
@@ -55,9 +57,11 @@ def write_reference(path: Path) -> Path:
     from slam.viz.recorder import RunRecorder
 
     viz = VizConfig(map_every=10, detail_every=5, scan_points=24, map_levels=16)
+    map_config = MapConfig(resolution=0.1, initial_size_m=6.0)
     recorder = RunRecorder(
         path,
         viz,
+        map_config=map_config,
         name="golden",
         recording_id=RECORDING_ID,
         clock=FakeClock(),
@@ -67,7 +71,7 @@ def write_reference(path: Path) -> Path:
     poses = scripted_poses()
     times = 1000.0 + 0.1 * np.arange(STEPS)
     recorder.log_ground_truth(poses + np.array([0.02, -0.02, 0.0]))
-    grid = OccupancyGrid(MapConfig(resolution=0.1, initial_size_m=6.0), center=(0.0, 1.0))
+    grid = OccupancyGrid(map_config, center=(0.0, 1.0))
     wall = np.stack([np.linspace(-2.5, 2.5, 36), np.full(36, 2.6)], axis=1)
     offsets = np.linspace(-0.05, 0.05, 8)
     for k in range(STEPS):
@@ -88,8 +92,6 @@ def write_reference(path: Path) -> Path:
             record.weights = np.linspace(1.0, 2.0, 8) / np.linspace(1.0, 2.0, 8).sum()
             record.endpoints = wall.copy()
         recorder.on_step(record)
-        if k % viz.map_every == 0:
-            recorder.on_map(k, float(times[k]), grid)
     with tempfile.TemporaryDirectory() as folder:
         rgb = np.arange(48, dtype=np.uint8).reshape(4, 4, 3) * 5
         count = np.ones((4, 4), dtype=np.int32)
