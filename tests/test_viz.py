@@ -31,16 +31,20 @@ def _reference_tool():
     return module
 
 
-def rows(path: Path, entity: str, field: str, timeline: str = "scan") -> list[tuple[int, object]]:
-    """``(index, value)`` of every temporal row of ``entity`` holding ``field``, sorted."""
+def rows(
+    path: Path, entity: str, field: str, timeline: str | None = "scan"
+) -> list[tuple[int, object]]:
+    """``(index, value)`` of every temporal row of ``entity`` holding ``field``, sorted
+    (``timeline=None``: the static rows, index -1)."""
     out = []
     for chunk in RrdReader(path).stream().to_chunks():
-        if chunk.entity_path != f"/{entity}" or chunk.is_static:
+        if chunk.entity_path != f"/{entity}" or chunk.is_static != (timeline is None):
             continue
         batch = chunk.to_record_batch()
         if field not in batch.schema.names:
             continue
-        index = batch.column(timeline).to_pylist()
+        n = batch.num_rows
+        index = [-1] * n if timeline is None else batch.column(timeline).to_pylist()
         values = batch.column(field).to_pylist()
         out += [(i, v) for i, v in zip(index, values, strict=True) if v is not None]
     return sorted(out, key=lambda r: r[0])
@@ -71,7 +75,7 @@ def test_scripted_recording_has_every_entity_with_the_documented_row_counts(scri
         f"/{bp.MAP}"
     ].fields
     assert s[f"/{bp.TRAJECTORY_FINAL}"].rows == 1
-    assert s[f"/{bp.TEXTURE}"].rows == 1
+    assert s[f"/{bp.TEXTURE}"].static_rows == 1  # the finished texture, visible at any time
     assert s[f"/{bp.GROUND_TRUTH}"].static_rows == 1 and s[f"/{bp.GROUND_TRUTH}"].rows == 0
     assert s[f"/{bp.WORLD}"].fields == {"Transform3D:mat3x3"}
     assert RrdReader(scripted).blueprints(), "the default blueprint is in the file"
@@ -150,8 +154,8 @@ def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_pat
 
 
 def test_texture_is_rgba_with_unseen_cells_transparent(scripted):
-    (_, buffer) = rows(scripted, bp.TEXTURE, "Image:buffer")[0]
-    (_, fmt) = rows(scripted, bp.TEXTURE, "Image:format")[0]
+    (_, buffer) = rows(scripted, bp.TEXTURE, "Image:buffer", timeline=None)[0]
+    (_, fmt) = rows(scripted, bp.TEXTURE, "Image:format", timeline=None)[0]
     assert fmt[0]["width"] == 4 and fmt[0]["height"] == 4
     pixels = np.frombuffer(bytes(buffer[0]), dtype=np.uint8).reshape(4, 4, 4)
     assert pixels[0, 0, 3] == 0 and pixels[1, 1, 3] == 255

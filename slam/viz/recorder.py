@@ -19,7 +19,7 @@ entity                     content                                   rows
                                                                       (preview), the final map
 ``world/trajectory/final`` ``LineStrips2D``: the run's trajectory     once, at the last scan
 ``world/ground_truth``     ``LineStrips2D``                           static, when known
-``world/texture``          ``Image`` (RGBA) + transform               once, when texture.npz exists
+``world/texture``          ``Image`` (RGBA) + transform               static, when texture.npz exists
 =========================  ========================================  ===========================
 
 Decimation keeps recording cheap (≤ 10 % of a run's wall time, measured by ``tools/benches/viz.py``):
@@ -76,13 +76,20 @@ _GREEN = (60, 170, 60)
 _ORANGE = (240, 150, 20)
 
 
-def log_placed(rec: rr.RecordingStream, path: str, image: PlacedImage, draw_order: float) -> None:
+def log_placed(
+    rec: rr.RecordingStream,
+    path: str,
+    image: PlacedImage,
+    draw_order: float,
+    static: bool = False,
+) -> None:
     """Log ``image`` at ``path`` with the transform that places its pixels in the world."""
     x, y = image.corner
     rec.log(
         path,
         rr.Transform3D(translation=[x, y, 0.0], scale=[image.cell, image.cell, 1.0]),
         as_image(image.pixels, draw_order),
+        static=static,
     )
 
 
@@ -325,7 +332,7 @@ class RunRecorder:
                 self.maps += 1
         texture = texture_image(run_folder) if run_folder is not None else None
         if texture is not None:
-            log_placed(rec, bp.TEXTURE, texture, draw_order=-10.0)
+            log_placed(rec, bp.TEXTURE, texture, draw_order=-10.0, static=True)
         close_stream(rec)
         self.spent_s += time.perf_counter() - start
         out: dict[str, Any] = {
