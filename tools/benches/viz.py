@@ -14,13 +14,14 @@ overhead is then relative to a shorter run: the conservative figure). Reported:
 * ``wall_difference_pct`` — the median of the paired wall-time differences (with − without),
   relative to the same median; on a shared 2-core machine single runs vary by ±15 %, so this
   figure is only as good as that noise (it also includes rerun's own background threads);
-* the recording's size and its rows per entity.
+* the recording's size, whether ``rerun rrd verify`` accepts it, and its rows per entity.
 """
 
 from __future__ import annotations
 
 import json
 import statistics
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -44,7 +45,7 @@ def _run(name: str, out: Path, overrides: list[str]) -> dict:
 
 
 def _overhead(name: str, overrides: list[str]) -> dict:
-    from slam.viz.stream import summarize
+    from slam.viz.stream import rerun_executable, summarize, viewer_env
 
     with tempfile.TemporaryDirectory(prefix="slam-viz-bench-") as tmp:
         base = Path(tmp)
@@ -55,6 +56,9 @@ def _overhead(name: str, overrides: list[str]) -> dict:
             recorded.append(_run(name, base / "rec", overrides))
         rrd = base / "rec" / "recording.rrd"
         rows = {path: s.rows for path, s in summarize(rrd).items() if s.rows}
+        verify = subprocess.run(
+            [*rerun_executable(), "rrd", "verify", str(rrd)], env=viewer_env(), capture_output=True
+        )
         size_mb = rrd.stat().st_size / 2**20
     walls_plain = [m["bench_wall_s"] for m in plain]
     walls_rec = [m["bench_wall_s"] for m in recorded]
@@ -69,6 +73,7 @@ def _overhead(name: str, overrides: list[str]) -> dict:
         "recorder_pct": round(100.0 * log_s / median_plain, 1),
         "wall_difference_pct": round(100.0 * difference / median_plain, 1),
         "recording_mb": round(size_mb, 2),
+        "rrd_verify_ok": verify.returncode == 0,
         "map_snapshots": recorded[-1]["recording"]["maps"],
         "rows": rows,
         "walls_without_s": [round(w, 2) for w in walls_plain],
