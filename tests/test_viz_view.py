@@ -146,3 +146,15 @@ def test_a_viewer_that_never_listens_is_a_usage_error(tmp_path, monkeypatch):
     with pytest.raises(UsageError, match="did not start listening on 127.0.0.1"):
         spawn_viewer(timeout_s=5)
     assert wait_for_port(free_port(), 0.3) is False
+
+
+def test_screenshot_command_binds_loopback_and_keeps_the_pointer_off_the_window(tmp_path):
+    from slam.viz.screenshot import main as screenshot_main
+    from slam.viz.screenshot import screenshot_command
+
+    cmd = screenshot_command(tmp_path / "r.rrd", tmp_path / "out.png", 800, 450)
+    assert cmd[:4] == ["xvfb-run", "-a", "-s", "-screen 0 1600x900x24"]
+    script = cmd[-1]
+    assert "--bind 127.0.0.1" in script and "--window-size 800x450" in script
+    assert "--screenshot-to" in script and "xdotool mousemove 1596 896" in script
+    assert screenshot_main([str(tmp_path / "missing"), str(tmp_path / "o.png")]) == 2

@@ -23,8 +23,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "view",
         help="open a run's recording.rrd in the rerun viewer (native, or web with --web)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Open RUN_DIR/recording.rrd (or a .rrd file) in the rerun viewer: the native "
+            "viewer, or with --web the web viewer served on 127.0.0.1 (its URL is printed; "
+            "Ctrl-C stops it). Every server started listens on 127.0.0.1 only."
+        ),
     )
     parser.add_argument(
         "run_dir", metavar="RUN_DIR", type=Path, help="run folder (or a .rrd recording)"
