@@ -168,13 +168,13 @@ class RbpfConfig:
     (signed point-to-plane distance, with normals from neighbouring beams)."""
     dmax: float = 0.3
     """Truncation of the distance field (m): beams further from any surface carry no gradient."""
-    sigmas: tuple[float, ...] = (0.15, 0.075, 0.04)
+    sigmas: tuple[float, ...] = (0.075, 0.04)
     """Scan-matching sensor sigmas (m), wide to narrow; the last one scores the particles."""
     z_hit: float = 1.0
     """Weight of the Gaussian term of the likelihood field model."""
     z_rand: float = 0.05
     """Weight of the uniform (unexplained beam) term of the likelihood field model."""
-    max_iterations: int = 10
+    max_iterations: int = 5
     """Levenberg-Marquardt iterations per sigma level."""
     tolerance: float = 1e-3
     """A sigma level ends when a step moves less than this (m, and rad)."""

@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cell_distance(
     pool: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int, dmax: float
 ) -> float:
@@ -56,7 +56,7 @@ def cell_distance(
     return pool[t, iy & mask, ix & mask]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def plane_distance_at(
     plane: np.ndarray,
     table: np.ndarray,
@@ -74,14 +74,12 @@ def plane_distance_at(
     """
     gx = (x - ox) * inv_res - 0.5
     gy = (y - oy) * inv_res - 0.5
-    fx0 = np.floor(gx)
-    fy0 = np.floor(gy)
-    ix = int(fx0)
-    iy = int(fy0)
-    fx = gx - fx0
-    fy = gy - fy0
-    if ix < 0 or iy < 0:
+    if gx < 0.0 or gy < 0.0:
         return np.nan, 0.0, 0.0
+    ix = int(gx)  # truncation is the floor for non-negative values, and much cheaper
+    iy = int(gy)
+    fx = gx - ix
+    fy = gy - iy
     mask = (1 << shift) - 1
     tx = ix >> shift
     ty = iy >> shift
@@ -112,7 +110,7 @@ def plane_distance_at(
     return d, ddx, ddy
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cell(layer: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int) -> float:
     tx = ix >> shift
     ty = iy >> shift
@@ -125,7 +123,7 @@ def _cell(layer: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int) ->
     return layer[t, iy & mask, ix & mask]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _lookup(row: np.ndarray, step_inv: float, d: float) -> float:
     """Linear interpolation in a table sampled at ``|d| = 0, 1/step_inv, 2/step_inv, ...``."""
     u = abs(d) * step_inv
@@ -168,11 +166,12 @@ def normal_equations(
     """
     c = np.cos(th)
     s = np.sin(th)
-    h[:, :] = 0.0
-    g[:] = 0.0
     cost = 0.0
     inliers = 0
     unknown = cost_row[cost_row.shape[0] - 1]
+    # accumulate in scalars (kept in registers), write the arrays once at the end
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    g0 = g1 = g2 = 0.0
     for b in range(ex.shape[0]):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
@@ -184,18 +183,30 @@ def normal_equations(
         inliers += 1
         wgt = _lookup(weight_row, step_inv, d)
         j2 = -gx * ry + gy * rx
-        h[0, 0] += wgt * gx * gx
-        h[0, 1] += wgt * gx * gy
-        h[0, 2] += wgt * gx * j2
-        h[1, 1] += wgt * gy * gy
-        h[1, 2] += wgt * gy * j2
-        h[2, 2] += wgt * j2 * j2
-        g[0] += wgt * d * gx
-        g[1] += wgt * d * gy
-        g[2] += wgt * d * j2
-    h[1, 0] = h[0, 1]
-    h[2, 0] = h[0, 2]
-    h[2, 1] = h[1, 2]
+        wgx = wgt * gx
+        wgy = wgt * gy
+        wj2 = wgt * j2
+        h00 += wgx * gx
+        h01 += wgx * gy
+        h02 += wgx * j2
+        h11 += wgy * gy
+        h12 += wgy * j2
+        h22 += wj2 * j2
+        g0 += wgx * d
+        g1 += wgy * d
+        g2 += wj2 * d
+    h[0, 0] = h00
+    h[0, 1] = h01
+    h[0, 2] = h02
+    h[1, 0] = h01
+    h[1, 1] = h11
+    h[1, 2] = h12
+    h[2, 0] = h02
+    h[2, 1] = h12
+    h[2, 2] = h22
+    g[0] = g0
+    g[1] = g1
+    g[2] = g2
     return cost, inliers
 
 
