@@ -89,8 +89,9 @@ class MapConfig:
     """Extra room added on each side when the map must grow (m)."""
     log_odds_hit: float = math.log(4.0)
     """Log-odds added to a cell where a beam ends."""
-    log_odds_miss: float = -math.log(4.0)
-    """Log-odds added to cells a beam passes through."""
+    log_odds_miss: float = -0.4
+    """Log-odds added to cells a beam passes through (smaller than a hit, so a wall is not
+    erased by the rays that graze it)."""
     log_odds_min: float = -10.0
     """Lower clamp of the log-odds."""
     log_odds_max: float = 10.0
@@ -101,6 +102,8 @@ class MapConfig:
     """"No return" beams clear free space up to this range (m); 0 leaves them out."""
     free_beam_stride: int = 1
     """Cast free-space rays for every k-th beam only (hits are always integrated)."""
+    crop_margin_m: float = 2.0
+    """The output map is cropped to the observed cells plus this margin (m)."""
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,11 @@ class RbpfConfig:
     """Run a filter update after this much travel since the last one (m)."""
     update_angle: float = 0.1
     """... or after this much rotation (rad). Scans in between move particles by odometry only."""
+    update_interval_s: float = 0.15
+    """... or, once this long has passed since the last update (counted in scans × the median
+    scan period), after any motion beyond ``update_min_motion``; 0 disables this rule."""
+    update_min_motion: float = 0.02
+    """Least motion (m, and rad) for the interval rule: a standing robot is never updated."""
     match_beams: int = 180
     """At most this many beams (evenly spread) are used for scan matching and weighting."""
     insert_beams: int = 360
@@ -168,7 +176,7 @@ class RbpfConfig:
     (signed point-to-plane distance, with normals from neighbouring beams)."""
     dmax: float = 0.3
     """Truncation of the distance field (m): beams further from any surface carry no gradient."""
-    sigmas: tuple[float, ...] = (0.075, 0.04)
+    sigmas: tuple[float, ...] = (0.2, 0.075, 0.04)
     """Scan-matching sensor sigmas (m), wide to narrow; the last one scores the particles."""
     z_hit: float = 1.0
     """Weight of the Gaussian term of the likelihood field model."""
@@ -176,6 +184,8 @@ class RbpfConfig:
     """Weight of the uniform (unexplained beam) term of the likelihood field model."""
     max_iterations: int = 5
     """Levenberg-Marquardt iterations per sigma level."""
+    coarse_stride: int = 1
+    """The wide sigma levels use every k-th beam (the last level always uses all of them)."""
     tolerance: float = 1e-3
     """A sigma level ends when a step moves less than this (m, and rad)."""
     min_inliers: float = 0.3
@@ -184,7 +194,11 @@ class RbpfConfig:
     """Log-likelihoods are divided by this before weighting (beams are not independent)."""
     proposal_spread: float = 0.3
     """Particles are drawn around their matched pose with covariance ``proposal_spread ·
-    temperature · H⁻¹`` (``H`` the matcher's Hessian); 0 keeps the matched pose."""
+    (H / temperature + Σ_motion⁻¹)⁻¹`` (``H`` the matcher's Hessian, ``Σ_motion`` the odometry
+    model's covariance); 0 keeps the matched pose."""
+    proposal_motion_prior: bool = False
+    """Include the odometry model in the proposal's covariance (else the scan likelihood alone,
+    with a unit ridge)."""
     refine_passes: int = 3
     """After the filter, re-register the update scans of the final lineage against the map they
     build this many times (removes the jitter the proposal's sampling leaves; 0: off)."""
@@ -202,6 +216,56 @@ class RbpfConfig:
 
 
 @dataclass(frozen=True)
+class LoopConfig:
+    """Loop closing after the filter: a pose graph with scan-matched loop edges (rbpf only)."""
+
+    enabled: bool = True
+    """Run the stage."""
+    stride: int = 3
+    """Look for a loop closure at every k-th node (filter update)."""
+    radius: float = 3.0
+    """A candidate is the nearest earlier node within this distance (m) ..."""
+    min_path: float = 10.0
+    """... and at least this far back along the path (m)."""
+    submap_radius: float = 5.0
+    """The submap holds the earlier nodes within this distance of the candidate (m) ..."""
+    submap_nodes: int = 40
+    """... at most this many, the closest in time to the candidate."""
+    search_xy: float = 0.6
+    """Correlative search half-width in x and y (m)."""
+    search_step: float = 0.1
+    """Correlative search step in x and y (m)."""
+    search_th: float = 0.1
+    """Correlative search half-width in heading (rad)."""
+    search_th_step: float = 0.02
+    """Correlative search step in heading (rad)."""
+    search_sigma: float = 0.15
+    """Sensor sigma of the correlative search (m): wide, to rank coarse offsets smoothly."""
+    fit_distance: float = 0.1
+    """A beam fits when it lands within this distance (m) of a submap surface."""
+    min_fit: float = 0.5
+    """Accept a loop closure when at least this fraction of the scan's beams fit."""
+    min_beams: int = 30
+    """... and at least this many."""
+    sigma_xy: float = 0.05
+    """Standard deviation of a loop edge in x and y (m)."""
+    sigma_th: float = 0.02
+    """Standard deviation of a loop edge in heading (rad)."""
+    robust: float = 3.0
+    """Cauchy kernel width of loop edges, in standard deviations (wrong closures lose weight)."""
+    seq_sigma_xy: float = 0.01
+    """Standard deviation of a sequential edge: this much (m) ..."""
+    seq_sigma_th: float = 0.005
+    """... (rad) ..."""
+    seq_sigma_rel: float = 0.02
+    """... plus this fraction of the edge's translation (and rotation)."""
+    iterations: int = 10
+    """Gauss-Newton iterations."""
+    rounds: int = 2
+    """Detection + optimisation rounds."""
+
+
+@dataclass(frozen=True)
 class ClassicConfig:
     """The course's method: one shared map, map correlation with a local pose search."""
 
@@ -213,10 +277,16 @@ class ClassicConfig:
     """Yaw step of the local search (rad)."""
     yaw_steps: int = 2
     """Yaw offsets −yaw_steps..yaw_steps times yaw_step."""
-    temperature: float = 2.0
-    """Softmax temperature on the correlation counts."""
-    snap_to_best: bool = True
-    """Move each particle to its best local offset (the search acts as a scan matcher)."""
+    temperature: float = 10.0
+    """Softmax temperature on the correlation counts (hundreds of beams: counts are large)."""
+    snap_to_best: bool = False
+    """Move each particle to its best local offset (the search then acts as a scan matcher);
+    the course uses the best correlation only as the particle's score."""
+    motion_floor: tuple[float, ...] = (0.0005, 0.0005, 0.0005)
+    """Noise standard deviation added at every scan (m, m, rad); this method predicts at every
+    scan, so its floor is smaller than the filter-wide one (used per update)."""
+    log_odds_miss: float = -math.log(4.0)
+    """The course's symmetric update: a miss removes what a hit adds (``±log 4``)."""
 
 
 @dataclass(frozen=True)
@@ -315,6 +385,7 @@ class Config:
     filter: FilterConfig = field(default_factory=FilterConfig)
     rbpf: RbpfConfig = field(default_factory=RbpfConfig)
     classic: ClassicConfig = field(default_factory=ClassicConfig)
+    loops: LoopConfig = field(default_factory=LoopConfig)
     texture: TextureConfig = field(default_factory=TextureConfig)
     viz: VizConfig = field(default_factory=VizConfig)
 

@@ -124,6 +124,25 @@ class OccupancyGrid:
             c.log_odds_max,
         )
 
+    def cropped(self, margin_m: float = 1.0) -> OccupancyGrid:
+        """A copy reduced to the cells that were observed (log-odds ≠ 0) plus a margin."""
+        known = self.log_odds != 0
+        if not known.any():
+            return OccupancyGrid.from_arrays(
+                self.log_odds, self.resolution, self.origin, self.config
+            )
+        rows = np.flatnonzero(known.any(axis=1))
+        cols = np.flatnonzero(known.any(axis=0))
+        pad = int(np.ceil(margin_m / self.resolution))
+        r0 = max(int(rows[0]) - pad, 0)
+        r1 = min(int(rows[-1]) + pad + 1, self.shape[0])
+        c0 = max(int(cols[0]) - pad, 0)
+        c1 = min(int(cols[-1]) + pad + 1, self.shape[1])
+        origin = self.origin + np.array([c0, r0]) * self.resolution
+        return OccupancyGrid.from_arrays(
+            self.log_odds[r0:r1, c0:c1].copy(), self.resolution, origin, self.config
+        )
+
     def occupied(self) -> NDArray[np.bool_]:
         """Cells whose log-odds exceed the occupied threshold."""
         return self.log_odds > self.config.occupied_threshold
@@ -326,6 +345,7 @@ class ParticleMaps:
         max_iter: int,
         tolerance: float,
         min_inliers: float,
+        coarse_stride: int = 1,
     ) -> MatchResult:
         """Scan-match every particle's predicted pose against its own map and score it.
 
@@ -347,6 +367,7 @@ class ParticleMaps:
             luts[1],
             max_iter,
             tolerance,
+            coarse_stride,
             min_inliers,
             out.poses,
             out.loglik,
@@ -366,6 +387,7 @@ class ParticleMaps:
         tolerance: float,
         min_inliers: float,
         particle: int = 0,
+        coarse_stride: int = 1,
     ) -> F64:
         """Refine many scan poses ``(N, 3)`` against the map of ``particle``.
 
@@ -387,6 +409,7 @@ class ParticleMaps:
             luts[1],
             max_iter,
             tolerance,
+            coarse_stride,
             min_inliers,
             out,
         )

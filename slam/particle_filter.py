@@ -30,6 +30,7 @@ number of threads.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -37,7 +38,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.config import Config
+from slam.config import Config, RbpfConfig
 from slam.errors import DataError
 from slam.geometry import compose, relative, wrap_angle
 from slam.io.log import Log
@@ -109,6 +110,13 @@ class ScanSequence:
             no_return=float(no_return),
             indices=idx,
         )
+
+    def scan_period(self) -> float:
+        """Nominal time between scans: the median positive time step (robust to CARMEN logs
+        whose time stamps go backwards now and then)."""
+        steps = np.diff(self.times)
+        steps = steps[steps > 0]
+        return float(np.median(steps)) if steps.size else 0.0
 
     def scan_angles(self, k: int) -> F64:
         """Beam angles of scan ``k``."""
@@ -328,7 +336,7 @@ def build_map(
     grid.ensure_contains(*span)
     for k in steps:
         integrate_scan(grid, seq, int(k), poses[k])
-    return grid
+    return grid.cropped(config.map.crop_margin_m)
 
 
 def _notify(
@@ -371,11 +379,12 @@ def run_classic(seq: ScanSequence, config: Config, observer: Observer | None = N
     n = len(seq)
     p = fc.particles
     alphas = np.asarray(fc.motion_alphas, np.float64)
-    floor = np.asarray(fc.motion_floor, np.float64)
+    floor = np.asarray(cc.motion_floor, np.float64)
     yaw_offsets = cc.yaw_step * np.arange(-cc.yaw_steps, cc.yaw_steps + 1, dtype=np.float64)
     particles = np.tile(seq.odometry[0], (p, 1))
     logw = np.zeros(p)
-    grid = OccupancyGrid(config.map, center=(float(particles[0, 0]), float(particles[0, 1])))
+    map_config = dataclasses.replace(config.map, log_odds_miss=cc.log_odds_miss)
+    grid = OccupancyGrid(map_config, center=(float(particles[0, 0]), float(particles[0, 1])))
     integrate_scan(grid, seq, 0, particles[0])
     poses = np.empty((n, 3))
     poses[0] = particles[0]
@@ -437,27 +446,93 @@ def run_classic(seq: ScanSequence, config: Config, observer: Observer | None = N
         times=seq.times.copy(),
         poses=poses,
         scan_indices=seq.indices.copy(),
-        grid=grid,
+        grid=grid.cropped(config.map.crop_margin_m),
         n_eff=n_eff_log,
         max_weight=max_w_log,
         stats={"updates": n, "resamples": resamples},
     )
 
 
-def sample_around(poses: F64, hessian: F64, scale: float, rng: np.random.Generator) -> F64:
-    """Draw one pose per particle from ``N(pose, scale · H⁻¹)`` (the scan-matching proposal).
+def motion_covariance(poses: F64, increment: F64, alphas: F64, floor: F64) -> F64:
+    """World-frame covariance ``(P, 3, 3)`` of the odometry motion model for ``increment``.
 
-    ``H`` is each particle's Gauss-Newton Hessian; a tiny ridge keeps it invertible where the
-    scan does not constrain some direction (the spread there is then capped at 1 m / 1 rad).
+    The same standard deviations as :func:`slam.kernels.motion.sample_motion` (robot frame),
+    rotated into the world frame by each particle's heading.
     """
-    ridge = np.diag([1.0, 1.0, 1.0]) * 1.0
-    cov = scale * np.linalg.inv(hessian + ridge)
+    d = float(np.hypot(increment[0], increment[1]))
+    a = abs(float(increment[2]))
+    sx = alphas[0] * d + alphas[1] * a + floor[0]
+    sy = alphas[2] * d + alphas[1] * a + floor[1]
+    st = alphas[3] * a + alphas[4] * d + floor[2]
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    cov = np.zeros((poses.shape[0], 3, 3))
+    cov[:, 0, 0] = c * c * sx**2 + s * s * sy**2
+    cov[:, 1, 1] = s * s * sx**2 + c * c * sy**2
+    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (sx**2 - sy**2)
+    cov[:, 2, 2] = st**2
+    return cov
+
+
+def sample_around(
+    poses: F64,
+    hessian: F64,
+    temperature: float,
+    motion_cov: F64 | None,
+    spread: float,
+    rng: np.random.Generator,
+) -> F64:
+    """Draw one pose per particle around its matched pose: the scan-matching proposal.
+
+    The proposal combines the (tempered) scan likelihood, whose Gauss-Newton Hessian at the
+    match is ``H``, with the odometry motion model ``Σ_m`` (Grisetti et al. 2007's Gaussian
+    approximation of the optimal proposal): ``Σ = spread · (H / T + Σ_m⁻¹)⁻¹``. Where the scan
+    constrains the pose (walls in every direction) the spread is small; along a corridor, where
+    it does not, the spread is the odometry's, so particles explore the along-corridor position
+    that a later loop closure will decide. Without ``motion_cov`` the proposal is the tempered
+    scan likelihood alone, ``spread · T · (H + I)⁻¹``.
+    """
+    if motion_cov is None:
+        # scan likelihood only, with a small ridge where the scan constrains nothing
+        info = (hessian + np.eye(3)) / temperature
+    else:
+        info = hessian / temperature + np.linalg.inv(motion_cov)
+    cov = spread * np.linalg.inv(info)
     cov = 0.5 * (cov + np.transpose(cov, (0, 2, 1)))
     chol = np.linalg.cholesky(cov + np.eye(3) * 1e-12)
     noise = rng.standard_normal((poses.shape[0], 3))
     out = poses + np.einsum("pij,pj->pi", chol, noise)
     out[:, 2] = wrap_angle(out[:, 2])
     return out
+
+
+def _update_due(moved: F64, elapsed: float, rc: RbpfConfig) -> bool:
+    """Whether the filter updates on a scan (GMapping's linear/angular/temporal update rule).
+
+    After ``update_distance`` of travel or ``update_angle`` of rotation since the last update;
+    or, once ``update_interval_s`` has passed, after any motion beyond ``update_min_motion``
+    (m, and rad): a slow robot is still corrected often, a standing one is never re-weighted with
+    the same view (which would make the weights overconfident).
+    """
+    dist = float(np.hypot(moved[0], moved[1]))
+    turn = abs(float(moved[2]))
+    if dist >= rc.update_distance or turn >= rc.update_angle:
+        return True
+    if rc.update_interval_s > 0 and elapsed >= rc.update_interval_s:
+        return dist >= rc.update_min_motion or turn >= rc.update_min_motion
+    return False
+
+
+def _evidence_share(moved: F64, rc: RbpfConfig) -> float:
+    """Share of a full update's evidence an update carries: ``min(1, max(d/D, |θ|/Θ))``.
+
+    Scans taken a few centimetres apart mostly repeat each other; weighting every one of them
+    fully would count the same evidence many times and deplete the particles. Scaling the
+    log-likelihood by the motion since the last update (relative to ``update_distance`` ``D`` and
+    ``update_angle`` ``Θ``) makes the evidence grow with motion, whatever the update rate.
+    """
+    dist = float(np.hypot(moved[0], moved[1])) / rc.update_distance
+    turn = abs(float(moved[2])) / rc.update_angle
+    return min(1.0, max(dist, turn))
 
 
 def _interpolate_between_updates(
@@ -551,10 +626,12 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         integrate_scan(live, seq, 0, start)
     _notify(observer, 0, seq, start, p, 1.0 / p, True, False, particles, weights, None)
 
+    period = seq.scan_period()
+    last_k = 0
     for k in range(1, n):
         moved = relative(last_odo, seq.odometry[k])
         best = int(np.argmax(weights))
-        if np.hypot(moved[0], moved[1]) < rc.update_distance and abs(moved[2]) < rc.update_angle:
+        if not _update_due(moved, (k - last_k) * period, rc):
             n_eff_log[k] = n_eff_log[k - 1]
             max_w_log[k] = max_w_log[k - 1]
             if observer is not None:
@@ -573,14 +650,23 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         lo = predicted[:, :2].min(axis=0) - r
         hi = predicted[:, :2].max(axis=0) + r
         maps.ensure_contains(lo[0], lo[1], hi[0], hi[1])
-        match = maps.match(predicted, ex, ey, luts, rc.max_iterations, rc.tolerance, rc.min_inliers)
+        match = maps.match(
+            predicted, ex, ey, luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
+            rc.coarse_stride,
+        )  # fmt: skip
         particles = match.poses
+        share = _evidence_share(moved, rc)
         if rc.proposal_spread > 0:
+            motion_cov = (
+                motion_covariance(predicted, moved, alphas, floor)
+                if rc.proposal_motion_prior
+                else None
+            )
             particles = sample_around(
-                particles, match.hessian, rc.proposal_spread * rc.temperature, rng
+                particles, match.hessian, rc.temperature, motion_cov, rc.proposal_spread, rng
             )
         fallbacks += int(np.count_nonzero(match.inliers < rc.min_inliers))
-        logw = logw + match.loglik / rc.temperature
+        logw = logw + share * match.loglik / rc.temperature
         logw -= logw.max()
         weights = _normalise(logw)
         n_eff = effective_sample_size(weights)
@@ -607,6 +693,7 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
         peak_tiles = max(peak_tiles, maps.tiles_in_use)
         peak_map_bytes = max(peak_map_bytes, maps.memory_bytes())
         last_odo = seq.odometry[k]
+        last_k = k
         best_now = int(np.argmax(weights))
         if live is not None:
             integrate_scan(live, seq, k, particles[best_now])
@@ -624,6 +711,17 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
     for u in range(len(steps) - 1, -1, -1):
         lineage[u] = update_particles[u][best]
         best = int(update_parents[u][best])
+    loop_stats: dict = {}
+    if config.loops.enabled and len(steps) > 1:
+        from slam.graph import close_loops
+
+        closed = close_loops(seq, steps, lineage, config)
+        lineage = closed.poses
+        loop_stats = {
+            "loop_candidates": closed.candidates,
+            "loop_closures": closed.accepted,
+            "loop_correction_max_m": round(closed.correction_max_m, 3),
+        }
     for _ in range(rc.refine_passes):
         lineage = refine_trajectory(seq, lineage, steps, config)
     poses = _interpolate_between_updates(seq, steps, lineage)
@@ -641,6 +739,7 @@ def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None
             "match_fallbacks": fallbacks,
             "peak_tiles": int(peak_tiles),
             "peak_particle_map_mb": round(peak_map_bytes / 2**20, 1),
+            **loop_stats,
         },
     )
 
@@ -697,8 +796,9 @@ def refine_trajectory(
         ey[i, : hy.size] = hy
     luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     return maps.register(
-        poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers
-    )
+        poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
+        coarse_stride=rc.coarse_stride,
+    )  # fmt: skip
 
 
 def run_slam(

@@ -1,0 +1,110 @@
+"""Pose-graph kernels and loop closing: errors, Jacobians, the solver, a closed square loop."""
+
+import numpy as np
+import pytest
+
+from slam.config import LoopConfig
+from slam.geometry import accumulate, compose, relative
+from slam.graph import optimize
+from slam.kernels.graph import _jacobians, edge_error, linearize, solve_system
+
+
+def test_edge_error_is_zero_for_a_consistent_edge_and_known_otherwise():
+    xi = np.array([1.0, 2.0, 0.5])
+    xj = np.array([2.0, 2.5, 1.0])
+    z = relative(xi, xj)
+    np.testing.assert_allclose(edge_error(xi, xj, z), 0.0, atol=1e-12)
+    shifted = compose(xj, np.array([0.0, 0.0, 0.1]))
+    np.testing.assert_allclose(edge_error(xi, shifted, z), [0.0, 0.0, 0.1], atol=1e-12)
+    # move j 0.1 m along i's x axis: the error is that step seen from z's frame
+    moved = xj + np.array([0.1 * np.cos(0.5), 0.1 * np.sin(0.5), 0.0])
+    c, s = np.cos(z[2]), np.sin(z[2])
+    expected = [c * 0.1, -s * 0.1, 0.0]  # Rzᵀ (0.1, 0), no heading error
+    np.testing.assert_allclose(edge_error(xi, moved, z), expected, atol=1e-12)
+
+
+def test_jacobians_match_finite_differences():
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        xi, xj, z = rng.normal(size=(3, 3))
+        a, b = _jacobians(xi, xj, z)
+        h = 1e-6
+        for k in range(3):
+            dx = np.zeros(3)
+            dx[k] = h
+            num_a = (edge_error(xi + dx, xj, z) - edge_error(xi - dx, xj, z)) / (2 * h)
+            num_b = (edge_error(xi, xj + dx, z) - edge_error(xi, xj - dx, z)) / (2 * h)
+            np.testing.assert_allclose(a[:, k], num_a, atol=1e-6)
+            np.testing.assert_allclose(b[:, k], num_b, atol=1e-6)
+
+
+def test_preconditioned_solver_matches_a_dense_solve():
+    rng = np.random.default_rng(1)
+    n = 30
+    poses = accumulate(np.tile([0.5, 0.0, 0.2], (n - 1, 1)))
+    poses += rng.normal(scale=0.05, size=poses.shape)
+    ei = np.concatenate([np.arange(n - 1), [0, 5, 3]]).astype(np.int64)
+    ej = np.concatenate([np.arange(1, n), [29, 20, 27]]).astype(np.int64)
+    z = rng.normal(scale=0.3, size=(ei.size, 3))
+    info = np.tile(np.diag([100.0, 100.0, 400.0]), (ei.size, 1, 1))
+    robust = np.zeros(ei.size)
+    diag, band, far, grad = (
+        np.zeros((n, 3, 3)),
+        np.zeros((n - 1, 3, 3)),
+        np.zeros((ei.size, 3, 3)),
+        np.zeros((n, 3)),
+    )
+    linearize(poses, ei, ej, z, info, robust, diag, band, far, grad)
+    diag[0] += np.eye(3) * 1e3
+    dense = np.zeros((3 * n, 3 * n))
+    for k in range(n):
+        dense[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = diag[k]
+    for k in range(n - 1):
+        dense[3 * k : 3 * k + 3, 3 * k + 3 : 3 * k + 6] = band[k]
+        dense[3 * k + 3 : 3 * k + 6, 3 * k : 3 * k + 3] = band[k].T
+    for e in range(n - 1, ei.size):
+        i, j = ei[e], ej[e]
+        dense[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] += far[e]
+        dense[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] += far[e].T
+    expected = np.linalg.solve(dense, -grad.ravel()).reshape(n, 3)
+    x, iterations = solve_system(diag, band, far, ei, ej, -grad, 200, 1e-12)
+    np.testing.assert_allclose(x, expected, rtol=1e-6, atol=1e-8)
+    assert iterations < 20  # the chain preconditioner leaves only the 3 loop edges to iterate on
+
+
+def test_optimize_closes_a_drifted_square_loop():
+    # a 4 m square driven in 40 steps; odometry turns 1% too little, so the loop does not close
+    true_steps = np.tile([0.4, 0.0, 0.0], (40, 1))
+    true_steps[9::10, 2] = np.pi / 2
+    truth = accumulate(true_steps)
+    drifted_steps = true_steps.copy()
+    drifted_steps[:, 2] *= 0.99
+    drifted_steps[:, 0] *= 1.01
+    drifted = accumulate(drifted_steps)
+    assert np.hypot(*drifted[-1, :2]) > 0.05  # visibly open
+    # loop edge: the last pose seen from the first is the identity (back at the start)
+    edges = [(0, 40, relative(truth[0], truth[40]))]
+    lc = LoopConfig()
+    closed = optimize(drifted, edges, lc)
+    gap = relative(closed[0], closed[40])
+    assert np.hypot(gap[0], gap[1]) < 0.01 and abs(gap[2]) < 0.005
+    assert np.abs(closed - truth)[:, :2].max() < 0.05  # the whole square comes back into shape
+    np.testing.assert_allclose(closed[0], drifted[0], atol=1e-6)  # node 0 is fixed
+
+
+def test_a_wrong_loop_edge_is_down_weighted():
+    steps = np.tile([0.5, 0.0, 0.0], (30, 1))
+    poses = accumulate(steps)
+    wrong = [(0, 30, np.array([0.0, 3.0, 0.5]))]  # claims the end is 3 m to the side
+    lc = LoopConfig()
+    out = optimize(poses, wrong, lc)
+    # the robust kernel keeps one contradicting edge from bending a consistent chain much
+    assert np.abs(out - poses)[:, :2].max() < 0.3
+    plain = optimize(poses, wrong, LoopConfig(robust=0.0))
+    assert np.abs(plain - poses)[:, :2].max() > np.abs(out - poses)[:, :2].max()
+
+
+@pytest.mark.parametrize("n", [2, 5])
+def test_optimize_without_loops_keeps_the_chain(n):
+    poses = accumulate(np.tile([0.3, 0.1, 0.05], (n - 1, 1)))
+    np.testing.assert_allclose(optimize(poses, [], LoopConfig()), poses, atol=1e-9)
