@@ -158,7 +158,7 @@ class RbpfConfig:
     """Run a filter update after this much travel since the last one (m)."""
     update_angle: float = 0.1
     """... or after this much rotation (rad). Scans in between move particles by odometry only."""
-    update_interval_s: float = 0.15
+    update_interval_s: float = 0.3
     """... or, once this long has passed since the last update (counted in scans × the median
     scan period), after any motion beyond ``update_min_motion``; 0 disables this rule."""
     update_min_motion: float = 0.02
@@ -221,16 +221,17 @@ class LoopConfig:
 
     enabled: bool = True
     """Run the stage."""
-    stride: int = 3
+    stride: int = 5
     """Look for a loop closure at every k-th node (filter update)."""
     radius: float = 3.0
     """A candidate is the nearest earlier node within this distance (m) ..."""
     min_path: float = 10.0
     """... and at least this far back along the path (m)."""
-    submap_radius: float = 5.0
-    """The submap holds the earlier nodes within this distance of the candidate (m) ..."""
-    submap_nodes: int = 40
-    """... at most this many, the closest in time to the candidate."""
+    submap_path: float = 5.0
+    """A candidate's scan is matched against the nodes within this distance of ``j`` along the
+    path (m) ..."""
+    submap_stride: int = 2
+    """... every k-th of them."""
     search_xy: float = 0.6
     """Correlative search half-width in x and y (m)."""
     search_step: float = 0.1
@@ -247,10 +248,10 @@ class LoopConfig:
     """Accept a loop closure when at least this fraction of the scan's beams fit."""
     min_beams: int = 30
     """... and at least this many."""
-    sigma_xy: float = 0.05
-    """Standard deviation of a loop edge in x and y (m)."""
-    sigma_th: float = 0.02
-    """Standard deviation of a loop edge in heading (rad)."""
+    sigma_xy: float = 0.02
+    """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""
+    sigma_th: float = 0.005
+    """Floor of a loop edge's standard deviation in heading (rad)."""
     robust: float = 3.0
     """Cauchy kernel width of loop edges, in standard deviations (wrong closures lose weight)."""
     seq_sigma_xy: float = 0.01
@@ -258,9 +259,16 @@ class LoopConfig:
     seq_sigma_th: float = 0.005
     """... (rad) ..."""
     seq_sigma_rel: float = 0.02
-    """... plus this fraction of the edge's translation (and rotation)."""
+    """... plus this fraction of the edge's translation (and rotation): where the filter failed
+    to close a loop, its drift is of this order, and the chain must be able to absorb it."""
+    min_correction: float = 0.15
+    """Keep the filter's trajectory when the optimisation would move no node this far (m):
+    loop edges are only about as precise as the filter's own relative poses, so they are used to
+    repair gross inconsistencies (decimetres to metres), not to re-shape a closed map."""
     iterations: int = 10
-    """Gauss-Newton iterations."""
+    """Gauss-Newton iterations (at most; they stop when the poses stop moving)."""
+    solver_iterations: int = 300
+    """Conjugate-gradient iterations per Gauss-Newton step (at most)."""
     rounds: int = 2
     """Detection + optimisation rounds."""
 

@@ -9,13 +9,17 @@ deterministic, the way graph-based SLAM does, without changing what the filter d
    ``seq_sigma_xy + seq_sigma_rel · distance`` (and likewise in rotation).
 3. **Loop edges**: for every ``stride``-th node ``i``, the nearest earlier node ``j`` that is
    within ``radius`` in space but at least ``min_path`` back along the path is a candidate. Scan
-   ``i`` is registered against a submap built from the earlier nodes around ``j`` — first a
+   ``i`` is registered against the map of every node at least ``min_path / 2`` behind it — a
    brute-force correlative search (±``search_xy``, ±``search_th``: a basin far wider than the
-   filter's matcher), then Levenberg-Marquardt — and the match is accepted only if at least
-   ``min_fit`` of its beams land within ``fit_distance`` of the submap's surfaces. The accepted
-   pose of ``i`` relative to ``j`` becomes an edge with a Cauchy robust kernel.
+   filter's matcher) unless the scan already fits, then Levenberg-Marquardt — and the match is
+   accepted only if at least ``min_fit`` of its beams land within ``fit_distance`` of that
+   map's surfaces. The accepted pose of ``i`` relative to ``j`` becomes an edge with a Cauchy
+   robust kernel.
 4. **Optimisation**: Gauss-Newton on ``Σ ρ(eᵀΩe)`` (:mod:`slam.kernels.graph`), node 0 fixed;
    detection and optimisation run ``rounds`` times (a closed loop brings further ones in reach).
+5. **Do no harm**: loop edges are about as precise as the filter's own relative poses (a few
+   cm); if the optimisation moves no node by ``min_correction`` or more, the filter had already
+   closed its loops and its trajectory is kept as it is.
 """
 
 from __future__ import annotations
@@ -26,8 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, LoopConfig
-from slam.geometry import relative, wrap_angle
-from slam.kernels.field import match_one
+from slam.geometry import compose, relative, wrap_angle
+from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
 from slam.mapping import ParticleMaps, likelihood_tables
 
@@ -48,28 +52,28 @@ class LoopResult:
     """Largest change of a node's position (m)."""
 
 
-def _submap(seq, steps: NDArray[np.int64], poses: F64, members: NDArray[np.int64], config: Config):
+def _empty_map(center: F64, config: Config) -> ParticleMaps:
     rc = config.rbpf
-    center = poses[members, :2].mean(axis=0)
-    maps = ParticleMaps(
+    return ParticleMaps(
         1,
         rc.resolution or config.map.resolution,
         rc.dmax,
         tile=rc.tile,
         center=(float(center[0]), float(center[1])),
         size_m=20.0,
-        grow_margin_m=5.0,
-        capacity=256,
+        grow_margin_m=10.0,
+        capacity=1024,
     )
-    for m in members:
-        hx, hy = seq.hits(int(steps[m]), rc.insert_beams)
-        if hx.size == 0:
-            continue
-        reach = float(np.sqrt((hx * hx + hy * hy).max())) + rc.dmax + 1.0
-        p = poses[m]
-        maps.ensure_contains(p[0] - reach, p[1] - reach, p[0] + reach, p[1] + reach)
-        maps.insert(np.ascontiguousarray(p[None, :]), hx, hy, hx, hy, rc.skip_insert_below)
-    return maps
+
+
+def _insert_node(maps: ParticleMaps, seq, step: int, pose: F64, config: Config) -> None:
+    rc = config.rbpf
+    hx, hy = seq.hits(step, rc.insert_beams)
+    if hx.size == 0:
+        return
+    reach = float(np.sqrt((hx * hx + hy * hy).max())) + rc.dmax + 1.0
+    maps.ensure_contains(pose[0] - reach, pose[1] - reach, pose[0] + reach, pose[1] + reach)
+    maps.insert(np.ascontiguousarray(pose[None, :]), hx, hy, hx, hy, rc.skip_insert_below)
 
 
 def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
@@ -86,42 +90,80 @@ def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
 
 
 def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
-    """Loop edges ``(j, i, z)`` found by registering node ``i``'s scan against a submap at ``j``."""
+    """Loop edges ``(j, i, z)``: node ``i``'s scan registered against a submap around node ``j``.
+
+    The submap holds the nodes within ``submap_path`` of ``j`` along the path that are at least
+    ``min_path / 2`` behind ``i`` — a stretch of trajectory that is locally consistent, so a
+    drifted later visit of the same place does not blur it, and never ``i``'s own neighbours.
+    Consecutive candidates with the same submap share it. When the scan already fits where it
+    is, the brute-force search is skipped and only Levenberg-Marquardt runs.
+    """
     lc, rc = config.loops, config.rbpf
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     coarse, coarse_inv = likelihood_tables(
         np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
     )
-    edges = []
     candidates = _candidates(poses, path, lc)
+    edges = []
+    maps, window = None, (-1, -1)
     for j, i in candidates:
-        near = np.flatnonzero(
-            (path[i] - path >= lc.min_path / 2)
-            & (np.hypot(*(poses[:, :2] - poses[j, :2]).T) <= lc.submap_radius)
+        lo = int(np.searchsorted(path, path[j] - lc.submap_path))
+        hi = int(
+            np.searchsorted(path, min(path[j] + lc.submap_path, path[i] - lc.min_path / 2), "right")
         )
-        if near.size == 0:
-            continue
-        near = near[np.argsort(np.abs(near - j))][: lc.submap_nodes]
-        maps = _submap(seq, steps, poses, np.sort(near), config)
+        if (lo, hi) != window:
+            maps, window = _empty_map(poses[j], config), (lo, hi)
+            for k in range(lo, hi, lc.submap_stride):
+                _insert_node(maps, seq, int(steps[k]), poses[k], config)
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         if ex.size < lc.min_beams:
             continue
         args = (maps.plane, maps.tables[0], maps.shift, float(maps.origin[0]),
                 float(maps.origin[1]), 1.0 / maps.resolution)  # fmt: skip
-        thin = slice(None, None, max(1, ex.size // 60))
-        start = correlative_search(
-            *args, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
-            lc.search_xy, lc.search_step, lc.search_th, lc.search_th_step,
-        )  # fmt: skip
+        start = poses[i]
+        _, close = fit_counts(*args, start, ex, ey, lc.fit_distance)
+        if close < lc.min_fit * ex.size:
+            thin = slice(None, None, max(1, ex.size // 60))
+            start = correlative_search(
+                *args, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
+                lc.search_xy, lc.search_step, lc.search_th, lc.search_th_step,
+            )[:3].copy()  # fmt: skip
         refined, _, _ = match_one(
-            *args, start[:3].copy(), ex, ey, luts, step_inv, rc.max_iterations * 2,
-            rc.tolerance, 1,
-        )  # fmt: skip
+            *args, start, ex, ey, luts, step_inv, rc.max_iterations * 2, rc.tolerance, 1
+        )
+        shift = refined - poses[i]
+        if np.hypot(shift[0], shift[1]) > lc.search_xy or abs(wrap_angle(shift[2])) > lc.search_th:
+            continue  # slid out of the searched window (along a corridor): unverified
         _, close = fit_counts(*args, refined, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size or close < lc.min_beams:
             continue
-        edges.append((j, i, relative(poses[j], refined)))
+        hessian, gradient = np.zeros((3, 3)), np.zeros(3)
+        normal_equations(
+            *args, refined[0], refined[1], refined[2], ex, ey, luts[-1, 0], luts[-1, 1],
+            step_inv, hessian, gradient,
+        )  # fmt: skip
+        edges.append(
+            (j, i, relative(poses[j], refined), _edge_information(hessian, refined, lc, rc))
+        )
     return edges, len(candidates)
+
+
+def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:
+    """Information of a loop edge: the match's tempered Hessian, with a covariance floor.
+
+    The Hessian is that of the scan's negative log-likelihood with respect to the matched world
+    pose; divided by the filter's temperature (beams are not independent) it is the inverse
+    covariance of the match. A floor (``sigma_xy``, ``sigma_th``) keeps a long, clean scan from
+    claiming millimetres. The result is expressed in the matched pose's frame, where the edge
+    error lives, so a corridor's unobserved axis keeps its small information.
+    """
+    cov = np.linalg.inv(hessian / rc.temperature + np.eye(3) * 1e-6)
+    cov += np.diag([lc.sigma_xy**2, lc.sigma_xy**2, lc.sigma_th**2])
+    c, s = np.cos(matched[2]), np.sin(matched[2])
+    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world → matched frame
+    cov_edge = rot @ cov @ rot.T
+    info = np.linalg.inv(cov_edge)
+    return 0.5 * (info + info.T)
 
 
 def _information(sigma_xy: float, sigma_th: float) -> F64:
@@ -147,7 +189,7 @@ def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
                     for d, t in zip(dist, seq_z[:, 2], strict=True)
                 ]
             ).reshape(-1, 3, 3),
-            np.tile(_information(lc.sigma_xy, lc.sigma_th), (len(edges), 1, 1)),
+            np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3),
         ]
     )
     robust = np.concatenate([np.zeros(n - 1), np.full(len(edges), lc.robust)])
@@ -166,27 +208,77 @@ def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
     for _ in range(lc.iterations):
         linearize(x, edge_i, edge_j, z, info, robust, diag, band, far, grad)
         diag[0] += np.eye(3) * 1e9  # node 0 fixed
-        delta, _ = solve_system(diag, band, far, edge_i, edge_j, -grad, 500, 1e-10)
+        delta, _ = solve_system(diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, 1e-8)
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])
-        if np.abs(delta[:, :2]).max() < 1e-4 and np.abs(delta[:, 2]).max() < 1e-5:
+        if np.abs(delta[:, :2]).max() < 1e-3 and np.abs(delta[:, 2]).max() < 1e-4:
             break
     return x
 
 
+def blend_corrections(old: F64, keys: NDArray[np.int64], new_keys: F64) -> F64:
+    """Carry the keyframes' corrections to every pose between them.
+
+    A pose between keyframes ``a`` and ``b`` is placed from both (its motion relative to each,
+    composed onto their corrected poses) and the two are blended by its position between them
+    along the path, so the chain stays continuous.
+    """
+    n = old.shape[0]
+    out = np.empty_like(old)
+    step = np.concatenate([[0.0], np.hypot(*np.diff(old[:, :2], axis=0).T)])
+    path = np.cumsum(step)
+    for k in range(len(keys)):
+        a = int(keys[k])
+        b = int(keys[k + 1]) if k + 1 < len(keys) else n
+        idx = np.arange(a, b)
+        forward = compose(new_keys[k], relative(old[a], old[idx]))
+        if b == n:
+            out[idx] = forward
+            continue
+        backward = compose(new_keys[k + 1], relative(old[b], old[idx]))
+        span = path[b] - path[a]
+        f = ((path[idx] - path[a]) / span if span > 0 else (idx - a) / (b - a))[:, None]
+        blend = forward + f * (backward - forward)
+        blend[:, 2] = forward[:, 2] + f[:, 0] * wrap_angle(backward[:, 2] - forward[:, 2])
+        out[idx] = blend
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
 def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
-    """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise."""
+    """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise.
+
+    The graph's nodes are keyframes — every ``stride``-th node, where loop closures are looked
+    for, plus the last; the nodes in between follow their keyframes' corrections.
+    """
     lc = config.loops
     step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
     path = np.concatenate([[0.0], np.cumsum(step_len)])
+    keys = np.arange(0, poses.shape[0], lc.stride)
+    if keys[-1] != poses.shape[0] - 1:
+        keys = np.append(keys, poses.shape[0] - 1)
+    key_of = np.searchsorted(keys, np.arange(poses.shape[0]))  # the keyframe at or after a node
     x = poses.copy()
     examined = 0
     edges: list = []
     for _ in range(lc.rounds):
-        edges, count = _detect(seq, steps, x, path, config)
+        found, count = _detect(seq, steps, x, path, config)
         examined += count
-        if not edges:
+        if not found:
             break
-        x = optimize(poses, edges, lc)
+        # each loop edge joins two keyframes: i is one; j moves to its nearest keyframe
+        edges = []
+        for j, i, z, info in found:
+            kj = int(key_of[j])
+            if kj > 0 and abs(int(keys[kj - 1]) - j) < abs(int(keys[kj]) - j):
+                kj -= 1
+            ki = int(np.searchsorted(keys, i))
+            matched_i = compose(x[j], z)  # node i's pose found by the loop match
+            edges.append((kj, ki, relative(x[keys[kj]], matched_i), info))
+        new_keys = optimize(poses[keys], edges, lc)
+        x = blend_corrections(poses, keys, new_keys)
     moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
+    if moved < lc.min_correction:
+        # the filter's trajectory already agrees with its loop closures within their noise
+        return LoopResult(poses.copy(), examined, len(edges), 0.0)
     return LoopResult(x, examined, len(edges), moved)

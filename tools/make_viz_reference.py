@@ -12,7 +12,7 @@ intended change of the recording layout run
 
     uv run python tools/make_viz_reference.py
 
-and commit the new file (about 50 KB).
+and commit the new file (about 140 KB).
 """
 
 from __future__ import annotations

@@ -153,6 +153,7 @@ def normal_equations(
     step_inv: float,
     h: np.ndarray,
     g: np.ndarray,
+    stride: int = 1,
 ) -> tuple[float, int]:
     """One pass over the beams at pose ``(x, y, th)``: cost, Gauss-Newton system, inliers.
 
@@ -162,7 +163,8 @@ def normal_equations(
     approximation of its Hessian and its gradient, each beam weighted by its responsibility
     ``γ/σ²`` with ``γ = z_hit·φ / (z_hit·φ + z_rand)``. Both functions of ``|d|`` come from tables
     (``cost_row``, ``weight_row``; see :func:`slam.mapping.likelihood_tables`), which avoids an
-    ``exp`` and a ``log`` per beam. Returns the cost and the number of beams on known cells.
+    ``exp`` and a ``log`` per beam. Only every ``stride``-th beam is used. Returns the cost and
+    the number of beams on known cells.
     """
     c = np.cos(th)
     s = np.sin(th)
@@ -172,7 +174,7 @@ def normal_equations(
     # accumulate in scalars (kept in registers), write the arrays once at the end
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     g0 = g1 = g2 = 0.0
-    for b in range(ex.shape[0]):
+    for b in range(0, ex.shape[0], stride):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
         d, gx, gy = plane_distance_at(plane, table, shift, ox, oy, inv_res, x + rx, y + ry)
@@ -246,12 +248,15 @@ def match_one(
     step_inv: float,
     max_iter: int,
     tolerance: float,
+    coarse_stride: int,
 ) -> tuple[np.ndarray, float, int]:
     """Refine ``pose`` so the endpoints ``(ex, ey)`` (robot frame) fit the field.
 
     Levenberg-Marquardt on the negative log-likelihood (see :func:`normal_equations`), level by
     level through the likelihood tables ``luts[level]`` (wide sigma to narrow) so the first levels
-    pull in from further away. Each iteration costs one pass over the beams: a step that does not
+    pull in from further away; the wide levels, which only need to bring the pose into the narrow
+    basin, use every ``coarse_stride``-th beam. Each iteration costs one pass over the beams: a
+    step that does not
     lower the cost is undone and the damping raised; a level ends when a step moves less than
     ``tolerance`` (m or rad). Returns the refined pose, its cost at the last level and its inliers.
     """
@@ -263,27 +268,15 @@ def match_one(
     hd = np.zeros((3, 3))
     cost = 0.0
     inliers = 0
+    last = luts.shape[0] - 1
     for level in range(luts.shape[0]):
         cost_row = luts[level, 0]
         weight_row = luts[level, 1]
+        stride = 1 if level == last else coarse_stride
         cost, inliers = normal_equations(
-            plane,
-            table,
-            shift,
-            ox,
-            oy,
-            inv_res,
-            x,
-            y,
-            th,
-            ex,
-            ey,
-            cost_row,
-            weight_row,
-            step_inv,
-            h,
-            g,
-        )
+            plane, table, shift, ox, oy, inv_res, x, y, th, ex, ey, cost_row, weight_row, step_inv,
+            h, g, stride,
+        )  # fmt: skip
         lam = 1e-3
         for _ in range(max_iter):
             hd[:, :] = h
@@ -295,7 +288,7 @@ def match_one(
             nth = th - step[2]
             new_cost, new_inliers = normal_equations(
                 plane, table, shift, ox, oy, inv_res, nx, ny, nth, ex, ey, cost_row, weight_row,
-                step_inv, hc, gc,
+                step_inv, hc, gc, stride,
             )  # fmt: skip
             if new_cost < cost:
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
@@ -334,6 +327,7 @@ def match_particles(
     step_inv: float,
     max_iter: int,
     tolerance: float,
+    coarse_stride: int,
     min_inliers: float,
     out_poses: np.ndarray,
     out_loglik: np.ndarray,
@@ -367,6 +361,7 @@ def match_particles(
             step_inv,
             max_iter,
             tolerance,
+            coarse_stride,
         )
         frac = inliers / nbeams
         if frac < min_inliers:
@@ -593,6 +588,7 @@ def match_scans(
     step_inv: float,
     max_iter: int,
     tolerance: float,
+    coarse_stride: int,
     min_inliers: float,
     out_poses: np.ndarray,
 ) -> None:
@@ -608,7 +604,7 @@ def match_scans(
             continue
         refined, _, inliers = match_one(
             plane, table, shift, ox, oy, inv_res, poses[k], ex[k, :n], ey[k, :n], luts, step_inv,
-            max_iter, tolerance,
+            max_iter, tolerance, coarse_stride,
         )  # fmt: skip
         if inliers < min_inliers * n:
             out_poses[k] = poses[k]
