@@ -88,6 +88,41 @@ def interpolate_poses(times: ArrayLike, poses: ArrayLike, query: ArrayLike) -> A
     return out
 
 
+def spread_corrections(
+    old: ArrayLike, anchors: ArrayLike, new_anchors: ArrayLike, progress: ArrayLike
+) -> Array:
+    """Move a chain of poses so that its ``anchors`` land on ``new_anchors``, smoothly.
+
+    ``old`` is the ``(N, 3)`` chain, ``anchors`` the increasing indices whose corrected poses are
+    ``new_anchors`` (``anchors[0]`` must be 0). A pose between anchors ``a`` and ``b`` is placed
+    from both (its motion relative to each, composed onto their corrected poses) and the two are
+    blended by ``progress`` (a non-decreasing measure of motion along the chain), so the
+    correction is spread over the stretch instead of appearing as a jump. Poses after the last
+    anchor follow it rigidly.
+    """
+    old = np.asarray(old, dtype=np.float64)
+    anchors = np.asarray(anchors, dtype=np.int64)
+    new_anchors = np.asarray(new_anchors, dtype=np.float64)
+    progress = np.asarray(progress, dtype=np.float64)
+    n = old.shape[0]
+    out = np.empty_like(old)
+    for k, a in enumerate(anchors):
+        b = int(anchors[k + 1]) if k + 1 < len(anchors) else n
+        idx = np.arange(a, b)
+        forward = compose(new_anchors[k], relative(old[a], old[idx]))
+        if b == n:
+            out[idx] = forward
+            continue
+        backward = compose(new_anchors[k + 1], relative(old[b], old[idx]))
+        span = progress[b] - progress[a]
+        f = ((progress[idx] - progress[a]) / span if span > 0 else (idx - a) / (b - a))[:, None]
+        blend = forward + f * (backward - forward)
+        blend[:, 2] = forward[:, 2] + f[:, 0] * wrap_angle(backward[:, 2] - forward[:, 2])
+        out[idx] = blend
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
 def yaw_to_quaternion(theta: ArrayLike) -> Array:
     """Quaternions ``(qx, qy, qz, qw)`` of planar rotations by ``theta`` about z."""
     theta = np.asarray(theta, dtype=np.float64)

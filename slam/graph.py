@@ -9,12 +9,13 @@ deterministic, the way graph-based SLAM does, without changing what the filter d
    ``seq_sigma_xy + seq_sigma_rel · distance`` (and likewise in rotation).
 3. **Loop edges**: for every ``stride``-th node ``i``, the nearest earlier node ``j`` that is
    within ``radius`` in space but at least ``min_path`` back along the path is a candidate. Scan
-   ``i`` is registered against the map of every node at least ``min_path / 2`` behind it — a
-   brute-force correlative search (±``search_xy``, ±``search_th``: a basin far wider than the
-   filter's matcher) unless the scan already fits, then Levenberg-Marquardt — and the match is
-   accepted only if at least ``min_fit`` of its beams land within ``fit_distance`` of that
-   map's surfaces. The accepted pose of ``i`` relative to ``j`` becomes an edge with a Cauchy
-   robust kernel.
+   ``i`` is registered against a submap of the nodes within ``submap_path`` of ``j`` along the
+   path (a locally consistent stretch; a drifted later visit would blur a map of the whole past)
+   — a brute-force correlative search (±``search_xy``, ±``search_th``: a basin far wider than
+   the filter's matcher) unless the scan already fits, then Levenberg-Marquardt — and the match
+   is accepted only if it stayed inside the searched window and at least ``min_fit`` of its
+   beams land within ``fit_distance`` of the submap's surfaces. The accepted pose of ``i``
+   relative to ``j`` becomes an edge with a Cauchy robust kernel.
 4. **Optimisation**: Gauss-Newton on ``Σ ρ(eᵀΩe)`` (:mod:`slam.kernels.graph`), node 0 fixed;
    detection and optimisation run ``rounds`` times (a closed loop brings further ones in reach).
 5. **Do no harm**: loop edges are about as precise as the filter's own relative poses (a few
@@ -30,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, LoopConfig
-from slam.geometry import compose, relative, wrap_angle
+from slam.geometry import compose, relative, spread_corrections, wrap_angle
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
 from slam.mapping import ParticleMaps, likelihood_tables
@@ -216,35 +217,6 @@ def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
     return x
 
 
-def blend_corrections(old: F64, keys: NDArray[np.int64], new_keys: F64) -> F64:
-    """Carry the keyframes' corrections to every pose between them.
-
-    A pose between keyframes ``a`` and ``b`` is placed from both (its motion relative to each,
-    composed onto their corrected poses) and the two are blended by its position between them
-    along the path, so the chain stays continuous.
-    """
-    n = old.shape[0]
-    out = np.empty_like(old)
-    step = np.concatenate([[0.0], np.hypot(*np.diff(old[:, :2], axis=0).T)])
-    path = np.cumsum(step)
-    for k in range(len(keys)):
-        a = int(keys[k])
-        b = int(keys[k + 1]) if k + 1 < len(keys) else n
-        idx = np.arange(a, b)
-        forward = compose(new_keys[k], relative(old[a], old[idx]))
-        if b == n:
-            out[idx] = forward
-            continue
-        backward = compose(new_keys[k + 1], relative(old[b], old[idx]))
-        span = path[b] - path[a]
-        f = ((path[idx] - path[a]) / span if span > 0 else (idx - a) / (b - a))[:, None]
-        blend = forward + f * (backward - forward)
-        blend[:, 2] = forward[:, 2] + f[:, 0] * wrap_angle(backward[:, 2] - forward[:, 2])
-        out[idx] = blend
-    out[:, 2] = wrap_angle(out[:, 2])
-    return out
-
-
 def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
     """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise.
 
@@ -276,7 +248,7 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
             matched_i = compose(x[j], z)  # node i's pose found by the loop match
             edges.append((kj, ki, relative(x[keys[kj]], matched_i), info))
         new_keys = optimize(poses[keys], edges, lc)
-        x = blend_corrections(poses, keys, new_keys)
+        x = spread_corrections(poses, keys, new_keys, path)
     moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
     if moved < lc.min_correction:
         # the filter's trajectory already agrees with its loop closures within their noise

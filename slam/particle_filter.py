@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, RbpfConfig
 from slam.errors import DataError
-from slam.geometry import compose, relative, wrap_angle
+from slam.geometry import compose, relative, spread_corrections, wrap_angle
 from slam.io.log import Log
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
@@ -544,29 +544,11 @@ def _interpolate_between_updates(
     blended by the fraction of odometry motion covered, so the correction found at ``b`` is
     spread over the stretch instead of appearing as a jump.
     """
-    n = len(seq)
     odo = seq.odometry
-    out = np.empty((n, 3))
-    step = np.zeros(n)
+    step = np.zeros(len(seq))
     delta = relative(odo[:-1], odo[1:])
     step[1:] = np.hypot(delta[:, 0], delta[:, 1]) + 0.2 * np.abs(delta[:, 2])
-    progress = np.cumsum(step)
-    for j, a in enumerate(update_steps):
-        b = update_steps[j + 1] if j + 1 < len(update_steps) else n
-        ks = np.arange(a, b)
-        forward = compose(update_poses[j], relative(odo[a], odo[ks]))
-        if b == n:
-            out[ks] = forward
-            continue
-        backward = compose(update_poses[j + 1], relative(odo[b], odo[ks]))
-        span = progress[b] - progress[a]
-        frac = (progress[ks] - progress[a]) / span if span > 0 else (ks - a) / (b - a)
-        frac = frac[:, None]
-        blend = forward + frac * (backward - forward)
-        blend[:, 2] = forward[:, 2] + frac[:, 0] * wrap_angle(backward[:, 2] - forward[:, 2])
-        out[ks] = blend
-    out[:, 2] = wrap_angle(out[:, 2])
-    return out
+    return spread_corrections(odo, update_steps, update_poses, np.cumsum(step))
 
 
 def run_rbpf(seq: ScanSequence, config: Config, observer: Observer | None = None) -> SlamResult:

@@ -81,3 +81,21 @@ def test_interpolate_poses_across_wrap():
 def test_quaternion_round_trip():
     th = np.linspace(-3.1, 3.1, 13)
     np.testing.assert_allclose(quaternion_to_yaw(yaw_to_quaternion(th)), th, atol=1e-12)
+
+
+def test_spread_corrections_moves_anchors_and_spreads_the_rest():
+    from slam.geometry import spread_corrections
+
+    old = accumulate(np.tile([0.1, 0.0, 0.0], (10, 1)))  # 11 poses along x, 0.1 m apart
+    progress = np.arange(11) * 0.1
+    same = spread_corrections(old, [0, 10], old[[0, 10]], progress)
+    np.testing.assert_allclose(same, old, atol=1e-12)
+    moved = old[[0, 10]].copy()
+    moved[1, 1] += 0.5  # the last anchor is corrected 0.5 m sideways
+    out = spread_corrections(old, [0, 10], moved, progress)
+    np.testing.assert_allclose(out[10], moved[1], atol=1e-12)
+    np.testing.assert_allclose(out[:, 1], np.linspace(0.0, 0.5, 11), atol=1e-12)  # linear spread
+    np.testing.assert_allclose(out[:, 0], old[:, 0], atol=1e-12)
+    # after the last anchor the chain follows it rigidly
+    tail = spread_corrections(old, [0, 5], np.vstack([old[0], old[5] + [0, 0.2, 0]]), progress)
+    np.testing.assert_allclose(tail[5:, 1], 0.2, atol=1e-12)
