@@ -13,7 +13,8 @@ wall cannot happen), and races run 1 on a step-optimal plan over known-open side
   optimistic optimum O (unknown sides open). Only unknown sides on an optimistic path shorter
   than P are worth looking at; the robot goes to the pose whose sensors reveal the most valuable
   one, where value = run-1 steps it could save × 30 × ``payoff`` − steps to get there, and
-  resets when no pose has positive value (or P = O): exploration that cannot pay stops.
+  resets when no pose has positive value (or P = O): exploration that cannot pay stops. After
+  the goal, sides the contest rules close (:func:`contest_walls`) do not count as possibly open.
 """
 
 from __future__ import annotations
@@ -194,6 +195,53 @@ class ExplorerRobot:
         return True
 
 
+def contest_walls(
+    known_open: NDArray[np.uint8],
+    unknown: NDArray[np.uint8],
+    goal: NDArray[np.bool_],
+    goal_rim: NDArray[np.uint8],
+    posts: bool = True,
+) -> tuple[NDArray[np.uint8], bool]:
+    """Unknown sides that the contest rules still allow to be open, and whether posts obey.
+
+    Two rules of micromouse contests (most classic mazes are contest mazes):
+
+    * *every post touches at least one wall* (the post in the middle of the goal excepted): at an
+      inner post whose other three wall lines are known open, the fourth, unknown, is a wall;
+    * *the goal has one entrance*: once a side between a goal cell and a non-goal cell
+      (``goal_rim``, bit masks like ``unknown``) is known open, the unknown ones are walls.
+
+    The second value is ``False`` when a post with four known-open lines is in sight: this maze
+    breaks the post rule, and no wall is inferred from posts (nor with ``posts=False``).
+    """
+    out = unknown
+    if (known_open & goal_rim).any():
+        out = out & ~goal_rim
+    if not posts:
+        return out, True
+    ko = known_open.astype(np.int16)
+    un = out.astype(np.int16)
+    # the four lines at inner post (i, j), arrays indexed [i - 1, j - 1]: west side of
+    # (i, j - 1), west side of (i, j), south side of (i - 1, j), south side of (i, j)
+    lines = ((1, 0, 3), (1, 1, 3), (0, 1, 2), (1, 1, 2))
+    w, h = known_open.shape
+    opens = [ko[sx : w - 1 + sx, sy : h - 1 + sy] >> b & 1 for sx, sy, b in lines]
+    unks = [un[sx : w - 1 + sx, sy : h - 1 + sy] >> b & 1 for sx, sy, b in lines]
+    centre = goal[:-1, :-1] & goal[1:, :-1] & goal[:-1, 1:] & goal[1:, 1:]
+    n_open = sum(opens)
+    if ((n_open == 4) & ~centre).any():
+        return out, False
+    hit = (n_open == 3) & (sum(unks) == 1) & ~centre
+    if hit.any():
+        out = out.copy()
+        for (sx, sy, d), u in zip(lines, unks, strict=True):
+            for i, j in np.argwhere(hit & (u == 1)):
+                x, y = int(i) + sx, int(j) + sy
+                out[x, y] &= np.uint8(~(1 << d) & 15)
+                out[x + DX[d], y + DY[d]] &= np.uint8(~(1 << ((d + 2) % 4)) & 15)
+    return out, True
+
+
 def _actions(stride: int) -> list[tuple[int, int]]:
     """Candidate actions: moves of 1..stride cells forwards/backwards after each turn, and turns."""
     out = []
@@ -260,7 +308,7 @@ class FloodFillRobot(ExplorerRobot):
 
 @dataclass(frozen=True)
 class BoundedConfig:
-    """Tunables of the ``bounded`` explorer (defaults tuned on the 521 classic mazes)."""
+    """Tunables of the ``bounded`` explorer (``payoff``, ``p_open`` tuned on the 521 classic mazes)."""
 
     exploration_weight: float = EXPLORATION_WEIGHT
     """Score of one run-0 step in run-1 steps (the tester's 1/30)."""
@@ -270,6 +318,8 @@ class BoundedConfig:
     """Chance that an uncertain move on a shortcut (other than the one looked at) is open."""
     stride: int = MAX_MOVE
     """Most cells moved in one exploration step (fewer cells see more side walls)."""
+    contest_rules: bool = True
+    """After the goal, take sides the contest rules close (:func:`contest_walls`) as walls."""
 
     def __post_init__(self) -> None:
         if not 0 < self.exploration_weight <= 1:
@@ -293,7 +343,8 @@ class BoundedRobot(ExplorerRobot):
     (:func:`~slam.maze.kernels.edge_gain`), every reachable pose the best saving among the sides
     its sensors would reveal; a pose is worth visiting when saving × payoff / weight ≥ its
     distance in steps, and the robot heads for the worthwhile pose with the most saving per
-    step. No worthwhile pose left: reset.
+    step. No worthwhile pose left: reset. After the goal, unknown sides that the contest rules
+    close (:func:`contest_walls`) are left out of O and of the savings.
     """
 
     name = "bounded"
@@ -302,28 +353,37 @@ class BoundedRobot(ExplorerRobot):
         super().__init__(info)
         self.config = config or BoundedConfig()
         self.candidates = _actions(self.config.stride)
+        self.posts_rule = bool(self.config.contest_rules)  # until a post without walls is seen
+        w, h = info.width, info.height
+        self.goal_rim = np.zeros((w, h), dtype=np.uint8)
+        for x, y in info.goal:
+            for d in range(4):
+                nx, ny = x + DX[d], y + DY[d]
+                if 0 <= nx < w and 0 <= ny < h and not self.goal_mask[nx, ny]:
+                    self.goal_rim[x, y] |= np.uint8(1 << d)
+                    self.goal_rim[nx, ny] |= np.uint8(1 << ((d + 2) % 4))
 
     def explore(self) -> Action:
         """Head for the goal; once there, weigh each possible look against its detour."""
         kn = self.knowledge
         cfg = self.config
-        optimistic = kn.optimistic()
-        to_goal = step_distances(optimistic, self.goal_mask)
         if not self.hit_goal:
+            optimistic = kn.optimistic()
+            to_goal = step_distances(optimistic, self.goal_mask)
             through = step_distances(optimistic, self.start_mask) + to_goal
             # progress is counted in the robot's own steps, so a shorter stride still advances
             return self._towards(step_distances(optimistic, self.goal_mask, cfg.stride), through)
+        unknown = self._possible()
+        to_goal = step_distances(kn.known_open | unknown, self.goal_mask)
         best_known = self.known_best()
         optimum = int(to_goal[self.info.start])
         if best_known <= optimum or self.out_of_budget(best_known):
             return RESET
-        from_start, unk_start = bfs_cells_unknown(
-            kn.known_open, kn.unknown, self.start_mask, MAX_MOVE
-        )
-        _, unk_goal = bfs_cells_unknown(kn.known_open, kn.unknown, self.goal_mask, MAX_MOVE)
+        from_start, unk_start = bfs_cells_unknown(kn.known_open, unknown, self.start_mask, MAX_MOVE)
+        _, unk_goal = bfs_cells_unknown(kn.known_open, unknown, self.goal_mask, MAX_MOVE)
         gain = edge_gain(
             kn.known_open,
-            kn.unknown,
+            unknown,
             from_start,
             unk_start,
             to_goal,
@@ -332,7 +392,7 @@ class BoundedRobot(ExplorerRobot):
             MAX_MOVE,
             cfg.p_open,
         )
-        look = observation_gain(kn.known_open, kn.unknown, gain)
+        look = observation_gain(kn.known_open, unknown, gain)
         dist, parent, action, _ = pose_search(kn.known_open, self.pose, max_move=cfg.stride)
         worth = (dist > 0) & (look > 0) & (look * (cfg.payoff / cfg.exploration_weight) >= dist)
         if not worth.any():
@@ -341,6 +401,21 @@ class BoundedRobot(ExplorerRobot):
         ties = np.argwhere(rate == rate.max())
         target = min((int(dist[tuple(t)]), tuple(int(v) for v in t)) for t in ties)[1]
         return path_to(parent, action, target, self.info.height, cfg.stride).actions[0]
+
+    def _possible(self) -> NDArray[np.uint8]:
+        """Unknown sides that may still be open: all, or those the contest rules leave open.
+
+        The post rule is dropped for good once the robot sees a post without walls.
+        """
+        kn = self.knowledge
+        if not self.config.contest_rules:
+            return kn.unknown
+        args = (kn.known_open, kn.unknown, self.goal_mask, self.goal_rim)
+        possible, posts_ok = contest_walls(*args, posts=self.posts_rule)
+        if not posts_ok:
+            self.posts_rule = False
+            possible, _ = contest_walls(*args, posts=False)
+        return possible
 
     def _towards(self, to_goal: NDArray[np.int32], through: NDArray[np.int32]) -> Action:
         """Safe move that lowers ``to_goal``; ties: smaller ``through``, then more to see.
