@@ -272,6 +272,24 @@ class LoopConfig:
     rounds: int = 2
     """Detection + optimisation rounds."""
 
+    def __post_init__(self) -> None:
+        for name in ("stride", "submap_stride", "iterations", "solver_iterations", "rounds"):
+            if getattr(self, name) < 1:
+                raise ConfigError(
+                    f"loops.{name}: expected an integer ≥ 1, found {getattr(self, name)}"
+                )
+        for name in ("radius", "search_xy", "search_step", "search_th", "search_th_step",
+                     "search_sigma", "fit_distance", "sigma_xy", "sigma_th", "seq_sigma_xy",
+                     "seq_sigma_th"):  # fmt: skip
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"loops.{name}: expected > 0, found {getattr(self, name)}")
+        for name in ("min_path", "submap_path", "min_beams", "robust", "seq_sigma_rel",
+                     "min_correction"):  # fmt: skip
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"loops.{name}: expected ≥ 0, found {getattr(self, name)}")
+        if not 0.0 <= self.min_fit <= 1.0:
+            raise ConfigError(f"loops.min_fit: expected a fraction in [0, 1], found {self.min_fit}")
+
 
 @dataclass(frozen=True)
 class ClassicConfig:

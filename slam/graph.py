@@ -119,8 +119,7 @@ def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         if ex.size < lc.min_beams:
             continue
-        args = (maps.plane, maps.tables[0], maps.shift, float(maps.origin[0]),
-                float(maps.origin[1]), 1.0 / maps.resolution)  # fmt: skip
+        args = maps.field(0)
         start = poses[i]
         _, close = fit_counts(*args, start, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size:
@@ -167,29 +166,26 @@ def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:
     return 0.5 * (info + info.T)
 
 
-def _information(sigma_xy: float, sigma_th: float) -> F64:
-    return np.diag([1.0 / sigma_xy**2, 1.0 / sigma_xy**2, 1.0 / sigma_th**2])
+def _chain_information(seq_z: F64, lc: LoopConfig) -> F64:
+    """``(E, 3, 3)`` diagonal information of the sequential edges ``seq_z``."""
+    sigma_xy = lc.seq_sigma_xy + lc.seq_sigma_rel * np.hypot(seq_z[:, 0], seq_z[:, 1])
+    sigma_th = lc.seq_sigma_th + lc.seq_sigma_rel * np.abs(seq_z[:, 2])
+    info = np.zeros((seq_z.shape[0], 3, 3))
+    info[:, 0, 0] = info[:, 1, 1] = 1.0 / sigma_xy**2
+    info[:, 2, 2] = 1.0 / sigma_th**2
+    return info
 
 
 def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
     """Gauss-Newton on the chain of ``poses`` plus loop ``edges``; node 0 stays fixed."""
     n = poses.shape[0]
     seq_z = relative(poses[:-1], poses[1:])
-    dist = np.hypot(seq_z[:, 0], seq_z[:, 1])
     ei = [np.arange(n - 1)]
     ej = [np.arange(1, n)]
     meas = [seq_z]
     info = np.concatenate(
         [
-            np.stack(
-                [
-                    _information(
-                        lc.seq_sigma_xy + lc.seq_sigma_rel * d,
-                        lc.seq_sigma_th + lc.seq_sigma_rel * abs(t),
-                    )
-                    for d, t in zip(dist, seq_z[:, 2], strict=True)
-                ]
-            ).reshape(-1, 3, 3),
+            _chain_information(seq_z, lc),
             np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3),
         ]
     )

@@ -336,6 +336,15 @@ class ParticleMaps:
         self.tables = np.ascontiguousarray(self.tables[indices])
         self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
 
+    def field(self, particle: int | None = None) -> tuple:
+        """The map as the field kernels take it: ``(plane, tables, shift, ox, oy, 1/resolution)``.
+
+        ``tables`` holds every particle's tile tables, or only ``particle``'s when given.
+        """
+        tables = self.tables if particle is None else self.tables[particle]
+        return (self.plane, tables, self.shift, float(self.origin[0]), float(self.origin[1]),
+                1.0 / self.resolution)  # fmt: skip
+
     def match(
         self,
         poses: F64,
@@ -354,12 +363,7 @@ class ParticleMaps:
         n = poses.shape[0]
         out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
         match_particles(
-            self.plane,
-            self.tables,
-            self.shift,
-            float(self.origin[0]),
-            float(self.origin[1]),
-            1.0 / self.resolution,
+            *self.field(),
             np.ascontiguousarray(poses),
             ex,
             ey,
@@ -395,12 +399,7 @@ class ParticleMaps:
         """
         out = np.empty_like(poses)
         match_scans(
-            self.plane,
-            self.tables[particle],
-            self.shift,
-            float(self.origin[0]),
-            float(self.origin[1]),
-            1.0 / self.resolution,
+            *self.field(particle),
             np.ascontiguousarray(poses),
             ex,
             ey,

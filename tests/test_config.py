@@ -28,6 +28,10 @@ def test_overrides_parse_toml_literals():
         ("filter.nosuch=1", "unknown key filter.nosuch"),
         ("filter.method=magic", "filter.method: expected one of"),
         ("particles", "expected section.key=value"),
+        ("loops.stride=0", "loops.stride: expected an integer ≥ 1, found 0"),
+        ("loops.search_xy=0", "loops.search_xy: expected > 0, found 0"),
+        ("loops.min_correction=-0.1", "loops.min_correction: expected ≥ 0, found -0.1"),
+        ("loops.min_fit=1.5", "loops.min_fit: expected a fraction in [0, 1], found 1.5"),
     ],
 )
 def test_bad_overrides_name_the_key(override, message):
