@@ -136,6 +136,8 @@ class FilterConfig:
             raise ConfigError(f"filter.every: expected at least 1, found {self.every}")
         if self.max_scans < 0:
             raise ConfigError(f"filter.max_scans: expected 0 or more, found {self.max_scans}")
+        if self.seed < 0:
+            raise ConfigError(f"filter.seed: expected 0 or more, found {self.seed}")
         if not 0.0 <= self.resample_threshold <= 1.0:
             raise ConfigError(
                 f"filter.resample_threshold: expected 0..1, found {self.resample_threshold}"

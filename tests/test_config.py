@@ -28,6 +28,7 @@ def test_overrides_parse_toml_literals():
         ("filter.nosuch=1", "unknown key filter.nosuch"),
         ("filter.method=magic", "filter.method: expected one of"),
         ("particles", "expected section.key=value"),
+        ("filter.seed=-1", "filter.seed: expected 0 or more, found -1"),
         ("loops.stride=0", "loops.stride: expected an integer ≥ 1, found 0"),
         ("loops.search_xy=0", "loops.search_xy: expected > 0, found 0"),
         ("loops.min_correction=-0.1", "loops.min_correction: expected ≥ 0, found -0.1"),

@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--particles", type=int, help="number of particles")
     parser.add_argument("--seed", type=int, help="random seed")
     parser.add_argument("--every", type=int, help="process every k-th scan")
-    parser.add_argument("--max-scans", type=int, help="stop after this many scans")
+    parser.add_argument("--max-scans", type=int, help="stop after this many scans (0: all)")
     parser.add_argument(
         "--no-texture", action="store_true", help="skip the floor texture (RGB-D) stage"
     )
