@@ -81,7 +81,10 @@ def test_run_history_and_callback_for_a_recorder(tmp_path):
             ("[sensor]", "[prior]\nvalues = [[1, 0, 0], [0, 1, 0]]\n[sensor]"),
             r"obstacle cells must have prior probability 0",
         ),
-        (('map = ["GRG", "G#R"]', 'map = ["GRG", "G#"]'), r"s.toml: world.map: .*equal length"),
+        (
+            ('map = ["GRG", "G#R"]', 'map = ["GRG", "G#"]'),
+            r"s.toml: world.map\[1\]: .*equal length",
+        ),
         (
             ('map = ["GRG", "G#R"]', 'map = ["GR.", "G#R"]'),
             r"s.toml: \[sensor\] colour sensor: every open cell needs a colour; cell \(0, 2\)",

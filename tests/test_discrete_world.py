@@ -33,8 +33,12 @@ def test_rows_parse_obstacles_colours_and_legend():
 @pytest.mark.parametrize(
     "rows, message",
     [
-        (["..", "..."], "rows of equal length"),
-        ([], "rows of equal length"),
+        (
+            ["..", "..."],
+            r"^world\.map\[1\]: expected non-empty rows of equal length, found lengths \[2, 3\]",
+        ),
+        ([], r"^world\.map: expected non-empty rows of equal length"),
+        ([""], r"^world\.map\[0\]: expected non-empty rows"),
         (["##", "##"], "every cell is an obstacle"),
     ],
 )

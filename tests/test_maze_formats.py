@@ -73,7 +73,8 @@ def test_ascii_reader_on_the_readme_example():
     [
         ("3\n1,1,1\n1,1,1\n1,1,1\n", "even number"),
         ("x\n", "side length"),
-        ("2\n1,6\n", "expected 2 lines"),
+        ("2\n1,6\n", "m.txt:2: expected 2 lines of masks after the size, found 1"),
+        ("2\n1,6\n1,12\n3,4\n", "m.txt:4: expected 2 lines of masks after the size, found 3"),
         ("2\n1,6,0\n1,12\n", "expected 2 comma-separated"),
         ("2\n1,16\n1,12\n", "0..15, found 16"),
         ("2\n1,a\n1,12\n", "found 'a'"),
@@ -120,6 +121,23 @@ def test_format_detection_and_unknown_format():
     assert detect_format("\n" + README_EXAMPLE) == "ascii"
     with pytest.raises(DataError, match="unknown maze format"):
         parse_maze("hello\n", source="h.txt")
+    with pytest.raises(DataError, match=r"^h\.txt:2: unknown maze format: .* found 'hello'$"):
+        parse_maze("\nhello\n", source="h.txt")
+    with pytest.raises(DataError, match=r"^h\.txt: unknown maze format: the file is empty"):
+        parse_maze("\n \n", source="h.txt")
+
+
+def test_read_maze_names_the_line_of_a_non_ascii_byte(tmp_path):
+    path = tmp_path / "bad.txt"
+    path.write_bytes(b"o---o\n| \xc3 |\no---o\n")
+    with pytest.raises(DataError, match=r"bad\.txt:2:3: expected ASCII text, found byte 0xc3$"):
+        read_maze(path)
+
+
+def test_read_maze_accepts_crlf_line_ends(tmp_path):
+    path = tmp_path / "crlf.txt"
+    path.write_bytes(UDACITY_2X2.replace("\n", "\r\n").encode("ascii"))
+    assert read_maze(path).same_walls(parse_udacity(UDACITY_2X2))
 
 
 def test_round_trip_between_formats_on_hand_made_maze():

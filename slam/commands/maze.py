@@ -206,11 +206,12 @@ def show_maze(args: argparse.Namespace) -> int:
 
 def convert_maze(args: argparse.Namespace) -> int:
     """Read a maze in one format and write it in the other."""
-    from slam.maze.formats import detect_format, locate_maze, read_maze, write_maze
+    from slam.maze.formats import detect_format, locate_maze, parse_maze, read_maze_text, write_maze
 
     path = locate_maze(args.maze, data_dir_from(args))
-    maze = read_maze(path)
-    source_format = detect_format(path.read_text(encoding="ascii"), str(path))
+    text = read_maze_text(path)
+    source_format = detect_format(text, str(path))
+    maze = parse_maze(text, str(path), name=path.stem, fmt=source_format)
     target = args.to or ("ascii" if source_format == "udacity" else "udacity")
     write_maze(maze, args.out, target)
     print(f"wrote {args.out} ({target} format, {maze.width}x{maze.height})")

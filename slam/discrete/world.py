@@ -192,8 +192,10 @@ def world_from_rows(
     appearance in the legend, then in the map.
     """
     if not rows or any(len(row) != len(rows[0]) for row in rows) or not rows[0]:
+        bad = next((i for i, row in enumerate(rows) if len(row) != len(rows[0])), 0)
+        where = f"world.map[{bad}]" if rows else "world.map"
         raise ConfigError(
-            f"world.map: expected non-empty rows of equal length, found lengths "
+            f"{where}: expected non-empty rows of equal length, found lengths "
             f"{[len(r) for r in rows]}"
         )
     legend = dict(legend or {})

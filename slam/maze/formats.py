@@ -150,8 +150,18 @@ def parse_udacity(text: str, source: str = "<text>", name: str = "") -> Maze:
             f"{source}:{first_no}: the maze side must be an even number >= 2, found {n}"
         )
     rows = lines[1:]
-    if len(rows) != n:
-        raise DataError(f"{source}: expected {n} lines of masks after the size, found {len(rows)}")
+    if len(rows) < n:
+        last = rows[-1][0] if rows else first_no
+        raise DataError(
+            f"{source}:{last}: expected {n} lines of masks after the size, found {len(rows)} "
+            f"(the file ends here)"
+        )
+    if len(rows) > n:
+        extra_no, extra = rows[n]
+        raise DataError(
+            f"{source}:{extra_no}: expected {n} lines of masks after the size, found "
+            f"{len(rows)} (extra line {extra[:40]!r})"
+        )
     mask = np.zeros((n, n), dtype=np.uint8)
     for x, (lineno, line) in enumerate(rows):
         fields = [f.strip() for f in line.split(",")]
@@ -327,7 +337,7 @@ def format_ascii(maze: Maze) -> str:
 
 def detect_format(text: str, source: str = "<text>") -> str:
     """``"udacity"`` when the first non-blank line is an integer, ``"ascii"`` when it is a border."""
-    for line in text.splitlines():
+    for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line:
             continue
@@ -335,10 +345,14 @@ def detect_format(text: str, source: str = "<text>") -> str:
             return "udacity"
         if line.startswith("o"):
             return "ascii"
-        break
+        raise DataError(
+            f"{source}:{lineno}: unknown maze format: expected a side length (Udacity) or a "
+            f"border of posts 'o---o' (micromouseonline ASCII) on the first line, found "
+            f"{line[:40]!r}"
+        )
     raise DataError(
-        f"{source}: unknown maze format: expected a side length (Udacity) or a border of posts "
-        f"'o---o' (micromouseonline ASCII) on the first line"
+        f"{source}: unknown maze format: the file is empty (expected a side length (Udacity) "
+        f"or a border of posts 'o---o' (micromouseonline ASCII) on the first line)"
     )
 
 
@@ -355,15 +369,30 @@ def parse_maze(text: str, source: str = "<text>", name: str = "", fmt: str | Non
 def read_maze(path: Path, fmt: str | None = None) -> Maze:
     """Read a maze file in either format (detected unless ``fmt`` is given)."""
     path = Path(path)
+    text = read_maze_text(path)
+    return parse_maze(text, str(path), name=path.stem, fmt=fmt)
+
+
+def read_maze_text(path: Path) -> str:
+    """The text of a maze file (ASCII); a :class:`DataError` names the file, line and byte."""
+    path = Path(path)
     try:
-        text = path.read_text(encoding="ascii")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise DataError(f"{path}: maze file not found") from None
     except IsADirectoryError:
         raise DataError(f"{path}: is a folder, expected a maze file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read maze file ({exc})") from None
-    return parse_maze(text, str(path), name=path.stem, fmt=fmt)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read maze file ({exc.strerror or exc})") from None
+    try:
+        text = data.decode("ascii")
+    except UnicodeDecodeError as exc:
+        lineno = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise DataError(
+            f"{path}:{lineno}:{column}: expected ASCII text, found byte 0x{data[exc.start]:02x}"
+        ) from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as read_text
 
 
 def format_maze(maze: Maze, fmt: str) -> str:

@@ -20,17 +20,15 @@ _DY = np.array([1, 0, -1, 0], dtype=np.int64)
 
 
 @njit(cache=True)
-def bfs_cells(open_mask, source_mask, max_move):  # pragma: no cover - numba
-    """Steps from the nearest source cell to every cell (-1: unreachable).
+def _seed_sources(source_mask):  # pragma: no cover - numba
+    """Start of a multi-source cell search: ``(dist, queue, tail)`` with the sources at 0.
 
-    A step moves 1..``max_move`` cells in a straight line in any of the four directions; heading
-    never limits this (a turn and a move fit in one step, and backwards moves need no turn), and
-    moves are reversible, so the same array is also the number of steps *to* the sources.
+    ``dist`` is -1 elsewhere; the queue holds the ``tail`` source cells (``x * height + y``) in
+    x-major order, with room for every cell.
     """
-    width, height = open_mask.shape
+    width, height = source_mask.shape
     dist = np.full((width, height), -1, dtype=np.int32)
     queue = np.empty(width * height, dtype=np.int64)
-    head = 0
     tail = 0
     for x in range(width):
         for y in range(height):
@@ -38,6 +36,32 @@ def bfs_cells(open_mask, source_mask, max_move):  # pragma: no cover - numba
                 dist[x, y] = 0
                 queue[tail] = x * height + y
                 tail += 1
+    return dist, queue, tail
+
+
+@njit(cache=True)
+def _ray_end(open_mask, x, y, d):  # pragma: no cover - numba
+    """``(cx, cy, n)``: the cell where a ray from ``(x, y)`` along ``d`` over open sides of
+    ``open_mask`` stops, and the number ``n`` of sides it crossed."""
+    n = 0
+    while (open_mask[x, y] >> d) & 1:
+        x += _DX[d]
+        y += _DY[d]
+        n += 1
+    return x, y, n
+
+
+@njit(cache=True)
+def bfs_cells(open_mask, source_mask, max_move):  # pragma: no cover - numba
+    """Steps from the nearest source cell to every cell (-1: unreachable).
+
+    A step moves 1..``max_move`` cells in a straight line in any of the four directions; heading
+    never limits this (a turn and a move fit in one step, and backwards moves need no turn), and
+    moves are reversible, so the same array is also the number of steps *to* the sources.
+    """
+    height = open_mask.shape[1]
+    dist, queue, tail = _seed_sources(source_mask)
+    head = 0
     while head < tail:
         cell = queue[head]
         head += 1
@@ -135,18 +159,10 @@ def bfs_cells_unknown(open_mask, unknown_mask, source_mask, max_move):  # pragma
     search settles a level before expanding the next, so improving the count of a cell found
     on the current level is exact.
     """
-    width, height = open_mask.shape
-    dist = np.full((width, height), -1, dtype=np.int32)
-    unk = np.zeros((width, height), dtype=np.int32)
-    queue = np.empty(width * height, dtype=np.int64)
+    height = open_mask.shape[1]
+    dist, queue, tail = _seed_sources(source_mask)
+    unk = np.zeros(dist.shape, dtype=np.int32)
     head = 0
-    tail = 0
-    for x in range(width):
-        for y in range(height):
-            if source_mask[x, y]:
-                dist[x, y] = 0
-                queue[tail] = x * height + y
-                tail += 1
     while head < tail:
         cell = queue[head]
         head += 1
@@ -248,11 +264,7 @@ def observation_gain(known_open_mask, unknown_mask, gain):  # pragma: no cover -
                 best = 0.0
                 for rel in (-1, 0, 1):
                     d = (h + rel) % 4
-                    cx = x
-                    cy = y
-                    while (known_open_mask[cx, cy] >> d) & 1:
-                        cx += _DX[d]
-                        cy += _DY[d]
+                    cx, cy, _ = _ray_end(known_open_mask, x, y, d)
                     if (unknown_mask[cx, cy] >> d) & 1 and gain[cx, cy, d] > best:
                         best = gain[cx, cy, d]
                 value[x, y, h] = best
@@ -267,14 +279,7 @@ def ray_lengths(open_mask):  # pragma: no cover - numba
     for x in range(width):
         for y in range(height):
             for d in range(4):
-                cx = x
-                cy = y
-                n = 0
-                while (open_mask[cx, cy] >> d) & 1:
-                    cx += _DX[d]
-                    cy += _DY[d]
-                    n += 1
-                out[x, y, d] = n
+                out[x, y, d] = _ray_end(open_mask, x, y, d)[2]
     return out
 
 
@@ -289,11 +294,7 @@ def reveal_count(known_open_mask, unknown_mask):  # pragma: no cover - numba
                 n = 0
                 for rel in (-1, 0, 1):
                     d = (h + rel) % 4
-                    cx = x
-                    cy = y
-                    while (known_open_mask[cx, cy] >> d) & 1:
-                        cx += _DX[d]
-                        cy += _DY[d]
+                    cx, cy, _ = _ray_end(known_open_mask, x, y, d)
                     if (unknown_mask[cx, cy] >> d) & 1:
                         n += 1
                 count[x, y, h] = n
