@@ -463,7 +463,7 @@ def test_unreadable_folder(tmp_path):
     write_encoders(folder)
     _unreadable(folder)
     try:
-        with pytest.raises(DataError, match=f"{folder}: cannot read this folder"):
+        with pytest.raises(DataError, match=f"{folder}: cannot read the ECE276A data folder"):
             load_ece276a(folder, 20)
     finally:
         folder.chmod(0o755)
@@ -477,7 +477,9 @@ def test_unreadable_folder_without_permission_bits(tmp_path, monkeypatch):
     monkeypatch.setattr(
         os, "access", lambda p, mode: False if Path(p) == folder else real_access(p, mode)
     )
-    with pytest.raises(DataError, match=f"{folder}: cannot read this folder .permission denied."):
+    with pytest.raises(
+        DataError, match=f"{folder}: cannot read the ECE276A data folder .permission denied."
+    ):
         load_ece276a(folder, 20)
 
 

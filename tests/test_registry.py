@@ -208,6 +208,12 @@ def test_registry_file_errors_name_the_file(tmp_path):
         load_registry(bad)
     with pytest.raises(ConfigError, match="nothing.toml: dataset registry not found"):
         load_registry(tmp_path / "nothing.toml")
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"schema = 1\n# \xff\n")
+    with pytest.raises(
+        ConfigError, match=f"{binary}:2: expected text, found the non-text byte 0xff"
+    ):
+        load_registry(binary)
 
 
 # --- status -----------------------------------------------------------------------------------

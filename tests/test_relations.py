@@ -61,6 +61,13 @@ def test_empty_and_missing_relations(tmp_path):
         read_relations(tmp_path)
 
 
+def test_non_text_relations_name_the_line(tmp_path):
+    path = tmp_path / "r.relations"
+    path.write_bytes(b"1 2 3 4 5 6 7 8\n\xff 2\n")
+    with pytest.raises(DataError, match=f"{path}:2: expected text, found the non-text byte 0xff"):
+        read_relations(path)
+
+
 @pytest.mark.parametrize(
     "name, count",
     [("intel", 2984), ("aces", 1279), ("fr079", 1685), ("fr-clinic", 2820), ("mit-csail", 1172)],

@@ -49,6 +49,7 @@ from slam.config import LidarConfig
 from slam.errors import ConfigError, DataError
 from slam.geometry import relative, wrap_angle
 from slam.io.log import Log, OdometryStream, ScanStream
+from slam.io.text import decode_utf8
 
 F64 = NDArray[np.float64]
 
@@ -259,13 +260,7 @@ def _read_text(path: Path) -> str:
             ) from None
         except (OSError, zlib.error) as exc:
             raise DataError(f"{path}: corrupt gzip file ({exc})") from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        lineno = raw.count(b"\n", 0, exc.start) + 1
-        raise DataError(
-            f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x}"
-        ) from None
+    return decode_utf8(path, raw)
 
 
 def _beam_count(path: Path, lineno: int, tokens: Sequence[str], index: int, kind: str) -> int:
@@ -536,7 +531,6 @@ def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanS
         odometry=odometry,
         laser_pose=laser_pose,
         invalid_beams=int(np.count_nonzero(invalid)),
-        non_monotonic=int(np.count_nonzero(np.diff(time) < 0)),
     )
     return scans, source
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from slam.errors import DataError
+
 DATA_DIR_ENV = "SLAM_DATA_DIR"
 CACHE_DIR_ENV = "SLAM_CACHE_DIR"
 
@@ -50,3 +52,38 @@ def resolve_cache_dir(data_dir: Path) -> Path:
         return candidate
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "slam"
+
+
+def check_readable_dir(folder: Path, what: str = "folder") -> bool:
+    """Whether ``folder`` exists; :class:`DataError` naming it when it exists but cannot be read
+    (no read or search permission) or is not a folder."""
+    folder = Path(folder)
+    try:
+        if not folder.exists():
+            return False
+        if not folder.is_dir():
+            raise DataError(f"{folder}: expected the {what}, found a file")
+    except PermissionError:
+        raise DataError(f"{folder}: cannot read the {what} (permission denied)") from None
+    if not os.access(folder, os.R_OK | os.X_OK):
+        raise DataError(f"{folder}: cannot read the {what} (permission denied)")
+    return True
+
+
+def is_present(path: Path, *, folder: bool = False) -> bool:
+    """Whether ``path`` is an existing file (a folder when ``folder``); :class:`DataError` naming
+    it when its parent cannot be searched."""
+    path = Path(path)
+    try:
+        return path.is_dir() if folder else path.is_file()
+    except PermissionError:
+        raise DataError(f"{path}: cannot read (permission denied)") from None
+
+
+def put_files_hint(inside: str, count: int = 1) -> str:
+    """The end of a "missing file" message: where the ``count`` files named by ``inside`` (paths
+    relative to a data directory) should go."""
+    return (
+        f"Put the file{'s' if count > 1 else ''} there, or point --data-dir (or {DATA_DIR_ENV}) "
+        f"at a data directory that has {inside}; see docs/data.md"
+    )

@@ -28,7 +28,15 @@ from numpy.typing import NDArray
 
 from slam.config import LidarConfig
 from slam.errors import DataError, UsageError
-from slam.io.log import EncoderStream, ImuStream, Log, RgbdIndex, ScanStream
+from slam.io.datadir import check_readable_dir, is_present, put_files_hint
+from slam.io.log import (
+    EncoderStream,
+    ImuStream,
+    Log,
+    RgbdIndex,
+    ScanStream,
+    count_non_monotonic,
+)
 
 STREAMS: tuple[str, ...] = ("encoders", "imu", "scans", "kinect")
 """Streams of an ECE276A log, each read from one file."""
@@ -142,6 +150,13 @@ def rgbd_dirs(folder: Path, number: int | str) -> tuple[Path, Path]:
     return base / f"RGB{nn}", base / f"Disparity{nn}"
 
 
+def rgbd_patterns(number: int | str) -> tuple[str, str]:
+    """Names of the RGB and disparity images of dataset ``number``, with ``{}`` for the frame
+    index (counted from 1)."""
+    nn = _number(number)
+    return f"rgb{nn}_{{}}.png", f"disparity{nn}_{{}}.png"
+
+
 def load_ece276a(
     folder: Path,
     number: int | str,
@@ -167,10 +182,10 @@ def load_ece276a(
         raise UsageError(
             f"unknown ECE276A stream(s) {', '.join(unknown)}; expected some of {', '.join(STREAMS)}"
         )
-    _check_folder(folder)
+    check_readable_dir(folder, "ECE276A data folder")  # absent: every file is then missing
     lidar = lidar or LidarConfig()
     paths = {s: folder / SPECS[s].file_name(nn) for s in STREAMS}
-    exists = {s: _is_file(p) for s, p in paths.items()}
+    exists = {s: is_present(p) for s, p in paths.items()}
     missing = [s for s in STREAMS if s in need and not exists[s]]
     if missing:
         raise DataError(_missing_message(name or f"dataset{nn}", folder, nn, missing))
@@ -209,25 +224,6 @@ def _number(number: int | str) -> str:
     return text
 
 
-def _check_folder(folder: Path) -> None:
-    try:
-        if not folder.exists():
-            return  # every file is then missing; the caller decides whether that matters
-        if not folder.is_dir():
-            raise DataError(f"{folder}: expected the ECE276A data folder, found a file")
-    except PermissionError:
-        raise DataError(f"{folder}: cannot read this folder (permission denied)") from None
-    if not os.access(folder, os.R_OK | os.X_OK):
-        raise DataError(f"{folder}: cannot read this folder (permission denied)")
-
-
-def _is_file(path: Path) -> bool:
-    try:
-        return path.is_file()
-    except PermissionError:
-        raise DataError(f"{path}: cannot read (permission denied)") from None
-
-
 def _missing_message(label: str, folder: Path, nn: str, missing: list[str]) -> str:
     files = [SPECS[s].file_name(nn) for s in missing]
     details = "; ".join(
@@ -236,11 +232,7 @@ def _missing_message(label: str, folder: Path, nn: str, missing: list[str]) -> s
     )
     where = ", ".join(str(folder / f) for f in files)
     inside = " and ".join(f"{folder.name}/{f}" for f in files)
-    return (
-        f"{label}: missing {where} ({details}). Put the file{'s' if len(files) > 1 else ''} "
-        f"there, or point --data-dir (or SLAM_DATA_DIR) at a data directory that has "
-        f"{inside}; see docs/data.md"
-    )
+    return f"{label}: missing {where} ({details}). " + put_files_hint(inside, len(files))
 
 
 _READ_ERRORS = (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, KeyError)
@@ -355,10 +347,6 @@ def _times(path: Path, key: str, array: NDArray[Any], spec: StreamSpec) -> NDArr
     return time
 
 
-def _non_monotonic(time: NDArray[np.float64]) -> int:
-    return int(np.count_nonzero(np.diff(time) < 0))
-
-
 def _columns(path: Path, key: str, array: NDArray[Any], rows: int, n: int) -> None:
     if array.ndim != 2 or array.shape[0] != rows or array.shape[1] != n:
         raise DataError(
@@ -396,7 +384,7 @@ def _load_encoders(path: Path, meta: dict[str, Any]) -> EncoderStream:
             f"{path}: key 'counts' holds values outside int16 "
             f"({int(counts.min())}..{int(counts.max())}); expected ticks per interval"
         )
-    meta["encoders_non_monotonic"] = _non_monotonic(time)
+    meta["encoders_non_monotonic"] = count_non_monotonic(time)
     return EncoderStream(time=time, counts=np.ascontiguousarray(counts, dtype=np.int16))
 
 
@@ -414,7 +402,7 @@ def _load_imu(path: Path, meta: dict[str, Any]) -> ImuStream:
             bad = int(np.count_nonzero(~np.isfinite(values)))
             raise DataError(f"{path}: key {key!r} has {bad} non-finite value(s)")
         arrays[key] = values
-    meta["imu_non_monotonic"] = _non_monotonic(time)
+    meta["imu_non_monotonic"] = count_non_monotonic(time)
     return ImuStream(
         time=time,
         angular_velocity=arrays["angular_velocity"],
@@ -473,7 +461,6 @@ def _load_scans(path: Path, lidar: LidarConfig) -> ScanStream:
         no_return=no_return,
         laser_offset=np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64),
         invalid_beams=invalid_beams,
-        non_monotonic=_non_monotonic(time),
     )
 
 
@@ -483,12 +470,13 @@ def _load_kinect(path: Path, folder: Path, nn: str, meta: dict[str, Any]) -> Rgb
     disparity_time = _times(path, "disparity_time_stamps", raw["disparity_time_stamps"], spec)
     rgb_time = _times(path, "rgb_time_stamps", raw["rgb_time_stamps"], spec)
     rgb_dir, disparity_dir = rgbd_dirs(folder, nn)
-    meta["rgb_non_monotonic"] = _non_monotonic(rgb_time)
-    meta["disparity_non_monotonic"] = _non_monotonic(disparity_time)
+    rgb_pattern, disparity_pattern = rgbd_patterns(nn)
+    meta["rgb_non_monotonic"] = count_non_monotonic(rgb_time)
+    meta["disparity_non_monotonic"] = count_non_monotonic(disparity_time)
     meta["rgbd_images"] = _image_status(
         [
-            (rgb_dir, f"rgb{nn}_", rgb_time.shape[0]),
-            (disparity_dir, f"disparity{nn}_", disparity_time.shape[0]),
+            (rgb_dir, rgb_pattern, rgb_time.shape[0]),
+            (disparity_dir, disparity_pattern, disparity_time.shape[0]),
         ]
     )
     return RgbdIndex(
@@ -496,19 +484,21 @@ def _load_kinect(path: Path, folder: Path, nn: str, meta: dict[str, Any]) -> Rgb
         disparity_time=disparity_time,
         rgb_dir=rgb_dir,
         disparity_dir=disparity_dir,
-        rgb_pattern=f"rgb{nn}_{{}}.png",
-        disparity_pattern=f"disparity{nn}_{{}}.png",
+        rgb_pattern=rgb_pattern,
+        disparity_pattern=disparity_pattern,
     )
 
 
 def _image_status(dirs: list[tuple[Path, str, int]]) -> str:
-    """``"present"``, else which image folders are missing, unreadable or hold too few frames.
+    """``"present"``, else which image folders are missing, unreadable or hold too few frames
+    (``dirs``: folder, image name pattern with ``{}`` for the index, expected frame count).
 
     The text starts with ``"missing: "`` when a folder is absent, so later stages (texture mapping)
     can skip with a warning that names the folders.
     """
     missing, other = [], []
-    for directory, prefix, expected in dirs:
+    for directory, pattern, expected in dirs:
+        prefix, suffix = pattern.split("{}")
         try:
             if not directory.is_dir():
                 missing.append(f"{directory}/")
@@ -516,7 +506,7 @@ def _image_status(dirs: list[tuple[Path, str, int]]) -> str:
             found = sum(
                 1
                 for entry in os.scandir(directory)
-                if entry.name.startswith(prefix) and entry.name.endswith(".png")
+                if entry.name.startswith(prefix) and entry.name.endswith(suffix)
             )
         except PermissionError:
             other.append(f"unreadable: {directory}/")

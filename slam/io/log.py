@@ -84,11 +84,14 @@ class ScanStream:
     """``(N, 3)`` laser pose in the odometry frame at each scan, when the log carries it."""
     invalid_beams: int = 0
     """How many readings were NaN/inf/negative or below ``range_min`` in the file."""
-    non_monotonic: int = 0
-    """How many scans have a timestamp smaller than the previous scan's."""
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
+
+    @property
+    def non_monotonic(self) -> int:
+        """How many scans have a timestamp smaller than the previous scan's."""
+        return count_non_monotonic(self.time)
 
     @property
     def num_beams(self) -> int:
@@ -210,6 +213,11 @@ class Log:
             out[name] = info
         out.update({k: v for k, v in self.meta.items() if isinstance(v, int | float | str)})
         return out
+
+
+def count_non_monotonic(time: F64) -> int:
+    """How many readings of ``time`` have a timestamp smaller than the previous one's."""
+    return int(np.count_nonzero(np.diff(time) < 0))
 
 
 def _time_summary(time: F64) -> dict[str, Any]:

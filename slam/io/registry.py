@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from slam.errors import ConfigError, DataError
+from slam.io.datadir import check_readable_dir, is_present, put_files_hint
+from slam.io.text import decode_utf8
 from slam.resources import registry_path
 
 if TYPE_CHECKING:
@@ -154,12 +156,13 @@ def load_registry(path: Path | None = None) -> dict[str, Dataset]:
     """
     path = Path(path) if path is not None else registry_path()
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
+        data = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError(f"{path}: dataset registry not found") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the dataset registry ({exc.strerror})") from None
+    try:
+        raw = tomllib.loads(decode_utf8(path, data, ConfigError))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
     return parse_registry(raw, str(path))
@@ -382,28 +385,8 @@ def get_dataset(name: str, registry: Mapping[str, Dataset] | None = None) -> Dat
 # --- what is on disk ------------------------------------------------------------------------
 
 
-def check_readable_dir(folder: Path, what: str = "folder") -> bool:
-    """Whether ``folder`` exists; :class:`DataError` naming it when it exists but cannot be read
-    (no read or search permission) or is not a folder."""
-    folder = Path(folder)
-    try:
-        if not folder.exists():
-            return False
-        if not folder.is_dir():
-            raise DataError(f"{folder}: expected the {what}, found a file")
-    except PermissionError:
-        raise DataError(f"{folder}: cannot read the {what} (permission denied)") from None
-    if not os.access(folder, os.R_OK | os.X_OK):
-        raise DataError(f"{folder}: cannot read the {what} (permission denied)")
-    return True
-
-
 def _exists(entry: DataFile, data_dir: Path) -> bool:
-    location = entry.location(data_dir)
-    try:
-        return location.is_dir() if entry.is_dir else location.is_file()
-    except PermissionError:
-        raise DataError(f"{location}: cannot read (permission denied)") from None
+    return is_present(entry.location(data_dir), folder=entry.is_dir)
 
 
 def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
@@ -479,9 +462,8 @@ def load_dataset(
     path = dataset.log_file().location(data_dir)
     if not _exists(dataset.log_file(), data_dir):
         raise DataError(
-            f"{name}: missing {path} (a CARMEN log, {dataset.description}). Put the file there, "
-            f"or point --data-dir (or SLAM_DATA_DIR) at a data directory that has "
-            f"{dataset.log_file().path}; see docs/data.md"
+            f"{name}: missing {path} (a CARMEN log, {dataset.description}). "
+            + put_files_hint(dataset.log_file().path)
         )
     log = load_carmen(path, name=name, lidar=config.lidar)
     absent = [s for s in (need or ()) if s not in log.streams()]

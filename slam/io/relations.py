@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import DataError
+from slam.io.text import decode_utf8
 
 F64 = NDArray[np.float64]
 
@@ -53,15 +54,14 @@ def read_relations(path: Path) -> Relations:
     """Read a relations file; :class:`DataError` names the file and line of any bad entry."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise DataError(f"{path}: relations file not found") from None
     except IsADirectoryError:
         raise DataError(f"{path}: is a folder, expected a relations file") from None
     except OSError as exc:
         raise DataError(f"{path}: cannot read relations file ({exc.strerror or exc})") from None
-    except UnicodeDecodeError:
-        raise DataError(f"{path}: not a text file (expected relations lines)") from None
+    text = decode_utf8(path, raw)
 
     rows: list[str] = []
     linenos: list[int] = []

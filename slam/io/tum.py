@@ -14,6 +14,9 @@ from numpy.typing import NDArray
 from slam.errors import DataError
 from slam.geometry import quaternion_to_yaw, yaw_to_quaternion
 from slam.io.atomic import write_text
+from slam.io.text import decode_utf8
+
+_TUM_LINE = "%.6f %.6f %.6f 0.000000 %.9f %.9f %.9f %.9f"
 
 
 def format_tum(times: NDArray[np.float64], poses: NDArray[np.float64]) -> str:
@@ -22,13 +25,9 @@ def format_tum(times: NDArray[np.float64], poses: NDArray[np.float64]) -> str:
     poses = np.asarray(poses, dtype=np.float64)
     if times.shape[0] != poses.shape[0]:
         raise ValueError(f"{times.shape[0]} times for {poses.shape[0]} poses")
-    q = yaw_to_quaternion(poses[:, 2])
+    rows = np.column_stack([times, poses[:, :2], yaw_to_quaternion(poses[:, 2])]).tolist()
     lines = ["# timestamp tx ty tz qx qy qz qw"]
-    for t, p, qq in zip(times, poses, q, strict=True):
-        lines.append(
-            f"{t:.6f} {p[0]:.6f} {p[1]:.6f} 0.000000 "
-            f"{qq[0]:.9f} {qq[1]:.9f} {qq[2]:.9f} {qq[3]:.9f}"
-        )
+    lines += [_TUM_LINE % tuple(row) for row in rows]  # Python floats format faster than numpy
     return "\n".join(lines) + "\n"
 
 
@@ -41,11 +40,12 @@ def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Read a TUM file; return ``(times (N,), poses (N, 3))`` with yaw from the quaternion."""
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise DataError(f"{path}: trajectory file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read trajectory ({exc})") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read trajectory ({exc.strerror or exc})") from None
+    text = decode_utf8(path, raw)
     rows = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()

@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 
 from slam.errors import UsageError
 from slam.io.atomic import atomic_dir
+from slam.io.ece276a import rgbd_dirs, rgbd_patterns, stream_file
 from slam.io.tum import format_tum
 from slam.kinect import KinectModel
 from slam.sim.render import FrameNoise, KinectRenderer
@@ -243,19 +244,44 @@ def _scalar(value: float) -> NDArray[np.float64]:
     return np.array([[value]], dtype=np.float64)
 
 
+def hokuyo_arrays(
+    lidar: LidarSpec, times: NDArray[np.float64], ranges: NDArray[np.float32]
+) -> dict[str, NDArray[Any]]:
+    """The keys of ``HokuyoNN.npz`` for scans ``ranges`` ``(N, beams)`` taken at ``times``."""
+    return {
+        "angle_min": _scalar(lidar.angle_min),
+        "angle_max": _scalar(lidar.angle_max),
+        "angle_increment": _scalar(lidar.angle_increment),
+        "range_min": _scalar(lidar.range_min),
+        "range_max": _scalar(lidar.range_max),
+        "ranges": np.ascontiguousarray(ranges.T),
+        "time_stamps": times,
+    }
+
+
+def map_arrays(world: World) -> dict[str, NDArray[Any]]:
+    """The keys of ``groundtruth_map.npz``: the true occupancy grid of ``world``."""
+    return {
+        "occupancy": world.occupancy,
+        "labels": world.labels,
+        "interior": world.interior,
+        "resolution": np.float64(world.resolution),
+        "origin": np.asarray(world.origin, dtype=np.float64),
+    }
+
+
 def write_dataset(log: SimulatedLog, folder: Path, progress: bool = False) -> dict[str, Any]:
     """Write ``log`` into ``folder`` (created if needed); return a summary with timings."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     nn = f"{log.options.number:02d}"
-    lidar = log.options.lidar
     clock = time.perf_counter()
     save_npz(
-        folder / f"Encoders{nn}.npz",
+        stream_file(folder, nn, "encoders"),
         {"counts": log.encoder_counts, "time_stamps": log.encoder_time},
     )
     save_npz(
-        folder / f"Imu{nn}.npz",
+        stream_file(folder, nn, "imu"),
         {
             "angular_velocity": log.gyro,
             "linear_acceleration": log.accel,
@@ -263,16 +289,8 @@ def write_dataset(log: SimulatedLog, folder: Path, progress: bool = False) -> di
         },
     )
     save_npz(
-        folder / f"Hokuyo{nn}.npz",
-        {
-            "angle_min": _scalar(lidar.angle_min),
-            "angle_max": _scalar(lidar.angle_max),
-            "angle_increment": _scalar(lidar.angle_increment),
-            "range_min": _scalar(lidar.range_min),
-            "range_max": _scalar(lidar.range_max),
-            "ranges": np.ascontiguousarray(log.ranges.T),
-            "time_stamps": log.lidar_time,
-        },
+        stream_file(folder, nn, "scans"),
+        hokuyo_arrays(log.options.lidar, log.lidar_time, log.ranges),
     )
     log.timings["write_npz_s"] = time.perf_counter() - clock
 
@@ -299,16 +317,7 @@ def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
         parts += [log.disparity_time, log.rgb_time]
     times = np.unique(np.concatenate(parts))
     (folder / "groundtruth.tum").write_text(format_tum(times, traj.pose_at(times)))
-    save_npz(
-        folder / "groundtruth_map.npz",
-        {
-            "occupancy": world.occupancy,
-            "labels": world.labels,
-            "interior": world.interior,
-            "resolution": np.float64(world.resolution),
-            "origin": np.asarray(world.origin, dtype=np.float64),
-        },
-    )
+    save_npz(folder / "groundtruth_map.npz", map_arrays(world))
     save_npz(
         folder / "groundtruth_texture.npz",
         {
@@ -344,11 +353,11 @@ def _write_kinect(log: SimulatedLog, folder: Path, nn: str, progress: bool) -> N
     assert log.renderer is not None and log.disparity_time is not None
     assert log.rgb_time is not None
     save_npz(
-        folder / f"Kinect{nn}.npz",
+        stream_file(folder, nn, "kinect"),
         {"disparity_time_stamps": log.disparity_time, "rgb_time_stamps": log.rgb_time},
     )
-    rgb_dir = folder / "dataRGBD" / f"RGB{nn}"
-    disp_dir = folder / "dataRGBD" / f"Disparity{nn}"
+    rgb_dir, disp_dir = rgbd_dirs(folder, nn)
+    rgb_pattern, disp_pattern = rgbd_patterns(nn)
     rgb_dir.mkdir(parents=True, exist_ok=True)
     disp_dir.mkdir(parents=True, exist_ok=True)
     traj = log.scene.trajectory
@@ -369,11 +378,11 @@ def _write_kinect(log: SimulatedLog, folder: Path, nn: str, progress: bool) -> N
             start = time.perf_counter()
             if kind == 0:
                 disparity, _, _ = log.renderer.disparity(pose, log.disparity_noise[k])
-                path = disp_dir / f"disparity{nn}_{k + 1}.png"
+                path = disp_dir / disp_pattern.format(k + 1)
                 image = disparity
             else:
                 rgb = log.renderer.rgb(pose, log.rgb_noise[k])
-                path = rgb_dir / f"rgb{nn}_{k + 1}.png"
+                path = rgb_dir / rgb_pattern.format(k + 1)
                 image = np.ascontiguousarray(rgb[:, :, ::-1])
             render_s += time.perf_counter() - start
             pending.append(pool.submit(_write_png, path, image))

@@ -21,15 +21,15 @@ import numpy as np
 
 from slam.config import RobotConfig
 from slam.errors import DataError
-from slam.geometry import compose
-from slam.io.ece276a import load_ece276a
+from slam.io.ece276a import load_ece276a, stream_file
 from slam.io.tum import write_tum
 from slam.odometry import OdometryWarning, dead_reckon_ece276a
-from slam.sim.dataset import save_npz
-from slam.sim.sensors import LidarSpec, NoiseConfig, measure_ranges, true_ranges
+from slam.sim.dataset import hokuyo_arrays, map_arrays, save_npz
+from slam.sim.sensors import LidarSpec, NoiseConfig, measure_ranges, mount_laser, true_ranges
 from slam.sim.world import World, world_around_path
 
 REAL_FILES = ("Encoders20.npz", "Imu20.npz", "Kinect20.npz")
+"""The real files of dataset20 the fixture links beside its simulated ``Hokuyo20.npz``."""
 
 
 @dataclass(frozen=True)
@@ -38,14 +38,17 @@ class SimLidarDataset:
 
     data_dir: Path
     """Data directory to pass as ``--data-dir`` (holds ``ece276a/``)."""
-    folder: Path
-    """``data_dir / "ece276a"``: the linked real files and the simulated ``Hokuyo20.npz``."""
     world: World
     """The building the laser was simulated in."""
     times: np.ndarray
     """Scan times (the real encoder time stamps)."""
     poses: np.ndarray
     """Robot poses at the scan times (the dead-reckoned path the building was grown around)."""
+
+    @property
+    def folder(self) -> Path:
+        """``data_dir / "ece276a"``: the linked real files and the simulated ``Hokuyo20.npz``."""
+        return self.data_dir / "ece276a"
 
 
 def _link(src: Path, dst: Path) -> None:
@@ -92,34 +95,10 @@ def assemble_dataset20_with_sim_lidar(
     world = world_around_path(rng, poses[:, :2])
     noise = NoiseConfig() if noise is None else noise
     lidar = LidarSpec()
-    laser = compose(poses, np.array([lidar.x, 0.0, 0.0]))
-    ranges, incidence = true_ranges(world, laser, lidar)
+    ranges, incidence = true_ranges(world, mount_laser(poses, lidar), lidar)
     ranges = measure_ranges(ranges, incidence, rng, noise, lidar)
 
-    def scalar(value: float) -> np.ndarray:
-        return np.array([[value]], dtype=np.float64)
-
-    save_npz(
-        folder / "Hokuyo20.npz",
-        {
-            "angle_min": scalar(lidar.angle_min),
-            "angle_max": scalar(lidar.angle_max),
-            "angle_increment": scalar(lidar.angle_increment),
-            "range_min": scalar(lidar.range_min),
-            "range_max": scalar(lidar.range_max),
-            "ranges": np.ascontiguousarray(ranges.T),
-            "time_stamps": times,
-        },
-    )
+    save_npz(stream_file(folder, 20, "scans"), hokuyo_arrays(lidar, times, ranges))
     write_tum(folder / "groundtruth.tum", times, poses)
-    save_npz(
-        folder / "groundtruth_map.npz",
-        {
-            "occupancy": world.occupancy,
-            "labels": world.labels,
-            "interior": world.interior,
-            "resolution": np.float64(world.resolution),
-            "origin": np.asarray(world.origin, dtype=np.float64),
-        },
-    )
-    return SimLidarDataset(Path(data_dir), folder, world, times, poses)
+    save_npz(folder / "groundtruth_map.npz", map_arrays(world))
+    return SimLidarDataset(Path(data_dir), world, times, poses)

@@ -193,9 +193,14 @@ def simulate_imu(
     return gyro, accel
 
 
+def mount_laser(robot_poses: F64, lidar: LidarSpec = LidarSpec()) -> F64:
+    """World poses ``(N, 3)`` of the laser on a robot at ``robot_poses``."""
+    return compose(robot_poses, np.array([lidar.x, 0.0, 0.0]))
+
+
 def laser_poses(traj: Trajectory, times: F64, lidar: LidarSpec = LidarSpec()) -> F64:
     """World poses ``(N, 3)`` of the laser at ``times``."""
-    return compose(traj.pose_at(times), np.array([lidar.x, 0.0, 0.0]))
+    return mount_laser(traj.pose_at(times), lidar)
 
 
 def true_ranges(world: World, poses: F64, lidar: LidarSpec = LidarSpec()) -> tuple[F64, F64]:

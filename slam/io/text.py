@@ -1,0 +1,19 @@
+"""Decoding the text files the loaders read, with errors that name the file and line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from slam.errors import DataError, SlamError
+
+
+def decode_utf8(path: Path, raw: bytes, error: type[SlamError] = DataError) -> str:
+    """``raw`` (the contents of ``path``) as UTF-8 text; ``error`` naming the file, the line and
+    the offending byte when it is not text."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        lineno = raw.count(b"\n", 0, exc.start) + 1
+        raise error(
+            f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x}"
+        ) from None
