@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, TextureConfig
 from slam.errors import DataError
-from slam.geometry import interpolate_poses
+from slam.geometry import interpolate_poses, inverse, transform_points
 from slam.io.atomic import atomic_path, write_text
 from slam.io.log import Log, RgbdIndex
 from slam.kinect import KinectModel
@@ -818,12 +818,6 @@ def swept_cells(
     return out
 
 
-def _transform_xy(transform: F64, xy: F64) -> F64:
-    c, s = math.cos(float(transform[2])), math.sin(float(transform[2]))
-    x, y = xy[..., 0], xy[..., 1]
-    return np.stack([c * x - s * y + transform[0], s * x + c * y + transform[1]], axis=-1)
-
-
 def evaluate_texture(
     texture: TextureMap,
     gt: GroundTruth,
@@ -872,15 +866,14 @@ def evaluate_texture(
             transform = align_se2(poses[inside, :2], reference[:, :2])
             iy, ix = np.nonzero(coloured)
             centres = texture.origin + (np.stack([ix, iy], axis=-1) + 0.5) * res
-            colour, is_floor = truth.cells(_transform_xy(transform, centres), res)
+            colour, is_floor = truth.cells(transform_points(transform, centres), res)
             err_a = np.abs(texture.rgb[iy, ix][is_floor].astype(np.float64) - colour[is_floor])
             err_a = err_a.mean(axis=1)
             # Swept cells (ground-truth frame) found back in the texture's frame.
             sy, sx = np.nonzero(swept)
             swept_xy = texture.origin + (np.stack([sx, sy], axis=-1) + 0.5) * res
-            inverse = np.array([0.0, 0.0, -transform[2]])
-            inverse[:2] = -_transform_xy(inverse, transform[:2])
-            cells = np.floor((_transform_xy(inverse, swept_xy) - texture.origin) / res)
+            back = transform_points(inverse(transform), swept_xy)
+            cells = np.floor((back - texture.origin) / res)
             cx, cy = cells[:, 0].astype(np.int64), cells[:, 1].astype(np.int64)
             ok = (cx >= 0) & (cy >= 0) & (cx < shape[1]) & (cy < shape[0])
             hit = np.zeros(cx.shape, dtype=bool)
@@ -1130,8 +1123,14 @@ def recompute_run(
     log_odds = np.asarray(arrays["log_odds"], dtype=np.float32)
     if log_odds.ndim != 2:
         raise DataError(f"{run_dir / 'map.npz'}: log_odds must be 2-D, found {log_odds.shape}")
+    resolution, origin = np.asarray(arrays["resolution"]), np.asarray(arrays["origin"])
+    if resolution.size != 1 or origin.size != 2:
+        raise DataError(
+            f"{run_dir / 'map.npz'}: expected a scalar resolution and a 2-element origin, found "
+            f"resolution of shape {resolution.shape} and origin of shape {origin.shape}"
+        )
     grid = OccupancyGrid.from_arrays(
-        log_odds, float(arrays["resolution"]), np.asarray(arrays["origin"]).reshape(2), config.map
+        log_odds, float(resolution.reshape(())), origin.reshape(2), config.map
     )
     log = load_run_log(name, data_dir, config)
     if log.rgbd is None:

@@ -80,6 +80,14 @@ def run_eval(args: argparse.Namespace) -> int:
         raise DataError(
             f"{run_dir}: run folder not found (expected a folder with {TRAJECTORY_FILE})"
         )
+    if not (run_dir / TRAJECTORY_FILE).is_file():
+        raise DataError(
+            f"{run_dir / TRAJECTORY_FILE}: trajectory file not found (expected the "
+            f"{TRAJECTORY_FILE} that `slam run` writes to its run folder)"
+        )
+    for option, path in (("--relations", args.relations), ("--reference", args.reference)):
+        if path is not None and path.is_dir():
+            raise DataError(f"{path}: {option} expected a file, found a folder")
     times, poses = read_tum(run_dir / TRAJECTORY_FILE)
 
     result: dict[str, Any] = {

@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 
 from slam.commands._common import show_progress
+from slam.errors import DataError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,6 +56,8 @@ def run_sim(args: argparse.Namespace) -> int:
     from slam.sim.sensors import NoiseConfig
 
     get_scenario(args.name)  # UsageError for an unknown name, before any work
+    if args.out.exists() and not args.out.is_dir():
+        raise DataError(f"{args.out}: --out expected a folder to create, found a file")
     options = SimOptions(
         scenario=args.name,
         seed=args.seed,
