@@ -195,10 +195,8 @@ def _numbers(text: str, kind: type, name: str) -> tuple:
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Run the study, print the table, write the plot."""
-    import cv2
-
     from slam.discrete.study import StudyConfig, format_rows, rows_json, run_study, study_figure
-    from slam.io.atomic import atomic_path
+    from slam.io.atomic import write_png
 
     config = StudyConfig(
         sizes=_numbers(args.sizes, int, "sizes"),
@@ -223,9 +221,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     image = study_figure(rows, config)
-    with atomic_path(args.out) as tmp:
-        if not cv2.imwrite(str(tmp), image):
-            raise UsageError(f"{args.out}: OpenCV could not write the PNG")
+    write_png(args.out, image)
     if args.json:
         json.dump({"rows": rows_json(rows), "plot": str(args.out)}, sys.stdout)
         print()

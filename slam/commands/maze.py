@@ -191,8 +191,9 @@ def bench_mazes(args: argparse.Namespace) -> int:
 
 def show_maze(args: argparse.Namespace) -> int:
     """Render a trial (or the maze alone) to a PNG."""
+    from slam.io.atomic import write_png
     from slam.maze.bench import trial
-    from slam.maze.render import render_trial, write_png
+    from slam.maze.render import render_trial
 
     maze = _load(args)
     if args.cell < 8:

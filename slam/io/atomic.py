@@ -2,7 +2,8 @@
 
 Files are written to a temporary sibling and renamed into place; run folders are assembled in a
 temporary sibling folder and renamed when complete, so an interrupted or failed run leaves no
-half-written output behind.
+half-written output behind. :func:`write_png` is the project's one PNG writer (run pictures,
+simulated frames, maze and grid-study plots).
 """
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 
 def write_bytes(path: Path, data: bytes) -> None:
@@ -33,6 +35,20 @@ def write_bytes(path: Path, data: bytes) -> None:
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     write_bytes(path, text.encode("utf-8"))
+
+
+def write_png(path: Path, image: Any, params: Sequence[int] = ()) -> None:
+    """Encode ``image`` (OpenCV channel order: grey, BGR or BGRA) as PNG and write it atomically.
+
+    ``params`` are OpenCV ``IMWRITE_PNG_*`` flag/value pairs (compression, filter); the file is
+    PNG whatever the suffix of ``path``.
+    """
+    import cv2
+
+    ok, data = cv2.imencode(".png", image, list(params))
+    if not ok:  # pragma: no cover - OpenCV failure
+        raise OSError(f"{path}: PNG encoding failed")
+    write_bytes(path, data.tobytes())
 
 
 @contextlib.contextmanager

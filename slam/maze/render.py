@@ -3,18 +3,15 @@
 Drawn with OpenCV, north up. Cells the robot stood in during run 0 are shaded; walls the robot
 learnt are black, walls it never saw are light grey; the goal is green, the start blue. The run-0
 track is orange (thin), the run-1 track red (thick), both drawn through the cell centres of the
-steps' end points. Files are written atomically.
+steps' end points (written by :func:`slam.io.atomic.write_png`).
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.io.atomic import atomic_path
 from slam.maze.formats import EAST, NORTH, Maze
 from slam.maze.referee import TrialResult
 
@@ -116,10 +113,3 @@ def _caption(img: NDArray[np.uint8], lines: list[str], x: int, top: int, height:
     for i, text in enumerate(lines):
         y = int(top + (i + 1) * line_h)
         cv2.putText(img, text, (x, y), font, scale, TEXT, 1, cv2.LINE_AA)
-
-
-def write_png(path: Path, image: NDArray[np.uint8]) -> None:
-    """Write ``image`` as a PNG at ``path``, atomically."""
-    with atomic_path(Path(path)) as tmp:
-        if not cv2.imwrite(str(tmp), image):
-            raise OSError(f"{path}: OpenCV could not write the PNG")

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import UsageError
-from slam.io.atomic import atomic_dir
+from slam.io.atomic import atomic_dir, write_png
 from slam.io.ece276a import rgbd_dirs, rgbd_patterns, stream_file
 from slam.io.tum import format_tum
 from slam.kinect import KinectModel
@@ -233,13 +233,6 @@ def save_npz(path: Path, arrays: dict[str, NDArray[Any]]) -> None:
                 np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
 
 
-def _write_png(path: Path, image: NDArray[Any]) -> None:
-    ok, buf = cv2.imencode(".png", image, PNG_PARAMS)
-    if not ok:  # pragma: no cover - OpenCV failure
-        raise OSError(f"{path}: PNG encoding failed")
-    path.write_bytes(buf.tobytes())
-
-
 def _scalar(value: float) -> NDArray[np.float64]:
     return np.array([[value]], dtype=np.float64)
 
@@ -327,9 +320,13 @@ def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
             "origin": np.asarray(world.texture_origin, dtype=np.float64),
         },
     )
-    _write_png(folder / "groundtruth_map.png", render_map_png(world, traj.sample_xy(0.05)))
-    _write_png(
-        folder / "groundtruth_texture.png", np.ascontiguousarray(world.texture[::-1, :, ::-1])
+    write_png(
+        folder / "groundtruth_map.png", render_map_png(world, traj.sample_xy(0.05)), PNG_PARAMS
+    )
+    write_png(
+        folder / "groundtruth_texture.png",
+        np.ascontiguousarray(world.texture[::-1, :, ::-1]),
+        PNG_PARAMS,
     )
 
 
@@ -385,7 +382,7 @@ def _write_kinect(log: SimulatedLog, folder: Path, nn: str, progress: bool) -> N
                 path = rgb_dir / rgb_pattern.format(k + 1)
                 image = np.ascontiguousarray(rgb[:, :, ::-1])
             render_s += time.perf_counter() - start
-            pending.append(pool.submit(_write_png, path, image))
+            pending.append(pool.submit(write_png, path, image, PNG_PARAMS))
             while len(pending) > 8:
                 pending.popleft().result()
             if bar is not None:

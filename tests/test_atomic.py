@@ -1,0 +1,43 @@
+"""``slam.io.atomic.write_png``: the one PNG writer (run pictures, simulated frames, plots)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from slam.io.atomic import write_png
+from slam.sim.dataset import PNG_PARAMS
+
+
+def test_round_trip_of_grey_colour_and_16_bit_images(tmp_path):
+    rng = np.random.default_rng(0)
+    images = {
+        "grey.png": rng.integers(0, 256, (5, 7), dtype=np.uint8),
+        "bgr.png": rng.integers(0, 256, (5, 7, 3), dtype=np.uint8),
+        "disparity.png": rng.integers(0, 2048, (5, 7), dtype=np.uint16),
+    }
+    for name, image in images.items():
+        write_png(tmp_path / name, image, PNG_PARAMS)
+        back = cv2.imread(str(tmp_path / name), cv2.IMREAD_UNCHANGED)
+        assert back.dtype == image.dtype
+        np.testing.assert_array_equal(back, image)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(images)  # no temporary left
+
+
+def test_bytes_are_opencv_png_whatever_the_suffix_and_an_old_file_is_replaced(tmp_path):
+    image = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    path = tmp_path / "sub" / "plot.jpg"
+    write_png(path, image)
+    assert path.read_bytes() == cv2.imencode(".png", image)[1].tobytes()
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    write_png(path, image[::-1].copy())
+    np.testing.assert_array_equal(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), image[::-1])
+
+
+def test_a_failed_encoding_leaves_the_old_file_whole(tmp_path):
+    path = tmp_path / "map.png"
+    path.write_bytes(b"old")
+    with pytest.raises(cv2.error):
+        write_png(path, np.zeros((2, 2, 2), dtype=np.uint8))  # PNG has no 2-channel pixels
+    assert path.read_bytes() == b"old" and [p.name for p in tmp_path.iterdir()] == ["map.png"]
