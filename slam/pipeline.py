@@ -1,8 +1,8 @@
 """The ``slam run`` pipeline: find the data, estimate, write the run folder.
 
-``run(request)`` resolves the configuration, loads the log (a registry dataset, the simulator's
-``demo``, or a log file/folder given by path), runs the chosen method, and writes the run folder
-atomically (it appears complete or not at all):
+``run(request)`` loads the log its NAME stands for (a registry dataset, the simulator's ``demo``,
+or a log file/folder given by path: :mod:`slam.io.sources` decides), runs the chosen method, and
+writes the run folder atomically (it appears complete or not at all):
 
 * ``config.toml``   — the exact configuration used (re-run with ``--config``);
 * ``trajectory.tum`` — one pose per processed scan (per encoder reading for ``odometry`` on
@@ -23,7 +23,7 @@ import json
 import resource
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -32,10 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, dumps
-from slam.errors import DataError
-from slam.io.atomic import atomic_dir, atomic_path, write_text
-from slam.io.log import Log
-from slam.io.tum import format_tum, read_tum
+from slam.io import sources
+from slam.io.atomic import atomic_dir, write_png, write_text
+from slam.io.sources import Source
+from slam.io.tum import format_tum
 from slam.mapping import OccupancyGrid
 from slam.particle_filter import Observer
 
@@ -62,73 +62,23 @@ class RunRequest:
     """Stream the recording live to a spawned rerun viewer (:mod:`slam.viz`)."""
 
 
-@dataclass
-class Source:
-    """A loaded log and what we know about it."""
-
-    log: Log
-    ground_truth: tuple[F64, F64] | None = None
-    """``(times, poses)`` of the true trajectory when the dataset has one (simulated logs)."""
-    notes: list[str] = field(default_factory=list)
-
-
 def _needs(config: Config) -> tuple[str, ...]:
     if config.filter.method == "odometry":
         return ("encoders", "imu")
     return ("encoders", "imu", "scans")
 
 
-def _ground_truth(folder: Path) -> tuple[F64, F64] | None:
-    path = folder / "groundtruth.tum"
-    return read_tum(path) if path.is_file() else None
-
-
 def load_source(name: str, data_dir: Path, config: Config, progress: bool = False) -> Source:
-    """Load the log ``name``: the demo, a registry dataset, or a path to a log."""
-    from slam.io import registry
-
-    need = _needs(config)
-    if name == "demo":
-        from slam.io.datadir import resolve_cache_dir
-        from slam.io.ece276a import load_ece276a
-        from slam.sim.demo import DEMO_NUMBER, ensure_demo
-
-        folder = ensure_demo(resolve_cache_dir(data_dir), progress=progress)
-        log = load_ece276a(folder, DEMO_NUMBER, need=need, name="demo", lidar=config.lidar)
-        return Source(log, _ground_truth(folder), [f"demo dataset: {folder}"])
-    path = Path(name)
-    if name not in registry.load_registry() and path.exists():
-        return _load_path(path, config, need)
-    if config.filter.method == "odometry":
-        carmen = registry.get_dataset(name).loader == "carmen"
-        need = () if carmen else need
-    elif registry.get_dataset(name).loader == "carmen":
-        need = ("scans",)
-    log = registry.load_dataset(name, data_dir, need=need, config=config)
-    return Source(log)
-
-
-def _load_path(path: Path, config: Config, need: tuple[str, ...]) -> Source:
-    if path.is_dir():
-        from slam.io.ece276a import load_ece276a
-
-        numbers = sorted(p.stem[len("Encoders") :] for p in path.glob("Encoders*.npz"))
-        if len(numbers) != 1:
-            raise DataError(
-                f"{path}: expected one EncodersNN.npz in an ECE276A dataset folder, "
-                f"found {len(numbers)}"
-            )
-        log = load_ece276a(path, numbers[0], need=need, name=path.name, lidar=config.lidar)
-        return Source(log, _ground_truth(path))
-    from slam.io.carmen import load_carmen
-
-    return Source(load_carmen(path, name=path.name.split(".")[0], lidar=config.lidar))
+    """Load the log ``name`` (see :func:`slam.io.sources.resolve`) with the streams the
+    configured method needs."""
+    ref = sources.resolve(name, data_dir, where="slam run NAME")
+    return sources.load(ref, config, _needs(config), progress)
 
 
 def default_run_dir(name: str) -> Path:
-    """``runs/<name>-<YYYYmmdd-HHMMSS>`` (with a numeric suffix if it already exists)."""
-    stem = Path(name).name.split(".")[0] or "run"
-    base = Path("runs") / f"{stem}-{datetime.now():%Y%m%d-%H%M%S}"
+    """``runs/<name>-<YYYYmmdd-HHMMSS>`` (with a numeric suffix if it already exists), ``name``
+    being the dataset's configuration name (the file or folder name up to its first dot)."""
+    base = Path("runs") / f"{name or 'run'}-{datetime.now():%Y%m%d-%H%M%S}"
     candidate, k = base, 1
     while candidate.exists():
         k += 1
@@ -170,16 +120,6 @@ def _peak_rss_mb() -> float:
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
 
 
-def _write_png(path: Path, image: NDArray[np.uint8]) -> None:
-    import cv2
-
-    ok, data = cv2.imencode(".png", image)
-    if not ok:
-        raise OSError(f"{path}: PNG encoding failed")
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data.tobytes())
-
-
 def run(request: RunRequest) -> Path:
     """Run ``slam run`` end to end; return the run folder.
 
@@ -188,14 +128,15 @@ def run(request: RunRequest) -> Path:
     output is written.
     """
     config = request.config
-    out = request.out or default_run_dir(request.name)
+    ref = sources.resolve(request.name, request.data_dir, where="slam run NAME")
+    out = request.out or default_run_dir(ref.config_name)
     if out.exists() and not request.force and any(out.iterdir()):
         raise FileExistsError(f"{out}: output folder exists and is not empty")
     wall_start = time.perf_counter()
     with atomic_dir(out, overwrite=request.force) as tmp:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            source = load_source(request.name, request.data_dir, config, request.progress)
+            source = sources.load(ref, config, _needs(config), request.progress)
             observers: list[Observer] = []
             from slam.viz.recorder import start_recording
 
@@ -220,7 +161,7 @@ def run(request: RunRequest) -> Path:
         if result.grid is not None:
             result.grid.save_npz(tmp / "map.npz")
             gt = None if source.ground_truth is None else source.ground_truth[1]
-            _write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
+            write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
         if recorder is not None:  # last: the recording logs the texture when there is one
             metrics["recording"] = recorder.finish(result.times, result.poses, result.grid, tmp)
         metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)

@@ -1051,37 +1051,6 @@ RUN_FILES = ("config.toml", "trajectory.tum", "map.npz")
 """What ``slam texture RUN_DIR`` reads from a run folder."""
 
 
-def load_run_log(name: str, data_dir: Path, config: Config) -> Log:
-    """The Kinect stream of dataset ``name``: ``demo`` (the cached simulated demo), a registry
-    dataset, or a path to an ECE276A dataset folder."""
-    from slam.io import registry
-    from slam.io.ece276a import load_ece276a
-
-    if name == "demo":
-        from slam.io.datadir import resolve_cache_dir
-        from slam.sim.demo import DEMO_NUMBER, ensure_demo
-
-        folder = ensure_demo(resolve_cache_dir(data_dir))
-        return load_ece276a(folder, DEMO_NUMBER, need=("kinect",), name="demo", lidar=config.lidar)
-    if name in registry.load_registry():
-        return registry.load_dataset(name, data_dir, need=("kinect",), config=config)
-    path = Path(name)
-    if path.is_dir():
-        numbers = sorted(p.stem[len("Kinect") :] for p in path.glob("Kinect*.npz"))
-        if len(numbers) != 1:
-            raise DataError(
-                f"{path}: expected one KinectNN.npz in an ECE276A dataset folder, "
-                f"found {len(numbers)}"
-            )
-        return load_ece276a(path, numbers[0], need=("kinect",), name=path.name, lidar=config.lidar)
-    from slam.errors import UsageError
-
-    raise UsageError(
-        f"dataset {name!r} is neither 'demo', a registry dataset (slam data list) nor an ECE276A "
-        "folder; give the dataset folder with --dataset PATH"
-    )
-
-
 def recompute_run(
     run_dir: Path,
     data_dir: Path,
@@ -1099,6 +1068,7 @@ def recompute_run(
 
     from slam.config import load_config
     from slam.errors import UsageError
+    from slam.io import sources
     from slam.io.tum import read_tum
 
     run_dir = Path(run_dir)
@@ -1118,6 +1088,9 @@ def recompute_run(
     name = dataset or config.dataset
     if not name:
         raise DataError(f"{run_dir / 'config.toml'}: no 'dataset' key; give --dataset")
+    where = "--dataset" if dataset else f"{run_dir / 'config.toml'}: dataset"
+    hint = "" if dataset else "give the dataset with --dataset NAME_OR_PATH"
+    ref = sources.resolve(name, data_dir, where=where, hint=hint)
     times, poses = read_tum(run_dir / "trajectory.tum")
     arrays = _load_npz(run_dir / "map.npz", ("log_odds", "resolution", "origin"))
     log_odds = np.asarray(arrays["log_odds"], dtype=np.float32)
@@ -1132,7 +1105,7 @@ def recompute_run(
     grid = OccupancyGrid.from_arrays(
         log_odds, float(resolution.reshape(())), origin.reshape(2), config.map
     )
-    log = load_run_log(name, data_dir, config)
+    log = sources.load(ref, config, need=("kinect",), progress=progress).log
     if log.rgbd is None:
         raise DataError(f"dataset {name}: no Kinect frames (KinectNN.npz)")
     why = images_missing(log)

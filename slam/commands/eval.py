@@ -1,9 +1,12 @@
 """``slam eval RUN_DIR``: accuracy of a run's trajectory against ground truth.
 
 ``--relations FILE`` applies the Kümmerle relation metric (CARMEN benchmark logs);
-``--reference FILE.tum`` computes ATE and RPE against a reference trajectory. Both may be given.
-The command reads ``RUN_DIR/trajectory.tum``, prints a table (or the JSON with ``--json``) and
-writes the same JSON to ``RUN_DIR/eval.json`` atomically (replacing an earlier one).
+``--reference FILE.tum`` computes ATE and RPE against a reference trajectory. Both may be given;
+with neither, the ground truth of the run's dataset is used (the 'dataset' of its config.toml, or
+--dataset NAME_OR_PATH): the registry's relations file of a CARMEN benchmark log, the
+groundtruth.tum of the demo or of a simulated dataset folder. The command reads
+``RUN_DIR/trajectory.tum``, prints a table (or the JSON with ``--json``) and writes the same JSON
+to ``RUN_DIR/eval.json`` atomically (replacing an earlier one).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from slam.commands._common import add_data_dir_argument, data_dir_from
 from slam.errors import DataError, UsageError
 
 TRAJECTORY_FILE = "trajectory.tum"
@@ -61,6 +65,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=DeltaUnit.FRAMES.value,
         help="unit of --delta (default frames)",
     )
+    parser.add_argument(
+        "--dataset",
+        metavar="NAME_OR_PATH",
+        help="dataset whose ground truth to use when neither --relations nor --reference is given "
+        "(default: the 'dataset' of the run's config.toml)",
+    )
+    add_data_dir_argument(parser)
     parser.set_defaults(func=run_eval)
 
 
@@ -69,8 +80,6 @@ def run_eval(args: argparse.Namespace) -> int:
     from slam.eval.report import format_table, to_json, write_eval_json
     from slam.io.tum import read_tum
 
-    if args.relations is None and args.reference is None:
-        raise UsageError("slam eval: give --relations FILE and/or --reference FILE.tum")
     if not args.tolerance > 0:
         raise UsageError(
             f"--tolerance: expected a positive number of seconds, found {args.tolerance}"
@@ -88,17 +97,17 @@ def run_eval(args: argparse.Namespace) -> int:
     for option, path in (("--relations", args.relations), ("--reference", args.reference)):
         if path is not None and path.is_dir():
             raise DataError(f"{path}: {option} expected a file, found a folder")
+    result: dict[str, Any] = {"trajectory": str(run_dir / TRAJECTORY_FILE)}
+    relations, reference = args.relations, args.reference
+    if relations is None and reference is None:
+        result["dataset"], relations, reference = _dataset_ground_truth(args, run_dir)
     times, poses = read_tum(run_dir / TRAJECTORY_FILE)
-
-    result: dict[str, Any] = {
-        "trajectory": str(run_dir / TRAJECTORY_FILE),
-        "poses": int(times.shape[0]),
-    }
-    if args.relations is not None:
-        result["relations"] = _relations(times, poses, args.relations, args.tolerance)
-    if args.reference is not None:
-        result["reference"] = str(args.reference)
-        result.update(_reference(times, poses, args))
+    result["poses"] = int(times.shape[0])
+    if relations is not None:
+        result["relations"] = _relations(times, poses, relations, args.tolerance)
+    if reference is not None:
+        result["reference"] = str(reference)
+        result.update(_reference(times, poses, reference, args))
 
     try:
         write_eval_json(run_dir, result)
@@ -134,11 +143,41 @@ def _relations(times: Any, poses: Any, path: Path, tolerance: float) -> dict[str
     return summary
 
 
-def _reference(times: Any, poses: Any, args: argparse.Namespace) -> dict[str, Any]:
+def _dataset_ground_truth(
+    args: argparse.Namespace, run_dir: Path
+) -> tuple[str, Path | None, Path | None]:
+    """The dataset of the run (``--dataset``, else its ``config.toml``) and its ground truth:
+    ``(name, relations file or None, reference trajectory or None)``, one of them set."""
+    from slam.config import load_config
+    from slam.io import sources
+
+    usage = "give --relations FILE and/or --reference FILE.tum"
+    config_file = run_dir / "config.toml"
+    name = args.dataset
+    if name is None and config_file.is_file():
+        name = load_config("", config_file).dataset or None
+    if name is None:
+        raise UsageError(f"slam eval: {usage} (no --dataset, and {config_file} names no dataset)")
+    where = "--dataset" if args.dataset else f"{config_file}: dataset"
+    ref = sources.resolve(name, data_dir_from(args), where=where, hint=usage)
+    relations = ref.relations
+    reference = ref.reference
+    if reference is not None:
+        sources.ensure(ref, progress=sys.stderr.isatty())  # the demo, generated if absent
+        reference = reference if reference.is_file() else None
+    if relations is None and reference is None:
+        expected = sources.GROUND_TRUTH_FILE if ref.reference is not None else "relations file"
+        raise UsageError(
+            f"{where}: dataset {name!r} ({ref.kind}) has no ground truth (no {expected}); {usage}"
+        )
+    return name, relations, reference
+
+
+def _reference(times: Any, poses: Any, path: Path, args: argparse.Namespace) -> dict[str, Any]:
     from slam.eval.trajectory import Alignment, DeltaUnit, evaluate_against_reference
     from slam.io.tum import read_tum
 
-    ref_times, ref_poses = read_tum(args.reference)
+    ref_times, ref_poses = read_tum(path)
     return evaluate_against_reference(
         times,
         poses,

@@ -77,16 +77,17 @@ def run_command(args: argparse.Namespace) -> int:
     import json
 
     from slam.config import load_config
+    from slam.io.sources import resolve
     from slam.pipeline import RunRequest, run
 
-    name = args.name
-    dataset = Path(name).name.split(".")[0] if Path(name).exists() else name
-    config = load_config(dataset, args.config, overrides_from(args))
+    data_dir = data_dir_from(args)
+    ref = resolve(args.name, data_dir, where="slam run NAME")
+    config = load_config(ref.config_name, args.config, overrides_from(args))
     out = run(
         RunRequest(
-            name=name,
+            name=args.name,
             config=config,
-            data_dir=data_dir_from(args),
+            data_dir=data_dir,
             out=args.out,
             force=args.force,
             progress=show_progress(args),

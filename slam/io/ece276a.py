@@ -16,6 +16,7 @@ and are counted in :attr:`ScanStream.invalid_beams`. RGB-D images are never read
 from __future__ import annotations
 
 import os
+import re
 import zipfile
 import zlib
 from collections.abc import Collection
@@ -141,6 +142,20 @@ SPECS: dict[str, StreamSpec] = {
 def stream_file(folder: Path, number: int | str, stream: str) -> Path:
     """Path of the file holding ``stream`` (one of :data:`STREAMS`) of dataset ``number``."""
     return Path(folder) / SPECS[stream].file_name(_number(number))
+
+
+def dataset_numbers(folder: Path) -> list[str]:
+    """The dataset numbers ``NN`` whose files (``EncodersNN.npz``, ``ImuNN.npz``, ``HokuyoNN.npz``,
+    ``KinectNN.npz``) are in ``folder``, sorted; empty when there are none (or no such folder)."""
+    patterns = [
+        re.compile(re.escape(prefix) + "(.+)" + re.escape(suffix) + r"\Z")
+        for prefix, _, suffix in (spec.pattern.partition("{nn}") for spec in SPECS.values())
+    ]
+    try:
+        names = [entry.name for entry in os.scandir(folder)]
+    except OSError:
+        return []
+    return sorted({m.group(1) for name in names for p in patterns if (m := p.match(name))})
 
 
 def rgbd_dirs(folder: Path, number: int | str) -> tuple[Path, Path]:
