@@ -30,6 +30,9 @@ from slam.resources import config_dir
 METHODS = ("odometry", "classic", "rbpf")
 """Estimation methods of ``slam run``."""
 
+TEXTURE_MODES = ("mean", "latest")
+"""Accumulation modes of the floor texture (``texture.mode``, ``slam texture --mode``)."""
+
 
 def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
     if value not in choices:
@@ -357,7 +360,7 @@ class TextureConfig:
     """Kinect yaw relative to the robot heading (rad), positive looks left."""
 
     def __post_init__(self) -> None:
-        _check_choice("texture.mode", self.mode, ("mean", "latest"))
+        _check_choice("texture.mode", self.mode, TEXTURE_MODES)
         if self.floor_height <= 0:
             raise ConfigError(f"texture.floor_height: expected > 0, found {self.floor_height}")
         if not 0 <= self.min_depth < self.max_depth:

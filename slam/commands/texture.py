@@ -13,6 +13,7 @@ import warnings
 from pathlib import Path
 
 from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.config import TEXTURE_MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -25,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder of `slam run`")
     parser.add_argument(
         "--mode",
-        choices=("mean", "latest"),
+        choices=TEXTURE_MODES,
         help="colour per cell: running mean of every sample, or the latest frame's "
         "(default: the run's texture.mode)",
     )
