@@ -70,7 +70,10 @@ def test_run_history_and_callback_for_a_recorder(tmp_path):
 @pytest.mark.parametrize(
     "change, message",
     [
-        (("[run]", "[run]\nbogus = 1"), r"s.toml: unknown key run.bogus"),
+        (
+            ("[run]", "[run]\nbogus = 1"),
+            r"s.toml: run.bogus: unknown key; expected one of steps, threshold",
+        ),
         (("p_correct = 0.9", 'p_correct = "high"'), r"s.toml: sensor.p_correct: expected a number"),
         (('type = "drift"', 'type = "teleport"'), r"s.toml: motion.type: expected one of"),
         (('"move E"', '"move up"'), r"s.toml: run.steps\[1\]: move 'up': expected one of N, E"),
@@ -89,8 +92,14 @@ def test_run_history_and_callback_for_a_recorder(tmp_path):
             ('map = ["GRG", "G#R"]', 'map = ["GR.", "G#R"]'),
             r"s.toml: \[sensor\] colour sensor: every open cell needs a colour; cell \(0, 2\)",
         ),
-        (('description = "tiny"', "description = 3"), r"scenario.description: expected a string"),
-        (("[world]", "[world]\nheadings = 2"), r"world.headings: expected 1 or 4"),
+        (
+            ('description = "tiny"', "description = 3"),
+            r"s.toml: description: expected a string, found 3",
+        ),
+        (
+            ("[world]", "[world]\nheadings = 2"),
+            r"s.toml: world.headings: expected one of 1, 4, found 2",
+        ),
     ],
 )
 def test_bad_scenarios_name_file_and_key(tmp_path, change, message):

@@ -207,6 +207,10 @@ def cmd_study(args: argparse.Namespace) -> int:
         threshold=args.threshold,
         seed=args.seed,
     )
+    from slam.discrete.scenario import check_world_memory
+
+    side = max(config.sizes)
+    check_world_memory(side, side, 1, f"--sizes {args.sizes}")
     if args.out.suffix.lower() != ".png":
         raise UsageError(f"--out {args.out}: expected a .png file name")
     total = len(config.sizes) * len(config.errors) * config.trials

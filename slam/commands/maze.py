@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
-from slam.errors import UsageError
+from slam.errors import ConfigError, UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -102,20 +102,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _options(pairs: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` strings to a dict of ints, floats or strings."""
+    """``KEY=VALUE`` strings to the bounded robot's options, typed by its fields.
+
+    Values are TOML literals (``0.5``, ``true``), never evaluated; a value of the wrong type or a
+    non-finite number is one :class:`~slam.errors.ConfigError` naming the option (its range is
+    checked by the robot's own configuration). Unknown keys are left to :func:`make_robot`.
+    """
+    from slam.maze.robots import BoundedConfig
+    from slam.validate import Bounds, check_value, coerce, field_types, parse_literal
+
+    types_ = field_types(BoundedConfig)
     options: dict[str, Any] = {}
     for pair in pairs:
         key, sep, text = pair.partition("=")
+        key = key.strip()
         if not sep or not key:
             raise UsageError(f"--set expects KEY=VALUE, found {pair!r}")
-        value: Any = text
-        for cast in (int, float):
-            try:
-                value = cast(text)
-                break
-            except ValueError:
-                continue
-        options[key.strip()] = value
+        value = parse_literal(text)
+        if key in types_:
+            value = coerce(value, types_[key], f"--set {pair}", key)
+            problem = check_value(value, types_[key], Bounds())
+            if problem is not None:
+                raise ConfigError(f"--set {pair}: {key}: expected {problem}, found {value!r}")
+        options[key] = value
     return options
 
 

@@ -3,9 +3,10 @@
 A scenario is a world, a sensor model, a motion model, a prior and a sequence of steps
 (``sense Z`` / ``move U``). This module owns
 
-* reading scenario TOML files (``configs/grid/*.toml``) — data only, parsed with ``tomllib``, every
-  key validated: an unknown key or a wrong type is a :class:`~slam.errors.ConfigError` naming the
-  file and the key;
+* reading scenario TOML files (``configs/grid/*.toml``) — data only, every table declared as a
+  validated dataclass (:mod:`slam.validate`): an unknown key, a wrong type or a value out of its
+  bounds is a :class:`~slam.errors.ConfigError` naming the file and the key; a world too large for
+  the machine's memory is refused before it is allocated (:mod:`slam.budget`);
 * reading ``gridloc/udacity_cases.json`` (cyclic world, uniform prior, per step MOVE then SENSE,
   motion "exact with ``p_move`` else stay", sensor correct with ``sensor_right``) into scenarios
   with their expected final posterior;
@@ -32,15 +33,16 @@ Scenario TOML, all tables optional except ``[world]``::
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from slam.budget import check_memory
 from slam.discrete.filter import HistogramFilter, ImpossibleObservation, localized
 from slam.discrete.motion import (
     DriftMotion,
@@ -51,9 +53,10 @@ from slam.discrete.motion import (
     UnknownHeading,
 )
 from slam.discrete.sensors import ColourSensor, ConfusionSensor, SensorModel, WnesSensor
-from slam.discrete.world import GridWorld, random_colour_world, world_from_rows
+from slam.discrete.world import HEADING_COUNTS, GridWorld, random_colour_world, world_from_rows
 from slam.errors import ConfigError, DataError, UsageError
 from slam.resources import config_dir
+from slam.validate import Rule, Validated, bounded, from_table, read_toml
 
 UDACITY_FILE = Path("gridloc") / "udacity_cases.json"
 """Location of the Udacity test vectors inside the data directory."""
@@ -225,182 +228,244 @@ def posterior_json(posterior: np.ndarray, world: GridWorld) -> list[list[float |
 # --- TOML scenarios -------------------------------------------------------------------------
 
 
-class _Table:
-    """A TOML table being validated: typed getters, unknown keys rejected, errors name the key."""
-
-    def __init__(self, source: str, where: str, data: Any) -> None:
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{source}: [{where}] must be a table, found {data!r}")
-        self.source, self.where, self.data = source, where, dict(data)
-
-    def fail(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.source}: {self.where}.{key}: {message}")
-
-    def allow(self, *keys: str) -> None:
-        for key in self.data:
-            if key not in keys:
-                raise ConfigError(
-                    f"{self.source}: unknown key {self.where}.{key}; expected one of "
-                    f"{', '.join(sorted(keys))}"
-                )
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def number(self, key: str, default: float | None = None) -> float:
-        value = self.data.get(key, default)
-        if value is None:
-            raise self.fail(key, "missing; expected a number")
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(key, f"expected a number, found {value!r}")
-        return float(value)
-
-    def integer(self, key: str, default: int | None = None) -> int:
-        value = self.data.get(key, default)
-        if value is None:
-            raise self.fail(key, "missing; expected an integer")
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, f"expected an integer, found {value!r}")
-        return value
-
-    def boolean(self, key: str, default: bool) -> bool:
-        value = self.data.get(key, default)
-        if not isinstance(value, bool):
-            raise self.fail(key, f"expected true or false, found {value!r}")
-        return value
-
-    def string(self, key: str, default: str | None = None) -> str:
-        value = self.data.get(key, default)
-        if value is None:
-            raise self.fail(key, "missing; expected a string")
-        if not isinstance(value, str):
-            raise self.fail(key, f"expected a string, found {value!r}")
-        return value
-
-    def strings(self, key: str) -> list[str]:
-        value = self.data.get(key)
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise self.fail(key, f"expected a list of strings, found {value!r}")
-        return value
-
-    def integers(self, key: str) -> list[int]:
-        value = self.data.get(key)
-        if not isinstance(value, list) or not all(
-            isinstance(v, int) and not isinstance(v, bool) for v in value
-        ):
-            raise self.fail(key, f"expected a list of integers, found {value!r}")
-        return value
-
-    def matrix(self, key: str) -> np.ndarray:
-        value = self.data.get(key)
-        if not isinstance(value, list) or not value:
-            raise self.fail(key, f"expected a non-empty list of numbers, found {value!r}")
-        rows = value if isinstance(value[0], list) else [value]
-        ok = all(isinstance(row, list) and len(row) == len(rows[0]) for row in rows) and all(
-            isinstance(v, int | float) and not isinstance(v, bool) for row in rows for v in row
-        )
-        if not ok:
-            raise self.fail(key, "expected a list of numbers or a list of equal-length rows")
-        return np.array(rows, dtype=float)
-
-    def table(self, key: str) -> _Table:
-        return _Table(self.source, f"{self.where}.{key}", self.data.get(key))
-
-    def choice(self, key: str, choices: tuple[str, ...]) -> str:
-        value = self.string(key)
-        if value not in choices:
-            raise self.fail(key, f"expected one of {', '.join(choices)}, found {value!r}")
-        return value
+def _probability(default: float | Any = dataclasses.MISSING) -> Any:
+    return bounded(default, ge=0.0, le=1.0)
 
 
-def _parse_world(t: _Table) -> GridWorld:
-    t.allow("map", "random", "legend", "cyclic", "headings")
-    cyclic = t.boolean("cyclic", False)
-    headings = t.integer("headings", 1)
-    if headings not in (1, 4):
-        raise t.fail("headings", f"expected 1 or 4, found {headings}")
-    if t.has("map") == t.has("random"):
-        raise ConfigError(f"{t.source}: [world] needs exactly one of map = [...] or [world.random]")
-    try:
-        if t.has("map"):
-            legend: dict[str, str] = {}
-            if t.has("legend"):
-                lt = t.table("legend")
-                legend = {key: lt.string(key) for key in lt.data}
-            return world_from_rows(t.strings("map"), legend, cyclic, headings)
-        r = t.table("random")
-        r.allow("rows", "cols", "colours", "seed", "counts")
-        counts = r.integers("counts") if r.has("counts") else None
-        rng = np.random.default_rng(r.integer("seed", 0))
-        return random_colour_world(
-            r.integer("rows"),
-            r.integer("cols"),
-            r.strings("colours"),
-            rng,
-            counts,
-            cyclic,
-            headings,
-        )
-    except ConfigError as exc:
-        if str(exc).startswith(t.source):
-            raise
-        raise ConfigError(f"{t.source}: {exc}") from None
+@dataclass(frozen=True)
+class _RandomWorldTable(Validated):
+    """``[world.random]``: a random colour map."""
+
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(
+            ("colours", "counts"),
+            lambda colours, counts: counts is None or len(counts) == len(colours),
+            "one count per colour",
+            blame=("counts",),
+        ),
+    )
+
+    rows: int = bounded(ge=1, le=1_000_000)
+    cols: int = bounded(ge=1, le=1_000_000)
+    colours: tuple[str, ...] = bounded(min_length=1)
+    seed: int = bounded(0, ge=0)
+    counts: tuple[int, ...] | None = bounded(None, ge=0)
 
 
-SENSOR_TYPES: tuple[str, ...] = ("colour", "wnes", "confusion")
+@dataclass(frozen=True)
+class _WorldTable(Validated):
+    """``[world]``."""
+
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(
+            ("map", "random"),
+            lambda rows, random: (rows is None) != (random is None),
+            "exactly one of map = [...] or a [world.random] table",
+        ),
+    )
+
+    map: tuple[str, ...] | None = None
+    random: _RandomWorldTable | None = None
+    legend: dict[str, str] = bounded(factory=dict)
+    cyclic: bool = False
+    headings: int = bounded(1, choices=HEADING_COUNTS)
+
+
+@dataclass(frozen=True)
+class _RunTable(Validated):
+    """``[run]``."""
+
+    steps: tuple[str, ...] = ()
+    threshold: float | None = bounded(None, gt=0.0, le=1.0)
+
+
+@dataclass(frozen=True)
+class _PriorTable(Validated):
+    """``[prior]``."""
+
+    values: Any = bounded()
+
+
+@dataclass(frozen=True)
+class _ScenarioTable(Validated):
+    """A whole scenario file; sensor and motion tables are read by their ``type``."""
+
+    world: _WorldTable = bounded()
+    description: str = ""
+    sensor: dict[str, Any] | None = None
+    motion: dict[str, Any] | None = None
+    prior: _PriorTable | None = None
+    run: _RunTable | None = None
+
+
+@dataclass(frozen=True)
+class _ColourTable(Validated):
+    type: str
+    p_correct: float = _probability()
+
+
+@dataclass(frozen=True)
+class _WnesTable(Validated):
+    type: str
+    p_obstacle_given_obstacle: float = _probability(0.85)
+    p_open_given_open: float = _probability(0.95)
+
+
+@dataclass(frozen=True)
+class _ConfusionTable(Validated):
+    type: str
+    matrix: Any = bounded()
+    observations: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class _ShiftTable(Validated):
+    type: str
+    p_exact: float = _probability(0.8)
+    p_undershoot: float = _probability(0.1)
+    p_overshoot: float = _probability(0.1)
+
+
+@dataclass(frozen=True)
+class _MoveOrStayTable(Validated):
+    type: str
+    p_move: float = _probability(1.0)
+
+
+@dataclass(frozen=True)
+class _DriftTable(Validated):
+    type: str
+    p_forward: float = _probability(0.8)
+    p_left: float = _probability(0.1)
+    p_right: float = _probability(0.1)
+
+
+@dataclass(frozen=True)
+class _UnknownHeadingTable(Validated):
+    type: str
+
+
+@dataclass(frozen=True)
+class _HeadingTable(Validated):
+    type: str
+    p_move: float = _probability(0.9)
+    p_turn: float = _probability(0.9)
+
+
+_SENSOR_TABLES: dict[str, type] = {
+    "colour": _ColourTable,
+    "wnes": _WnesTable,
+    "confusion": _ConfusionTable,
+}
+_MOTION_TABLES: dict[str, type] = {
+    "shift": _ShiftTable,
+    "move_or_stay": _MoveOrStayTable,
+    "drift": _DriftTable,
+    "unknown_heading": _UnknownHeadingTable,
+    "heading": _HeadingTable,
+}
+
+SENSOR_TYPES: tuple[str, ...] = tuple(_SENSOR_TABLES)
 """Values of ``sensor.type``."""
 
-MOTION_TYPES: tuple[str, ...] = ("shift", "move_or_stay", "drift", "unknown_heading", "heading")
+MOTION_TYPES: tuple[str, ...] = tuple(_MOTION_TABLES)
 """Values of ``motion.type``."""
 
+GRID_BYTES_PER_STATE = 40
+"""Memory one state (cell × heading) of a grid world costs while the filter runs: the float64
+belief, its spare buffer, a likelihood and two motion temporaries (8 bytes each)."""
 
-def _parse_sensor(t: _Table) -> SensorModel:
-    kind = t.choice("type", SENSOR_TYPES)
+
+def _typed(table: Mapping[str, Any], source: str, where: str, specs: dict[str, type]) -> Any:
+    """The table read as the dataclass its ``type`` names."""
+    if "type" not in table:
+        raise ConfigError(f"{source}: {where}.type: required key is missing")
+    kind = table["type"]
+    if kind not in specs:
+        raise ConfigError(
+            f"{source}: {where}.type: expected one of {', '.join(specs)}, found {kind!r}"
+        )
+    return from_table(specs[kind], table, source, where)
+
+
+def _matrix(value: Any, source: str, key: str) -> np.ndarray:
+    """A list of numbers or a list of equal-length rows, as a 2-D float array."""
+    if not isinstance(value, list) or not value:
+        raise ConfigError(f"{source}: {key}: expected a non-empty list of numbers, found {value!r}")
+    rows = value if isinstance(value[0], list) else [value]
+    ok = all(isinstance(row, list) and len(row) == len(rows[0]) for row in rows) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)
+        for row in rows
+        for v in row
+    )
+    if not ok:
+        raise ConfigError(
+            f"{source}: {key}: expected a list of finite numbers or a list of equal-length rows"
+        )
+    return np.array(rows, dtype=float)
+
+
+def check_world_memory(rows: int, cols: int, headings: int, source: str) -> None:
+    """Refuse (before allocating) a world whose filter would not fit in memory (:mod:`slam.budget`)."""
+    states = rows * cols * headings
+    check_memory(
+        states * GRID_BYTES_PER_STATE,
+        f"{source}: a {rows}×{cols} world with {headings} heading(s) ({states} states)",
+        "use a smaller world",
+    )
+
+
+def _parse_world(t: _WorldTable, source: str) -> GridWorld:
     try:
-        if kind == "colour":
-            t.allow("type", "p_correct")
-            return ColourSensor(t.number("p_correct"))
-        if kind == "wnes":
-            t.allow("type", "p_obstacle_given_obstacle", "p_open_given_open")
-            return WnesSensor(
-                t.number("p_obstacle_given_obstacle", 0.85), t.number("p_open_given_open", 0.95)
+        if t.map is not None:
+            check_world_memory(
+                len(t.map), max((len(r) for r in t.map), default=0), t.headings, source
             )
-        t.allow("type", "matrix", "observations")
-        names = tuple(t.strings("observations")) if t.has("observations") else ()
-        return ConfusionSensor(t.matrix("matrix"), names)
+            return world_from_rows(list(t.map), dict(t.legend), t.cyclic, t.headings)
+        r = t.random
+        assert r is not None  # guaranteed by the _WorldTable rule
+        check_world_memory(r.rows, r.cols, t.headings, source)
+        rng = np.random.default_rng(r.seed)
+        counts = None if r.counts is None else list(r.counts)
+        return random_colour_world(
+            r.rows, r.cols, list(r.colours), rng, counts, t.cyclic, t.headings
+        )
     except ConfigError as exc:
-        if str(exc).startswith(t.source):
+        if str(exc).startswith(source):
             raise
-        raise ConfigError(f"{t.source}: {exc}") from None
+        raise ConfigError(f"{source}: {exc}") from None
 
 
-def _parse_motion(t: _Table) -> MotionModel:
-    kind = t.choice("type", MOTION_TYPES)
+def _parse_sensor(table: Mapping[str, Any], source: str) -> SensorModel:
+    t = _typed(table, source, "sensor", _SENSOR_TABLES)
     try:
-        if kind == "shift":
-            t.allow("type", "p_exact", "p_undershoot", "p_overshoot")
-            return ShiftMotion(
-                t.number("p_exact", 0.8),
-                t.number("p_undershoot", 0.1),
-                t.number("p_overshoot", 0.1),
-            )
-        if kind == "move_or_stay":
-            t.allow("type", "p_move")
-            return MoveOrStay(t.number("p_move", 1.0))
-        if kind == "drift":
-            t.allow("type", "p_forward", "p_left", "p_right")
-            return DriftMotion(
-                t.number("p_forward", 0.8), t.number("p_left", 0.1), t.number("p_right", 0.1)
-            )
-        if kind == "unknown_heading":
-            t.allow("type")
+        if isinstance(t, _ColourTable):
+            return ColourSensor(t.p_correct)
+        if isinstance(t, _WnesTable):
+            return WnesSensor(t.p_obstacle_given_obstacle, t.p_open_given_open)
+        return ConfusionSensor(_matrix(t.matrix, source, "sensor.matrix"), t.observations)
+    except ConfigError as exc:
+        if str(exc).startswith(source):
+            raise
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def _parse_motion(table: Mapping[str, Any], source: str) -> MotionModel:
+    t = _typed(table, source, "motion", _MOTION_TABLES)
+    try:
+        if isinstance(t, _ShiftTable):
+            return ShiftMotion(t.p_exact, t.p_undershoot, t.p_overshoot)
+        if isinstance(t, _MoveOrStayTable):
+            return MoveOrStay(t.p_move)
+        if isinstance(t, _DriftTable):
+            return DriftMotion(t.p_forward, t.p_left, t.p_right)
+        if isinstance(t, _UnknownHeadingTable):
             return UnknownHeading()
-        t.allow("type", "p_move", "p_turn")
-        return HeadingMotion(t.number("p_move", 0.9), t.number("p_turn", 0.9))
+        return HeadingMotion(t.p_move, t.p_turn)
     except ConfigError as exc:
-        if str(exc).startswith(t.source):
+        if str(exc).startswith(source):
             raise
-        raise ConfigError(f"{t.source}: {exc}") from None
+        raise ConfigError(f"{source}: {exc}") from None
 
 
 def parse_steps(
@@ -436,67 +501,46 @@ def parse_steps(
     return tuple(steps)
 
 
-def _parse_prior(t: _Table, world: GridWorld) -> np.ndarray:
-    t.allow("values")
-    values = t.matrix("values")
+def _parse_prior(t: _PriorTable, world: GridWorld, source: str) -> np.ndarray:
+    values = _matrix(t.values, source, "prior.values")
     if values.shape != world.shape:
-        raise t.fail(
-            "values",
-            f"expected {world.shape[0]}×{world.shape[1]} values, found {values.shape[0]}×{values.shape[1]}",
+        raise ConfigError(
+            f"{source}: prior.values: expected {world.shape[0]}×{world.shape[1]} values, "
+            f"found {values.shape[0]}×{values.shape[1]}"
         )
     if (values < 0).any() or not values.sum() > 0:
-        raise t.fail("values", "expected non-negative probabilities with a positive sum")
+        raise ConfigError(
+            f"{source}: prior.values: expected non-negative probabilities with a positive sum"
+        )
     if (values[world.blocked] > 0).any():
-        raise t.fail("values", "obstacle cells must have prior probability 0")
+        raise ConfigError(f"{source}: prior.values: obstacle cells must have prior probability 0")
     return values / values.sum()
 
 
 def scenario_from_toml(data: Mapping[str, Any], source: str, name: str) -> Scenario:
     """Build a scenario from parsed TOML ``data`` (``source`` names the file in errors)."""
-    top = _Table(source, "scenario", data)
-    top.allow("description", "world", "sensor", "motion", "prior", "run")
-    if not top.has("world"):
-        raise ConfigError(f"{source}: missing [world] table")
-    description = top.string("description", "")
-    world = _parse_world(_Table(source, "world", data["world"]))
-    sensor = _parse_sensor(_Table(source, "sensor", data["sensor"])) if top.has("sensor") else None
-    motion = _parse_motion(_Table(source, "motion", data["motion"])) if top.has("motion") else None
+    top = from_table(_ScenarioTable, data, source, "")
+    world = _parse_world(top.world, source)
+    sensor = _parse_sensor(top.sensor, source) if top.sensor is not None else None
+    motion = _parse_motion(top.motion, source) if top.motion is not None else None
     for model, table in ((sensor, "sensor"), (motion, "motion")):
         if model is not None:
             try:
                 model.check(world)  # type: ignore[attr-defined]
             except ConfigError as exc:
                 raise ConfigError(f"{source}: [{table}] {exc}") from None
-    prior = (
-        _parse_prior(_Table(source, "prior", data["prior"]), world) if top.has("prior") else None
+    prior = _parse_prior(top.prior, world, source) if top.prior is not None else None
+    run = top.run or _RunTable()
+    steps = parse_steps(list(run.steps), world, sensor, motion, source)
+    return Scenario(
+        name, world, sensor, motion, steps, prior, run.threshold, top.description, None, source
     )
-    steps: tuple[Step, ...] = ()
-    threshold = None
-    if top.has("run"):
-        run = _Table(source, "run", data["run"])
-        run.allow("steps", "threshold")
-        if run.has("steps"):
-            steps = parse_steps(run.strings("steps"), world, sensor, motion, source)
-        if run.has("threshold"):
-            threshold = run.number("threshold")
-            if not 0.0 < threshold <= 1.0:
-                raise run.fail("threshold", f"expected a probability in (0, 1], found {threshold}")
-    return Scenario(name, world, sensor, motion, steps, prior, threshold, description, None, source)
 
 
 def load_scenario(path: Path) -> Scenario:
     """Read and validate a scenario TOML file."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: scenario file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read scenario ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
-    return scenario_from_toml(data, str(path), path.stem)
+    return scenario_from_toml(read_toml(path, "scenario file"), str(path), path.stem)
 
 
 def shipped_dir() -> Path:

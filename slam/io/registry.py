@@ -1,6 +1,7 @@
 """The dataset registry: dataset names -> loader, files, expected figures; status and verification.
 
-This module owns ``data/datasets.toml`` (its schema and validation), the question "which files of
+This module owns ``data/datasets.toml`` (its schema, declared as validated dataclasses with
+:mod:`slam.validate`), the question "which files of
 a dataset are under the data directory" (:func:`dataset_status`), loading a dataset by name
 whatever its format (:func:`load_dataset`, which dispatches to the format's loader) and the checks
 of ``slam data verify`` (:func:`verify_dataset`: sizes and sha256 where known, then the loader's
@@ -13,16 +14,16 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tomllib
+import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from slam.errors import ConfigError, DataError
 from slam.io.datadir import check_readable_dir, is_present, put_files_hint
-from slam.io.text import decode_utf8
 from slam.resources import registry_path
+from slam.validate import Rule, Validated, bounded, from_table, read_toml
 
 if TYPE_CHECKING:
     from slam.config import Config
@@ -54,20 +55,52 @@ STATES: tuple[str, ...] = ("present", "partial", "absent")
 """Values of :attr:`DatasetStatus.state`."""
 
 
+def _is_relative(text: str) -> bool:
+    """Whether ``text`` is a ``/``-separated path inside the data directory."""
+    parts = text.rstrip("/").split("/")
+    return not (text.startswith("/") or "\\" in text or any(p in ("", ".", "..") for p in parts))
+
+
+_RELATIVE = "a path relative to the data directory (like 'ece276a/Encoders20.npz')"
+_SHA256 = re.compile(r"[0-9a-fA-F]{64}\Z")
+
+
 @dataclass(frozen=True)
-class DataFile:
+class DataFile(Validated):
     """One file (or folder, when :attr:`path` ends with ``/``) of a dataset."""
 
-    path: str
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(
+            ("path", "size", "sha256"),
+            lambda path, size, sha: not path.endswith("/") or (size is None and sha is None),
+            "no size or sha256 on a folder (a path ending in /)",
+            blame=("size",),
+        ),
+        Rule(
+            ("path", "entries"),
+            lambda path, entries: path.endswith("/") or entries is None,
+            "entries only on a folder (a path ending in /)",
+            blame=("entries",),
+        ),
+    )
+
+    path: str = bounded(test=_is_relative, expected=_RELATIVE)
     """Location relative to the data directory, ``/``-separated."""
-    streams: tuple[str, ...]
+    streams: tuple[str, ...] = bounded(min_length=1, choices=FILE_STREAMS)
     """What it provides (see :data:`FILE_STREAMS`)."""
-    size: int | None = None
+    size: int | None = bounded(None, ge=0)
     """Size in bytes, when known."""
-    sha256: str | None = None
-    """SHA-256 of the contents (hex), when known."""
-    entries: int | None = None
+    sha256: str | None = bounded(
+        None, test=lambda v: bool(_SHA256.match(v)), expected="64 hex digits"
+    )
+    """SHA-256 of the contents (hex, lower case), when known."""
+    entries: int | None = bounded(None, ge=0)
     """Folders: how many files it should hold, when known."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.sha256 is not None and self.sha256 != self.sha256.lower():
+            object.__setattr__(self, "sha256", self.sha256.lower())
 
     @property
     def is_dir(self) -> bool:
@@ -80,12 +113,12 @@ class DataFile:
 
 
 @dataclass(frozen=True)
-class Expectation:
+class Expectation(Validated):
     """Figures a stream of a dataset should show once loaded."""
 
-    count: int | None = None
+    count: int | None = bounded(None, ge=0)
     """Exact number of readings."""
-    rate_hz: float | None = None
+    rate_hz: float | None = bounded(None, gt=0.0)
     """Nominal reading rate (Hz); verify accepts :data:`RATE_TOLERANCE` relative deviation."""
 
 
@@ -149,225 +182,105 @@ class DatasetStatus:
 # --- reading the registry -------------------------------------------------------------------
 
 
+def _one_log_file(loader: str, files: tuple[DataFile, ...]) -> bool:
+    return loader != "carmen" or sum("scans" in f.streams for f in files) == 1
+
+
+@dataclass(frozen=True)
+class _DatasetTable(Validated):
+    """A ``[datasets.NAME]`` table as written (its name is the table's key)."""
+
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(
+            ("loader", "number"),
+            lambda loader, number: loader != "ece276a" or number is not None,
+            "a dataset number for an ece276a dataset (e.g. number = 20)",
+            blame=("number",),
+        ),
+        Rule(
+            ("loader", "number"),
+            lambda loader, number: loader == "ece276a" or number is None,
+            "no number: only ece276a datasets have one",
+            blame=("number",),
+        ),
+        Rule(
+            ("relations", "files"),
+            lambda relations, files: relations is None or relations in [f.path for f in files],
+            "a relations file that is also listed under files",
+            blame=("relations",),
+        ),
+        Rule(
+            ("loader", "files"),
+            _one_log_file,
+            "exactly one file providing 'scans' (the log) in a carmen dataset",
+            blame=("files",),
+        ),
+    )
+
+    loader: str = bounded(choices=LOADERS)
+    """``"ece276a"`` or ``"carmen"``."""
+    folder: str = bounded(test=_is_relative, expected=_RELATIVE)
+    files: tuple[DataFile, ...] = bounded(min_length=1, expected="a non-empty list of tables")
+    description: str = bounded(min_length=1)
+    source: str = bounded(min_length=1)
+    number: int | str | None = bounded(
+        None,
+        test=lambda v: isinstance(v, int) or bool(re.fullmatch(r"[0-9A-Za-z_-]+", v)),
+        expected="a dataset number such as 20",
+    )
+    relations: str | None = bounded(None, test=_is_relative, expected=_RELATIVE)
+    expect: dict[str, Expectation] = bounded(factory=dict, choices=EXPECT_STREAMS)
+
+
+@dataclass(frozen=True)
+class _RegistryTable(Validated):
+    """The whole ``datasets.toml``."""
+
+    datasets: dict[str, Any] = bounded(
+        test=lambda d: len(d) > 0, expected="at least one dataset table"
+    )
+    schema: int = bounded(1, choices=(1,))
+
+
 def load_registry(path: Path | None = None) -> dict[str, Dataset]:
     """Read and validate the registry (default: the project's ``data/datasets.toml``).
 
     Raises :class:`ConfigError` naming the file and the offending key.
     """
     path = Path(path) if path is not None else registry_path()
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: dataset registry not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the dataset registry ({exc.strerror})") from None
-    try:
-        raw = tomllib.loads(decode_utf8(path, data, ConfigError))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
-    return parse_registry(raw, str(path))
+    return parse_registry(read_toml(path, "dataset registry"), str(path))
 
 
 def parse_registry(raw: Mapping[str, Any], source: str = "datasets.toml") -> dict[str, Dataset]:
     """Validate a parsed registry table; ``source`` prefixes every error message."""
-    _keys(raw, source, "", required=("datasets",), optional=("schema",))
-    schema = raw.get("schema", 1)
-    if schema != 1:
-        raise ConfigError(f"{source}: schema: expected 1, found {schema!r}")
-    table = _table(raw["datasets"], source, "datasets")
-    if not table:
-        raise ConfigError(f"{source}: datasets: expected at least one dataset, found none")
-    return {name: _dataset(name, value, source) for name, value in table.items()}
-
-
-def _where(source: str, key: str) -> str:
-    return f"{source}: {key}" if key else source
-
-
-def _table(value: Any, source: str, key: str) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"{_where(source, key)}: expected a table, found {value!r}")
-    return value
-
-
-def _keys(
-    table: Mapping[str, Any],
-    source: str,
-    key: str,
-    required: tuple[str, ...],
-    optional: tuple[str, ...] = (),
-) -> None:
-    prefix = f"{key}." if key else ""
-    for name in required:
-        if name not in table:
-            raise ConfigError(f"{_where(source, prefix + name)}: required key is missing")
-    allowed = set(required) | set(optional)
-    for name in table:
-        if name not in allowed:
-            raise ConfigError(
-                f"{_where(source, prefix + name)}: unknown key; expected one of "
-                f"{', '.join(sorted(allowed))}"
-            )
-
-
-def _string(value: Any, source: str, key: str) -> str:
-    if not isinstance(value, str) or not value.strip():
-        raise ConfigError(f"{_where(source, key)}: expected a non-empty string, found {value!r}")
-    return value
-
-
-def _count(value: Any, source: str, key: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ConfigError(f"{_where(source, key)}: expected an integer >= 0, found {value!r}")
-    return value
-
-
-def _relative(value: Any, source: str, key: str) -> str:
-    text = _string(value, source, key)
-    parts = text.rstrip("/").split("/")
-    if text.startswith("/") or "\\" in text or any(p in ("", ".", "..") for p in parts):
-        raise ConfigError(
-            f"{_where(source, key)}: expected a path relative to the data directory "
-            f"(like 'ece276a/Encoders20.npz'), found {text!r}"
-        )
-    return text
+    top = from_table(_RegistryTable, raw, source, "")
+    return {name: _dataset(name, value, source) for name, value in top.datasets.items()}
 
 
 def _dataset(name: str, value: Any, source: str) -> Dataset:
     key = f"datasets.{name}"
-    table = _table(value, source, key)
-    _keys(
-        table,
-        source,
-        key,
-        required=("loader", "folder", "files", "description", "source"),
-        optional=("number", "relations", "expect"),
-    )
-    loader = _string(table["loader"], source, f"{key}.loader")
-    if loader not in LOADERS:
-        raise ConfigError(
-            f"{source}: {key}.loader: expected one of {', '.join(LOADERS)}, found {loader!r}"
-        )
-    folder = _relative(table["folder"], source, f"{key}.folder")
-    files_raw = table["files"]
-    if not isinstance(files_raw, list) or not files_raw:
-        raise ConfigError(
-            f"{source}: {key}.files: expected a non-empty list of tables, found {files_raw!r}"
-        )
-    files = tuple(_file(f, source, f"{key}.files[{i}]") for i, f in enumerate(files_raw))
-    for i, f in enumerate(files):
-        if not f.path.startswith(folder.rstrip("/") + "/"):
+    table = from_table(_DatasetTable, value, source, key)
+    folder = table.folder.rstrip("/")
+    paths = [f.path for f in table.files]
+    for i, f in enumerate(table.files):
+        if not f.path.startswith(folder + "/"):
             raise ConfigError(
                 f"{source}: {key}.files[{i}].path: expected a path inside the dataset folder "
-                f"{folder!r}, found {f.path!r}"
+                f"{table.folder!r}, found {f.path!r}"
             )
-    paths = [f.path for f in files]
     duplicate = next((p for p in paths if paths.count(p) > 1), None)
     if duplicate:
         raise ConfigError(f"{source}: {key}.files: {duplicate!r} is listed twice")
-
-    number = None
-    if loader == "ece276a":
-        if "number" not in table:
-            raise ConfigError(
-                f"{source}: {key}.number: required for an ece276a dataset (e.g. number = 20)"
-            )
-        raw_number = table["number"]
-        if isinstance(raw_number, bool) or not isinstance(raw_number, int | str):
-            raise ConfigError(
-                f"{source}: {key}.number: expected an integer or string, found {raw_number!r}"
-            )
-        number = str(raw_number)
-    elif "number" in table:
-        raise ConfigError(f"{source}: {key}.number: only ece276a datasets have a number")
-
-    relations = None
-    if "relations" in table:
-        relations = _relative(table["relations"], source, f"{key}.relations")
-        if relations not in paths:
-            raise ConfigError(
-                f"{source}: {key}.relations: {relations!r} must also be listed under files"
-            )
-    if loader == "carmen":
-        logs = [f for f in files if "scans" in f.streams]
-        if len(logs) != 1:
-            raise ConfigError(
-                f"{source}: {key}.files: a carmen dataset needs exactly one file providing "
-                f"'scans' (the log), found {len(logs)}"
-            )
-
-    expect: dict[str, Expectation] = {}
-    if "expect" in table:
-        for stream, spec in _table(table["expect"], source, f"{key}.expect").items():
-            where = f"{key}.expect.{stream}"
-            if stream not in EXPECT_STREAMS:
-                raise ConfigError(
-                    f"{source}: {where}: unknown stream; expected one of "
-                    f"{', '.join(EXPECT_STREAMS)}"
-                )
-            spec = _table(spec, source, where)
-            _keys(spec, source, where, required=(), optional=("count", "rate_hz"))
-            rate = spec.get("rate_hz")
-            if rate is not None and (
-                isinstance(rate, bool) or not isinstance(rate, int | float) or rate <= 0
-            ):
-                raise ConfigError(
-                    f"{source}: {where}.rate_hz: expected a positive number, found {rate!r}"
-                )
-            count = spec.get("count")
-            expect[stream] = Expectation(
-                count=None if count is None else _count(count, source, f"{where}.count"),
-                rate_hz=None if rate is None else float(rate),
-            )
-
     return Dataset(
         name=name,
-        loader=loader,
-        folder=folder.rstrip("/"),
-        files=files,
-        description=_string(table["description"], source, f"{key}.description"),
-        source=_string(table["source"], source, f"{key}.source"),
-        number=number,
-        relations=relations,
-        expect=expect,
-    )
-
-
-def _file(value: Any, source: str, key: str) -> DataFile:
-    table = _table(value, source, key)
-    _keys(table, source, key, required=("path", "streams"), optional=("size", "sha256", "entries"))
-    path = _relative(table["path"], source, f"{key}.path")
-    streams = table["streams"]
-    if not isinstance(streams, list) or not streams:
-        raise ConfigError(
-            f"{source}: {key}.streams: expected a non-empty list of stream names, found {streams!r}"
-        )
-    for s in streams:
-        if s not in FILE_STREAMS:
-            raise ConfigError(
-                f"{source}: {key}.streams: unknown stream {s!r}; expected some of "
-                f"{', '.join(FILE_STREAMS)}"
-            )
-    size = table.get("size")
-    sha = table.get("sha256")
-    entries = table.get("entries")
-    is_dir = path.endswith("/")
-    if is_dir and (size is not None or sha is not None):
-        raise ConfigError(f"{source}: {key}: a folder ({path!r}) has no size or sha256")
-    if not is_dir and entries is not None:
-        raise ConfigError(f"{source}: {key}.entries: only folders (paths ending in /) have entries")
-    if sha is not None:
-        sha = _string(sha, source, f"{key}.sha256").lower()
-        if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
-            raise ConfigError(
-                f"{source}: {key}.sha256: expected 64 hex digits, found {table['sha256']!r}"
-            )
-    return DataFile(
-        path=path,
-        streams=tuple(streams),
-        size=None if size is None else _count(size, source, f"{key}.size"),
-        sha256=sha,
-        entries=None if entries is None else _count(entries, source, f"{key}.entries"),
+        loader=table.loader,
+        folder=folder,
+        files=table.files,
+        description=table.description,
+        source=table.source,
+        number=None if table.number is None else str(table.number),
+        relations=table.relations,
+        expect=table.expect,
     )
 
 

@@ -8,12 +8,13 @@ from slam.errors import DataError, SlamError
 
 
 def decode_utf8(path: Path, raw: bytes, error: type[SlamError] = DataError) -> str:
-    """``raw`` (the contents of ``path``) as UTF-8 text; ``error`` naming the file, the line and
-    the offending byte when it is not text."""
+    """``raw`` (the contents of ``path``) as UTF-8 text; ``error`` naming the file, the line, the
+    offending byte and its offset in the file when it is not text."""
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         lineno = raw.count(b"\n", 0, exc.start) + 1
         raise error(
-            f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x}"
+            f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x} "
+            f"(byte offset {exc.start}; the file must be UTF-8)"
         ) from None

@@ -1,0 +1,82 @@
+"""Memory budget: refuse, before allocating, work that would need more memory than the machine has.
+
+A run, a simulation, a grid world or a file header can ask for more memory than exists (a
+``--particles`` typo, a header claiming 10¹¹ values, a 100000² grid). Allocating first fails late
+(numpy's ``MemoryError`` traceback, the OOM killer, a machine swapping for minutes). Instead, each
+of those computes an estimate of its largest allocations from what it was asked, and
+:func:`check_memory` refuses with one line when the estimate exceeds ``share`` of the physical
+memory (``os.sysconf``), or of the cgroup's limit when that is lower. The share is
+``checks.max_memory_share`` of the run configuration (default :data:`DEFAULT_MEMORY_SHARE`).
+
+Estimates count the arrays that grow with the input (per-scan, per-particle, per-cell); the fixed
+overhead of the interpreter and libraries is not part of them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from slam.errors import UsageError
+
+DEFAULT_MEMORY_SHARE = 0.5
+"""Share of the physical memory one command may plan to use (``checks.max_memory_share``)."""
+
+_CGROUP_LIMITS = (
+    Path("/sys/fs/cgroup/memory.max"),
+    Path("/sys/fs/cgroup/memory/memory.limit_in_bytes"),
+)
+
+
+def physical_memory_bytes() -> int:
+    """The machine's physical memory, or the cgroup's memory limit when that is lower (bytes)."""
+    try:
+        total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: assume a small machine
+        total = 4 << 30
+    for path in _CGROUP_LIMITS:
+        try:
+            text = path.read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and 0 < int(text) < total:
+            total = int(text)
+    return total
+
+
+def memory_limit(share: float = DEFAULT_MEMORY_SHARE) -> int:
+    """Bytes one command may plan to use: ``share`` of :func:`physical_memory_bytes`."""
+    return int(share * physical_memory_bytes())
+
+
+def format_bytes(n: float) -> str:
+    """``n`` bytes for people (``"1.5 GiB"``)."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} EiB"  # pragma: no cover - the loop always returns
+
+
+def check_memory(
+    needed: float,
+    what: str,
+    hint: str,
+    share: float = DEFAULT_MEMORY_SHARE,
+    setting: str | None = None,
+    limit: int | None = None,
+) -> None:
+    """Refuse (:class:`~slam.errors.UsageError`) when ``needed`` bytes exceed the budget.
+
+    ``what`` says what would need the memory (``"intel: 100000 particle maps of ..."``), ``hint``
+    what to change, ``setting`` the configuration key that sets ``share`` (if any). ``limit``
+    replaces :func:`memory_limit` (tests).
+    """
+    budget = memory_limit(share) if limit is None else limit
+    if needed > budget:
+        key = f", {setting}" if setting else ""
+        raise UsageError(
+            f"{what} would need about {format_bytes(needed)} of memory; the limit is "
+            f"{format_bytes(budget)} ({share:g} of this machine's "
+            f"{format_bytes(physical_memory_bytes())}{key}); {hint}"
+        )
