@@ -16,8 +16,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from slam.errors import UsageError
+
+if TYPE_CHECKING:
+    from slam.config import Config
 
 DEFAULT_MEMORY_SHARE = 0.5
 """Share of the physical memory one command may plan to use (``checks.max_memory_share``)."""
@@ -80,3 +84,65 @@ def check_memory(
             f"{format_bytes(budget)} ({share:g} of this machine's "
             f"{format_bytes(physical_memory_bytes())}{key}); {hint}"
         )
+
+
+GRID_BYTES_PER_CELL = 16
+"""Occupancy-grid memory per cell: the float32 log-odds, the copy ``np.pad`` makes when the grid
+grows, the cropped copy and the rendered picture."""
+SCAN_BYTES_PER_READING = 12
+"""Per processed scan and beam: the selected float32 ranges and the cached float32 endpoints."""
+
+
+def run_memory(
+    config: Config, scans: int, beams: int, extent_x_m: float, extent_y_m: float, reach_m: float
+) -> dict[str, float]:
+    """Estimated bytes of the largest allocations of a run, by component.
+
+    ``scans`` × ``beams`` is the processed scan sequence, ``extent_*_m`` the odometry's bounding
+    box and ``reach_m`` the longest obstacle range; maps cover the box plus the reach and the
+    growth margin on every side (at least ``map.initial_size_m``). Components: ``scans``,
+    ``occupancy grid`` and, for ``rbpf``, ``particle-map tables`` (one tile index per particle
+    and tile, twice while resampling) and ``particle-map tiles`` (the shared map plus, per
+    particle, the tiles one update copies).
+    """
+    m = config.map
+    margin = 2.0 * (reach_m + m.grow_margin_m + 1.0)
+    side_x = max(extent_x_m + margin, m.initial_size_m)
+    side_y = max(extent_y_m + margin, m.initial_size_m)
+    cells = (side_x / m.resolution) * (side_y / m.resolution)
+    out = {
+        "scans": float(scans) * beams * SCAN_BYTES_PER_READING,
+        "occupancy grid": cells * GRID_BYTES_PER_CELL,
+    }
+    if config.filter.method == "rbpf":
+        rc = config.rbpf
+        tile_m = rc.tile * (rc.resolution or m.resolution)
+        tiles = (side_x / tile_m + 1) * (side_y / tile_m + 1)
+        per_update = min(tiles, min(rc.insert_beams, beams))
+        tile_bytes = 2 * 4 * rc.tile * rc.tile  # distance and plane layers, float32
+        particles = config.filter.particles
+        out["particle-map tables"] = 2.0 * particles * tiles * 4
+        out["particle-map tiles"] = (tiles + particles * per_update) * tile_bytes
+    return out
+
+
+_HINTS = {
+    "scans": "process fewer scans (filter.every, --max-scans)",
+    "occupancy grid": "use a coarser map.resolution or a smaller map.initial_size_m",
+    "particle-map tables": "use fewer particles (--particles) or a larger rbpf.tile",
+    "particle-map tiles": "use fewer particles (--particles) or a smaller rbpf.tile",
+}
+
+
+def check_run_memory(name: str, components: dict[str, float], config: Config) -> None:
+    """Refuse a run whose :func:`run_memory` estimate exceeds ``checks.max_memory_share``."""
+    total = sum(components.values())
+    largest = max(components, key=lambda k: components[k])
+    parts = ", ".join(f"{k} {format_bytes(v)}" for k, v in components.items())
+    check_memory(
+        total,
+        f"{name}: {config.filter.method} with {config.filter.particles} particles ({parts})",
+        _HINTS[largest],
+        share=config.checks.max_memory_share,
+        setting="checks.max_memory_share",
+    )

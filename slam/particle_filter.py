@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -42,6 +43,7 @@ from slam.config import Config, RbpfConfig
 from slam.errors import DataError
 from slam.geometry import compose, relative, spread_corrections, wrap_angle
 from slam.io.log import Log
+from slam.io.plausibility import DataWarning, check_valid_beams
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
@@ -84,7 +86,11 @@ class ScanSequence:
 
     @classmethod
     def from_log(cls, log: Log, config: Config) -> ScanSequence:
-        """Select the scans to process (``filter.every``, ``filter.max_scans``) with odometry."""
+        """Select the scans to process (``filter.every``, ``filter.max_scans``) with odometry.
+
+        :class:`DataError` when no selected scan has a valid beam, a :class:`DataWarning` when
+        too many are sparse (:func:`slam.io.plausibility.check_valid_beams`).
+        """
         if log.scans is None:
             raise DataError(f"{log.name}: the log has no laser scans to run SLAM on")
         scans = log.scans
@@ -99,9 +105,15 @@ class ScanSequence:
         no_return = lidar.no_return if lidar.no_return is not None else scans.no_return
         range_min = lidar.range_min if lidar.range_min is not None else scans.range_min
         angles = scans.angles if scans.angles.ndim == 1 else scans.angles[idx]
+        ranges = np.ascontiguousarray(scans.ranges[idx])
+        sparse = check_valid_beams(
+            log, ranges, range_min, min(range_max, no_return), no_return, config.checks
+        )
+        if sparse is not None:  # the pipeline records warnings in metrics.json and on stderr
+            warnings.warn(sparse, DataWarning, stacklevel=2)
         return cls(
             times=np.asarray(scans.time[idx], np.float64),
-            ranges=np.ascontiguousarray(scans.ranges[idx]),
+            ranges=ranges,
             angles=np.asarray(angles, np.float64),
             odometry=np.ascontiguousarray(odometry[idx]),
             laser_offset=np.asarray(scans.laser_offset, np.float64),

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import resource
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ from numpy.typing import NDArray
 from slam.config import Config, dumps
 from slam.io import sources
 from slam.io.atomic import atomic_dir, write_png, write_text
+from slam.io.plausibility import check_plausibility
 from slam.io.sources import Source
 from slam.io.tum import format_tum
 from slam.mapping import OccupancyGrid
@@ -137,6 +139,7 @@ def run(request: RunRequest) -> Path:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             source = sources.load(ref, config, _needs(config), request.progress)
+            doubts = check_plausibility(source.log, config)  # time base, odometry jumps
             observers: list[Observer] = []
             from slam.viz.recorder import start_recording
 
@@ -146,14 +149,21 @@ def run(request: RunRequest) -> Path:
             from slam.texture import run_stage
 
             result.metrics.update(run_stage(source.log, result, config, tmp, request.progress))
-        messages = sorted({str(w.message) for w in caught})
+        messages = doubts + sorted({str(w.message) for w in caught})
         metrics = result.metrics
         metrics["warnings"] = messages + source.notes
         if source.ground_truth is not None:
             from slam.eval.trajectory import evaluate_against_reference
 
             gt_times, gt_poses = source.ground_truth
-            ev = evaluate_against_reference(result.times, result.poses, gt_times, gt_poses)
+            ev = evaluate_against_reference(
+                result.times,
+                result.poses,
+                gt_times,
+                gt_poses,
+                estimate_name=f"{source.log.name} trajectory",
+                reference_name=f"its ground truth ({sources.GROUND_TRUTH_FILE})",
+            )
             metrics["ate_rmse"] = ev["ate_rmse"]
             metrics["ground_truth"] = ev
         write_text(tmp / "config.toml", dumps(config))
@@ -168,8 +178,19 @@ def run(request: RunRequest) -> Path:
         metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     for message in messages:
-        print(f"slam: warning: {message}", flush=True)
+        print(f"slam: warning: {message}", file=sys.stderr, flush=True)
     return out
+
+
+def _check_memory(name: str, seq: Any, poses: F64, config: Config) -> None:
+    """Refuse, before the maps are allocated, a run that would not fit in memory."""
+    from slam.budget import check_run_memory, run_memory
+
+    span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
+    components = run_memory(
+        config, len(seq), seq.num_beams, float(span[0]), float(span[1]), seq.range_max
+    )
+    check_run_memory(name, components, config)
 
 
 @dataclass
@@ -199,6 +220,7 @@ def _estimate(
         if log.scans is not None:
             seq = ScanSequence.from_log(log, config)
             scan_poses = scan_odometry(log, config.robot)[seq.indices]
+            _check_memory(log.name, seq, scan_poses, config)
             grid = build_map(seq, scan_poses, np.arange(len(seq)), config)
         wall = time.perf_counter() - start
         duration = float(times.max() - times.min()) if times.size else 0.0
@@ -214,6 +236,7 @@ def _estimate(
     from slam.particle_filter import ScanSequence, run_slam
 
     seq = ScanSequence.from_log(log, config)
+    _check_memory(log.name, seq, seq.odometry, config)
     bar = ProgressObserver(len(seq), enabled=progress, label=f"{log.name} {method}")
     try:
         result, wall = run_slam(seq, config, CompositeObserver([bar, *observers]))

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from slam.errors import UsageError
+from slam.errors import DataError, UsageError
 from slam.eval.trajectory import (
     Alignment,
     DeltaUnit,
@@ -155,10 +155,12 @@ def test_rpe_bad_delta(delta, unit, message):
         rpe_pairs(np.arange(5.0), delta, unit)
 
 
-def test_no_overlap_is_a_usage_error():
+def test_no_overlap_is_a_data_error_naming_both():
     times, poses = straight_line()
-    with pytest.raises(UsageError, match="no estimate pose lies within the reference"):
-        evaluate_against_reference(times + 100, poses, times, poses)
+    with pytest.raises(DataError, match="est.tum: no pose lies within the time span of ref.tum"):
+        evaluate_against_reference(
+            times + 100, poses, times, poses, estimate_name="est.tum", reference_name="ref.tum"
+        )
 
 
 def test_evaluate_against_reference_keys():

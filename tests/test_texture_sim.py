@@ -166,7 +166,7 @@ def test_bad_frames_are_skipped_counted_and_reported(small, small_run, tmp_path,
 
     out = tmp_path / "run"
     assert main(["run", str(bad), "--out", str(out), *RUN]) == 0
-    printed = capsys.readouterr().out
+    printed = capsys.readouterr().err  # warnings go to stderr
     tex = json.loads((out / "metrics.json").read_text())["texture"]
     skipped = dict(tex["skipped"])
     baseline = dict(clean["skipped"])
@@ -193,6 +193,6 @@ def test_missing_image_folders_skip_the_stage_without_failing_the_run(small, tmp
     assert (out / "map.png").is_file() and not (out / "texture.png").exists()
     tex = json.loads((out / "metrics.json").read_text())["texture"]
     assert tex["skipped"].startswith("texture: skipped, RGB-D image folders missing")
-    assert "slam: warning: texture: skipped, RGB-D image folders missing" in capsys.readouterr().out
+    assert "slam: warning: texture: skipped, RGB-D image folders missing" in capsys.readouterr().err
     assert main(["texture", str(out), "--dataset", str(bare), "--quiet"]) == 2
     assert "RGB-D image folders missing" in capsys.readouterr().err

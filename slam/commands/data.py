@@ -180,6 +180,8 @@ def _print_verify(report: dict[str, Any], data_dir: Path) -> None:
             print("notes:", file=out)
             for key, value in notes.items():
                 print(f"  {key}: {value}", file=out)
+    for warning in report.get("warnings", []):
+        print(f"warning: {warning}", file=out)
     if report["problems"]:
         print(f"result: {len(report['problems'])} problem(s)", file=out)
     elif report["missing"]:

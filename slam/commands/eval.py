@@ -104,7 +104,9 @@ def run_eval(args: argparse.Namespace) -> int:
     times, poses = read_tum(run_dir / TRAJECTORY_FILE)
     result["poses"] = int(times.shape[0])
     if relations is not None:
-        result["relations"] = _relations(times, poses, relations, args.tolerance)
+        result["relations"] = _relations(
+            times, poses, relations, args.tolerance, run_dir / TRAJECTORY_FILE
+        )
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(times, poses, reference, args))
@@ -117,7 +119,9 @@ def run_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _relations(times: Any, poses: Any, path: Path, tolerance: float) -> dict[str, Any]:
+def _relations(
+    times: Any, poses: Any, path: Path, tolerance: float, trajectory: Path
+) -> dict[str, Any]:
     from slam.eval.relations import relation_errors
     from slam.io.relations import read_relations
 
@@ -125,9 +129,10 @@ def _relations(times: Any, poses: Any, path: Path, tolerance: float) -> dict[str
     errors = relation_errors(times, poses, relations, tolerance)
     if errors.count == 0:
         raise DataError(
-            f"{path}: none of its {len(relations)} relations matches two poses of the trajectory "
-            f"within {tolerance:g} s (relations span {relations.t1.min():.6f}..{relations.t2.max():.6f} s, "
-            f"trajectory {times.min():.6f}..{times.max():.6f} s): is it the same log?"
+            f"{path}: none of its {len(relations)} relations matches two poses of {trajectory} "
+            f"within {tolerance:g} s (relations span {relations.t1.min():.6f}.."
+            f"{relations.t2.max():.6f} s, trajectory {times.min():.6f}..{times.max():.6f} s): "
+            "is it the same log?"
         )
     summary: dict[str, Any] = {"file": str(path)}
     summary.update(errors.summary())
@@ -186,4 +191,6 @@ def _reference(times: Any, poses: Any, path: Path, args: argparse.Namespace) -> 
         alignment=Alignment(args.align),
         delta=args.delta,
         unit=DeltaUnit(args.delta_unit),
+        estimate_name=str(args.run_dir / TRAJECTORY_FILE),
+        reference_name=str(path),
     )

@@ -22,6 +22,13 @@ RPE (relative pose error)
     RPE does not depend on any alignment. Pairs are formed over the associated poses sorted by
     time: in frames, ``j = i + delta``; in seconds, ``j`` is the first pose with
     ``tⱼ ≥ tᵢ + delta`` (to 1e-6 s).
+
+Degenerate inputs
+    A score needs something to score: :func:`evaluate_against_reference` requires at least
+    :data:`MIN_MATCHED_POSES` associated poses at distinct times (an SE(2) alignment has three
+    degrees of freedom: with one pose it cancels any error, with two it leaves one residual), and
+    at least one RPE pair. Fewer is a :class:`~slam.errors.DataError` naming both trajectories,
+    never a perfect score.
 """
 
 from __future__ import annotations
@@ -34,10 +41,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from slam.errors import UsageError
+from slam.errors import DataError, UsageError
 from slam.geometry import compose, interpolate_poses, relative, wrap_angle
 
 F64 = NDArray[np.float64]
+
+MIN_MATCHED_POSES = 3
+"""Fewest associated poses (at distinct times) ATE and RPE are computed from."""
 
 
 class DeltaUnit(Enum):
@@ -242,15 +252,58 @@ def evaluate_against_reference(
     alignment: Alignment = Alignment.SE2,
     delta: float = 1,
     unit: DeltaUnit = DeltaUnit.FRAMES,
+    estimate_name: str = "estimate",
+    reference_name: str = "reference",
 ) -> dict[str, Any]:
-    """ATE and RPE of an estimate against a reference, as one flat dictionary."""
+    """ATE and RPE of an estimate against a reference, as one flat dictionary.
+
+    ``estimate_name`` and ``reference_name`` (files, usually) name the trajectories in errors:
+    :class:`DataError` when fewer than :data:`MIN_MATCHED_POSES` estimate poses at distinct
+    times lie within the reference's time span, or when no RPE pair is ``delta`` apart.
+    """
     association = associate(est_times, est_poses, ref_times, ref_poses)
+    _require_matches(association, est_times, ref_times, estimate_name, reference_name)
     ate_result = ate(association, alignment)
     out: dict[str, Any] = {"matched": len(association), "excluded": association.excluded}
     out.update(ate_result.summary())
-    out.update(rpe(association, delta, unit).summary())
+    rpe_result = rpe(association, delta, unit)
+    if rpe_result.trans.size == 0:
+        raise DataError(
+            f"{estimate_name}: no pair of its {len(association)} poses matched to "
+            f"{reference_name} lies {delta:g} {unit.value} apart (they span "
+            f"{association.time[-1] - association.time[0]:.6f} s); choose a smaller --delta"
+        )
+    out.update(rpe_result.summary())
     out["alignment"] = alignment.value
     out["alignment_x"] = float(ate_result.transform[0])
     out["alignment_y"] = float(ate_result.transform[1])
     out["alignment_yaw_deg"] = float(np.rad2deg(ate_result.transform[2]))
     return out
+
+
+def _require_matches(
+    association: Association,
+    est_times: ArrayLike,
+    ref_times: ArrayLike,
+    estimate_name: str,
+    reference_name: str,
+) -> None:
+    """:class:`DataError` unless the association has :data:`MIN_MATCHED_POSES` distinct times."""
+    distinct = int(np.unique(association.time).size)
+    if distinct >= MIN_MATCHED_POSES:
+        return
+    est = np.asarray(est_times, dtype=np.float64).reshape(-1)
+    ref = np.asarray(ref_times, dtype=np.float64).reshape(-1)
+    spans = (
+        f"{reference_name} spans {ref.min():.6f}..{ref.max():.6f} s with {ref.size} pose(s), "
+        f"{estimate_name} {est.min():.6f}..{est.max():.6f} s with {est.size}"
+    )
+    if len(association) == 0:
+        raise DataError(
+            f"{estimate_name}: no pose lies within the time span of {reference_name} ({spans}): "
+            "is it the same log?"
+        )
+    raise DataError(
+        f"{estimate_name}: only {distinct} pose time(s) match {reference_name} ({spans}); ATE "
+        f"and RPE need at least {MIN_MATCHED_POSES} matched poses at distinct times"
+    )

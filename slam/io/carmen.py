@@ -45,10 +45,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import LidarConfig
 from slam.errors import ConfigError, DataError
 from slam.geometry import relative, wrap_angle
-from slam.io.log import Log, OdometryStream, ScanStream
+from slam.io.log import Log, OdometryStream, ScanStream, valid_ranges
 from slam.io.text import decode_utf8
 
 F64 = NDArray[np.float64]
@@ -61,6 +62,15 @@ their maximum codes (81.83 m, 81.91 m) for beams without an echo."""
 DEFAULT_RANGE_MIN = 0.05
 """Shortest valid reading when the config gives none (m): below every genuine reading of the
 benchmark logs (the shortest is 0.12 m, on fr079), so zero readings count as invalid beams."""
+
+MAX_BEAMS = 8192
+"""Most readings (and remissions) one scan line may declare: 16 times the densest 2D lidar of the
+benchmark logs (361 beams), and 8 times a 0.25° / 360° scanner. A larger count is a corrupt line,
+refused before every scan is padded to it."""
+
+ASSEMBLY_BYTES_PER_READING = 40
+"""Memory one padded reading costs while the scans are assembled (float64 value, angle, float32
+copy, masks)."""
 
 GZIP_MAGIC = b"\x1f\x8b"
 
@@ -142,7 +152,13 @@ class _ScanGroup:
     """ROBOTLASER1: the range limit each line declares."""
 
 
-def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | None = None) -> Log:
+def load_carmen(
+    path: Path,
+    *,
+    name: str | None = None,
+    lidar: LidarConfig | None = None,
+    memory_share: float = DEFAULT_MEMORY_SHARE,
+) -> Log:
     """Read a CARMEN log (plain text or gzip, detected by its magic bytes) into a :class:`Log`.
 
     ``lidar`` supplies what FLASER lines do not carry: ``fov_deg`` (default 180),
@@ -153,7 +169,9 @@ def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | Non
     (the default), else ``(lidar.x, lidar.y, lidar.yaw)``; it is reported in ``log.meta``.
 
     Raises :class:`DataError` naming the file (and the line number for a malformed line) when
-    the file is missing, unreadable, truncated, malformed or holds no scan.
+    the file is missing, unreadable, truncated, malformed or holds no scan, or when a line
+    declares more than :data:`MAX_BEAMS` readings; :class:`~slam.errors.UsageError` when the
+    scans padded to the widest one would exceed ``memory_share`` of the machine's memory.
     """
     path = Path(path)
     lidar = lidar or LidarConfig()
@@ -201,7 +219,7 @@ def load_carmen(path: Path, *, name: str | None = None, lidar: LidarConfig | Non
             f"{len(odom.text)} ODOM, {len(comments)} comment and "
             f"{sum(skipped.values())} other lines)"
         )
-    scans, offset_source = _assemble_scans(groups, lidar)
+    scans, offset_source = _assemble_scans(path, groups, lidar, memory_share)
     odometry = _parse_odom(path, odom) if odom.text else None
 
     meta: dict[str, Any] = {
@@ -274,8 +292,8 @@ def _beam_count(path: Path, lineno: int, tokens: Sequence[str], index: int, kind
         raise DataError(
             f"{path}:{lineno}: {kind} beam count: expected an integer, found {_clip(token)!r}"
         ) from None
-    if n < 1:
-        raise DataError(f"{path}:{lineno}: {kind} beam count: expected at least 1, found {n}")
+    if not 1 <= n <= MAX_BEAMS:
+        raise DataError(f"{path}:{lineno}: {kind} beam count: expected 1..{MAX_BEAMS}, found {n}")
     return n
 
 
@@ -296,9 +314,9 @@ def _robotlaser_layout(path: Path, lineno: int, line: str) -> tuple[int, int]:
             f"{path}:{lineno}: ROBOTLASER1 remission count (field {10 + n}): expected an "
             f"integer, found {_clip(token)!r}"
         ) from None
-    if nrem < 0:
+    if not 0 <= nrem <= MAX_BEAMS:
         raise DataError(
-            f"{path}:{lineno}: ROBOTLASER1 remission count: expected 0 or more, found {nrem}"
+            f"{path}:{lineno}: ROBOTLASER1 remission count: expected 0..{MAX_BEAMS}, found {nrem}"
         )
     return n, nrem
 
@@ -482,7 +500,9 @@ def _lidar_limits(lidar: LidarConfig, groups: list[_ScanGroup]) -> tuple[float, 
     return range_min, range_max, no_return
 
 
-def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanStream, str]:
+def _assemble_scans(
+    path: Path, groups: list[_ScanGroup], lidar: LidarConfig, memory_share: float
+) -> tuple[ScanStream, str]:
     """Merge the layout groups back into file order and build the :class:`ScanStream`."""
     range_min, range_max, no_return = _lidar_limits(lidar, groups)
     order = np.concatenate([g.order for g in groups])
@@ -490,6 +510,13 @@ def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanS
     position[np.argsort(order, kind="stable")] = np.arange(order.shape[0])
     total = order.shape[0]
     width = max(g.ranges.shape[1] for g in groups)
+    check_memory(
+        total * width * ASSEMBLY_BYTES_PER_READING,
+        f"{path}: {total} scans padded to the widest scan's {width} beams",
+        "check the file for a corrupt beam count",
+        share=memory_share,
+        setting="checks.max_memory_share",
+    )
 
     time = np.empty(total)
     laser_pose = np.empty((total, 3))
@@ -510,9 +537,8 @@ def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanS
         padded[rows, n:] = True
         if shared is None:
             angles[rows, :n] = g.angles
-    with np.errstate(invalid="ignore"):
-        invalid = ~padded & (~np.isfinite(ranges) | (ranges < range_min) | (ranges < 0.0))
-    ranges[invalid] = np.nan
+    stored, invalid_beams = valid_ranges(ranges, range_min)
+    invalid_beams -= int(np.count_nonzero(padded))  # padding is not a reading
 
     if lidar.use_log_laser_pose:
         offset = _median_offset(odometry, laser_pose)
@@ -522,7 +548,7 @@ def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanS
         source = "config"
     scans = ScanStream(
         time=time,
-        ranges=ranges.astype(np.float32),
+        ranges=stored,
         angles=angles,
         range_min=float(range_min),
         range_max=float(range_max),
@@ -530,7 +556,8 @@ def _assemble_scans(groups: list[_ScanGroup], lidar: LidarConfig) -> tuple[ScanS
         laser_offset=offset,
         odometry=odometry,
         laser_pose=laser_pose,
-        invalid_beams=int(np.count_nonzero(invalid)),
+        invalid_beams=invalid_beams,
+        lines=np.sort(order),
     )
     return scans, source
 

@@ -8,7 +8,9 @@ the cache: ``$SLAM_CACHE_DIR`` if set, else ``<data dir>/cache`` when that is wr
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 from pathlib import Path
 
 from slam.errors import DataError
@@ -70,14 +72,57 @@ def check_readable_dir(folder: Path, what: str = "folder") -> bool:
     return True
 
 
-def is_present(path: Path, *, folder: bool = False) -> bool:
-    """Whether ``path`` is an existing file (a folder when ``folder``); :class:`DataError` naming
-    it when its parent cannot be searched."""
+def _kind(mode: int) -> str:
+    """What a non-regular file is, for messages."""
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a regular file" if stat.S_ISREG(mode) else "not a regular file"
+
+
+def is_present(path: Path, *, folder: bool = False, strict: bool = True) -> bool:
+    """Whether ``path`` is an existing file (a folder when ``folder``).
+
+    ``False`` when nothing is there. Something else in its place (a folder where a file is
+    expected or the reverse, a symbolic link loop, a link to nothing, a pipe) is a
+    :class:`DataError` naming the path and what it is (``strict``; else ``False``, for listings);
+    so is a parent that cannot be searched.
+    """
     path = Path(path)
     try:
-        return path.is_dir() if folder else path.is_file()
+        if path.is_dir() if folder else path.is_file():
+            return True
+        if not strict:
+            return False
+        try:
+            link = path.lstat()
+        except FileNotFoundError:
+            return False
+        if stat.S_ISLNK(link.st_mode):
+            try:
+                target = path.stat()
+            except OSError as exc:
+                if exc.errno == errno.ELOOP:
+                    raise DataError(
+                        f"{path}: is a symbolic link loop, expected a "
+                        f"{'folder' if folder else 'file'}"
+                    ) from None
+                raise DataError(
+                    f"{path}: is a symbolic link to {os.readlink(path)!r}, which does not "
+                    f"exist (expected a {'folder' if folder else 'file'})"
+                ) from None
+            mode = target.st_mode
+        else:
+            mode = link.st_mode
     except PermissionError:
         raise DataError(f"{path}: cannot read (permission denied)") from None
+    expected = "a folder" if folder else "a file"
+    raise DataError(f"{path}: expected {expected}, found {_kind(mode)}")
 
 
 def put_files_hint(inside: str, count: int = 1) -> str:

@@ -15,6 +15,7 @@ and are counted in :attr:`ScanStream.invalid_beams`. RGB-D images are never read
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import zipfile
@@ -27,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import DEFAULT_MEMORY_SHARE, check_memory, format_bytes
 from slam.config import LidarConfig
 from slam.errors import DataError, UsageError
 from slam.io.datadir import check_readable_dir, is_present, put_files_hint
@@ -37,6 +39,7 @@ from slam.io.log import (
     RgbdIndex,
     ScanStream,
     count_non_monotonic,
+    valid_ranges,
 )
 
 STREAMS: tuple[str, ...] = ("encoders", "imu", "scans", "kinect")
@@ -179,6 +182,7 @@ def load_ece276a(
     need: Collection[str] = DEFAULT_NEED,
     name: str | None = None,
     lidar: LidarConfig | None = None,
+    memory_share: float = DEFAULT_MEMORY_SHARE,
 ) -> Log:
     """Load ECE276A dataset ``number`` from ``folder`` into a :class:`Log`.
 
@@ -188,7 +192,8 @@ def load_ece276a(
     stored in the Hokuyo file (``no_return`` defaults to ``range_max``). ``Log.meta`` records the
     dataset number, non-monotonic timestamp counts of the encoder and IMU streams, how long the
     IMU stops before the encoders, and whether the RGB-D image folders are there
-    (``meta["rgbd_images"]``: ``"present"`` or ``"missing: <dirs>"``).
+    (``meta["rgbd_images"]``: ``"present"`` or ``"missing: <dirs>"``). An array larger than
+    ``memory_share`` of the machine's memory is refused before it is read (:func:`read_npz`).
     """
     folder = Path(folder)
     nn = _number(number)
@@ -208,13 +213,13 @@ def load_ece276a(
     meta: dict[str, Any] = {"dataset_number": nn}
     encoders = imu = scans = rgbd = None
     if exists["encoders"]:
-        encoders = _load_encoders(paths["encoders"], meta)
+        encoders = _load_encoders(paths["encoders"], meta, memory_share)
     if exists["imu"]:
-        imu = _load_imu(paths["imu"], meta)
+        imu = _load_imu(paths["imu"], meta, memory_share)
     if exists["scans"]:
-        scans = _load_scans(paths["scans"], lidar)
+        scans = _load_scans(paths["scans"], lidar, memory_share)
     if exists["kinect"]:
-        rgbd = _load_kinect(paths["kinect"], folder, nn, meta)
+        rgbd = _load_kinect(paths["kinect"], folder, nn, meta, memory_share)
     if encoders is not None and imu is not None:
         meta["imu_ends_early_s"] = round(float(encoders.time[-1] - imu.time[-1]), 6)
     return Log(
@@ -253,11 +258,16 @@ def _missing_message(label: str, folder: Path, nn: str, missing: list[str]) -> s
 _READ_ERRORS = (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, KeyError)
 
 
-def read_npz(path: Path, keys: Collection[str]) -> dict[str, NDArray[Any]]:
+def read_npz(
+    path: Path, keys: Collection[str], memory_share: float = DEFAULT_MEMORY_SHARE
+) -> dict[str, NDArray[Any]]:
     """Read ``keys`` from the npz archive ``path`` without unpickling anything.
 
     Raises :class:`DataError` naming the file when it is empty, truncated, not an npz archive,
     holds pickled (object) arrays, or lacks one of ``keys`` (the message lists the keys found).
+    Each key's ``.npy`` header is read first (:func:`_check_member`): a corrupt header, or a
+    shape whose size the archive member cannot hold, is an error before anything is allocated,
+    and an array larger than ``memory_share`` of the machine's memory is refused.
     """
     path = Path(path)
     try:
@@ -301,6 +311,7 @@ def read_npz(path: Path, keys: Collection[str]) -> dict[str, NDArray[Any]]:
             )
         out = {}
         for key in keys:
+            _check_member(path, archive.zip, key, memory_share)
             try:
                 out[key] = archive[key]
             except ValueError as exc:
@@ -315,6 +326,66 @@ def read_npz(path: Path, keys: Collection[str]) -> dict[str, NDArray[Any]]:
                     f"({_reason(exc)})"
                 ) from None
     return out
+
+
+def _check_member(
+    path: Path, archive: zipfile.ZipFile | None, key: str, memory_share: float
+) -> None:
+    """Read the ``.npy`` header of ``key`` and check its size before the array is read.
+
+    The header's shape × item size must fit in the member's uncompressed size (a header claiming
+    10¹¹ values in a small file is corrupt, not a reason to allocate 745 GiB) and in the memory
+    budget (:mod:`slam.budget`).
+    """
+    if archive is None:
+        return
+    name = f"{key}.npy"
+    try:
+        info = archive.getinfo(name)
+        with archive.open(name) as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                raise DataError(
+                    f"{path}: key {key!r} has .npy format version {version[0]}.{version[1]}; "
+                    "expected 1.0 or 2.0 (what numpy writes for numeric arrays)"
+                )
+            offset = fh.tell()
+    except KeyError:
+        return  # not a member under that name: numpy's own lookup reports it
+    except DataError:
+        raise
+    except (ValueError, SyntaxError, TypeError):
+        raise DataError(
+            f"{path}: key {key!r} has a corrupt .npy header (not the shape/dtype dictionary "
+            "numpy writes); the file is damaged"
+        ) from None
+    except _READ_ERRORS as exc:
+        raise DataError(
+            f"{path}: key {key!r} is unreadable, the file looks truncated or corrupt "
+            f"({_reason(exc)})"
+        ) from None
+    if dtype.hasobject:
+        raise DataError(f"{path}: key {key!r} contains pickled objects; refusing to load")
+    count = math.prod(int(n) for n in shape)
+    nbytes = count * dtype.itemsize
+    available = info.file_size - offset
+    if nbytes > available:
+        raise DataError(
+            f"{path}: key {key!r}: its header claims shape {tuple(shape)} of {dtype} "
+            f"({format_bytes(nbytes)}), but the archive holds {format_bytes(max(available, 0))} "
+            "for it; the file is truncated or corrupt"
+        )
+    check_memory(
+        2 * nbytes,  # the array and the loader's converted copy
+        f"{path}: key {key!r} (shape {tuple(shape)} of {dtype})",
+        "use a smaller file",
+        share=memory_share,
+        setting="checks.max_memory_share",
+    )
 
 
 def _reason(exc: BaseException) -> str:
@@ -383,9 +454,9 @@ def _scalar(path: Path, key: str, array: NDArray[Any]) -> float:
     return value
 
 
-def _load_encoders(path: Path, meta: dict[str, Any]) -> EncoderStream:
+def _load_encoders(path: Path, meta: dict[str, Any], memory_share: float) -> EncoderStream:
     spec = SPECS["encoders"]
-    raw = read_npz(path, [k.key for k in spec.keys])
+    raw = read_npz(path, [k.key for k in spec.keys], memory_share)
     time = _times(path, "time_stamps", raw["time_stamps"], spec)
     counts = raw["counts"]
     if counts.dtype.kind not in "iu":
@@ -403,9 +474,9 @@ def _load_encoders(path: Path, meta: dict[str, Any]) -> EncoderStream:
     return EncoderStream(time=time, counts=np.ascontiguousarray(counts, dtype=np.int16))
 
 
-def _load_imu(path: Path, meta: dict[str, Any]) -> ImuStream:
+def _load_imu(path: Path, meta: dict[str, Any], memory_share: float) -> ImuStream:
     spec = SPECS["imu"]
-    raw = read_npz(path, [k.key for k in spec.keys])
+    raw = read_npz(path, [k.key for k in spec.keys], memory_share)
     time = _times(path, "time_stamps", raw["time_stamps"], spec)
     arrays = {}
     for key in ("angular_velocity", "linear_acceleration"):
@@ -425,9 +496,9 @@ def _load_imu(path: Path, meta: dict[str, Any]) -> ImuStream:
     )
 
 
-def _load_scans(path: Path, lidar: LidarConfig) -> ScanStream:
+def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStream:
     spec = SPECS["scans"]
-    raw = read_npz(path, [k.key for k in spec.keys])
+    raw = read_npz(path, [k.key for k in spec.keys], memory_share)
     time = _times(path, "time_stamps", raw["time_stamps"], spec)
     n = time.shape[0]
     ranges_in = raw["ranges"]
@@ -461,11 +532,7 @@ def _load_scans(path: Path, lidar: LidarConfig) -> ScanStream:
         )
     no_return = range_max if lidar.no_return is None else float(lidar.no_return)
 
-    ranges = np.ascontiguousarray(ranges_in.T, dtype=np.float32)
-    with np.errstate(invalid="ignore"):
-        invalid = ~np.isfinite(ranges) | (ranges < range_min)
-    invalid_beams = int(np.count_nonzero(invalid))
-    ranges[invalid] = np.nan
+    ranges, invalid_beams = valid_ranges(np.ascontiguousarray(ranges_in.T), range_min)
     angles = angle_min + increment * np.arange(beams, dtype=np.float64)
     return ScanStream(
         time=time,
@@ -479,9 +546,11 @@ def _load_scans(path: Path, lidar: LidarConfig) -> ScanStream:
     )
 
 
-def _load_kinect(path: Path, folder: Path, nn: str, meta: dict[str, Any]) -> RgbdIndex:
+def _load_kinect(
+    path: Path, folder: Path, nn: str, meta: dict[str, Any], memory_share: float
+) -> RgbdIndex:
     spec = SPECS["kinect"]
-    raw = read_npz(path, [k.key for k in spec.keys])
+    raw = read_npz(path, [k.key for k in spec.keys], memory_share)
     disparity_time = _times(path, "disparity_time_stamps", raw["disparity_time_stamps"], spec)
     rgb_time = _times(path, "rgb_time_stamps", raw["rgb_time_stamps"], spec)
     rgb_dir, disparity_dir = rgbd_dirs(folder, nn)

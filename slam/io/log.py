@@ -8,7 +8,8 @@ Conventions
 -----------
 * Times are seconds (Unix time for the ECE276A logs, the logger's clock for CARMEN logs).
 * ``ScanStream.ranges`` has shape ``(num_scans, num_beams)``; invalid beams (NaN, inf, negative,
-  below ``range_min``) are stored as NaN and counted in ``ScanStream.invalid_beams``. Readings at or
+  below ``range_min``, beyond :data:`MAX_VALID_RANGE_M`) are stored as NaN and counted in
+  ``ScanStream.invalid_beams``. Readings at or
   beyond ``no_return`` mean "no return": they may clear free space but never mark an obstacle.
 * Scans are kept in file order (CARMEN odometry follows file order, not timestamp order);
   ``ScanStream.non_monotonic`` counts the scans whose timestamp is below the previous one.
@@ -28,6 +29,10 @@ from slam.errors import DataError
 
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
+
+MAX_VALID_RANGE_M = 1000.0
+"""Readings beyond this (m) are invalid beams: no 2D lidar measures a kilometre, so such values
+come from corrupt files (and 1e308 does not even fit the float32 ranges are stored in)."""
 
 
 @dataclass(frozen=True)
@@ -83,7 +88,10 @@ class ScanStream:
     laser_pose: F64 | None = None
     """``(N, 3)`` laser pose in the odometry frame at each scan, when the log carries it."""
     invalid_beams: int = 0
-    """How many readings were NaN/inf/negative or below ``range_min`` in the file."""
+    """How many readings were NaN/inf/negative, below ``range_min`` or beyond
+    :data:`MAX_VALID_RANGE_M` in the file."""
+    lines: NDArray[np.int64] | None = None
+    """``(N,)`` 1-based line number of each scan in its file, when the log is text (CARMEN)."""
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -213,6 +221,20 @@ class Log:
             out[name] = info
         out.update({k: v for k, v in self.meta.items() if isinstance(v, int | float | str)})
         return out
+
+
+def valid_ranges(ranges: NDArray[Any], range_min: float) -> tuple[F32, int]:
+    """``ranges`` as float32 with every invalid reading (NaN, inf, negative, below ``range_min``,
+    beyond :data:`MAX_VALID_RANGE_M`) set to NaN, and how many there were.
+
+    Readings are judged in their own precision before the cast, so an absurd value (1e308)
+    becomes NaN instead of overflowing (and warning) on the way to float32.
+    """
+    with np.errstate(invalid="ignore"):
+        invalid = ~np.isfinite(ranges) | (ranges < range_min) | (ranges < 0.0)
+        invalid |= ranges > MAX_VALID_RANGE_M
+    out = np.where(invalid, np.nan, ranges).astype(np.float32)
+    return out, int(np.count_nonzero(invalid))
 
 
 def count_non_monotonic(time: F64) -> int:

@@ -298,8 +298,8 @@ def get_dataset(name: str, registry: Mapping[str, Dataset] | None = None) -> Dat
 # --- what is on disk ------------------------------------------------------------------------
 
 
-def _exists(entry: DataFile, data_dir: Path) -> bool:
-    return is_present(entry.location(data_dir), folder=entry.is_dir)
+def _exists(entry: DataFile, data_dir: Path, strict: bool = True) -> bool:
+    return is_present(entry.location(data_dir), folder=entry.is_dir, strict=strict)
 
 
 def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
@@ -318,7 +318,7 @@ def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
             parent = entry.location(data_dir).parent
             if parent != data_dir / dataset.folder:
                 check_readable_dir(parent, f"folder of {entry.path}")
-            (present if _exists(entry, data_dir) else missing).append(entry.path)
+            (present if _exists(entry, data_dir, strict=False) else missing).append(entry.path)
     else:
         missing = [f.path for f in dataset.files]
     if not missing:
@@ -368,6 +368,7 @@ def load_dataset(
             need=DEFAULT_NEED if need is None else need,
             name=name,
             lidar=config.lidar,
+            memory_share=config.checks.max_memory_share,
         )
 
     from slam.io.carmen import load_carmen
@@ -378,7 +379,9 @@ def load_dataset(
             f"{name}: missing {path} (a CARMEN log, {dataset.description}). "
             + put_files_hint(dataset.log_file().path)
         )
-    log = load_carmen(path, name=name, lidar=config.lidar)
+    log = load_carmen(
+        path, name=name, lidar=config.lidar, memory_share=config.checks.max_memory_share
+    )
     absent = [s for s in (need or ()) if s not in log.streams()]
     if absent:
         raise DataError(
@@ -464,7 +467,8 @@ def verify_dataset(
     file count), loads what is present with the format's loader (keys, shapes, dtypes, timestamps
     and rates are validated there) and compares reading counts and rates with the registry.
     Returns a JSON-ready report: ``status``, ``files``, ``missing``, ``summary`` (from
-    :meth:`Log.summary`) and ``problems`` (empty when everything present checks out). Raises
+    :meth:`Log.summary`), ``problems`` (empty when everything present checks out; they include
+    the time-base and odometry checks of :mod:`slam.io.plausibility`) and ``warnings``. Raises
     :class:`DataError` when no file of the dataset is present. ``registry`` replaces the
     project's registry.
     """
@@ -480,9 +484,14 @@ def verify_dataset(
     files = [_check_file(f, data_dir) for f in dataset.files if f.path in status.present]
     problems = [f"{f['path']}: {p}" for f in files for p in f["problems"]]
     summary: dict[str, Any] = {}
+    warnings: list[str] = []
     if dataset.loader == "carmen" and dataset.log_file().path in status.missing:
         pass  # only the relations file is there: nothing to load
     else:
+        from slam.config import load_config
+        from slam.io.plausibility import check_plausibility
+
+        config = config if config is not None else load_config(name)
         try:
             log = load_dataset(name, data_dir, need=(), config=config, registry=registry)
         except DataError as exc:
@@ -490,6 +499,10 @@ def verify_dataset(
         else:
             summary = log.summary()
             problems.extend(_check_expectations(dataset, summary))
+            try:
+                warnings = check_plausibility(log, config)
+            except DataError as exc:
+                problems.append(str(exc))
     return {
         "name": name,
         "loader": dataset.loader,
@@ -499,4 +512,5 @@ def verify_dataset(
         "missing": list(status.missing),
         "summary": summary,
         "problems": problems,
+        "warnings": warnings,
     }

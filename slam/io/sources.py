@@ -206,7 +206,12 @@ def load(
     if ref.kind is Kind.CARMEN:
         from slam.io.carmen import load_carmen
 
-        log = load_carmen(ref.path, name=ref.display_name, lidar=config.lidar)
+        log = load_carmen(
+            ref.path,
+            name=ref.display_name,
+            lidar=config.lidar,
+            memory_share=config.checks.max_memory_share,
+        )
         absent = [s for s in need if s not in log.streams()]
         if absent:
             found = ", ".join(log.streams()) or "none"
@@ -214,7 +219,14 @@ def load(
         return Source(log)
     folder = ensure(ref, progress)
     assert ref.number is not None  # set for every ECE276A kind by resolve()
-    log = load_ece276a(folder, ref.number, need=need, name=ref.display_name, lidar=config.lidar)
+    log = load_ece276a(
+        folder,
+        ref.number,
+        need=need,
+        name=ref.display_name,
+        lidar=config.lidar,
+        memory_share=config.checks.max_memory_share,
+    )
     reference = ref.reference
     truth = read_tum(reference) if reference is not None and reference.is_file() else None
     notes = [f"demo dataset: {folder}"] if ref.kind is Kind.DEMO else []

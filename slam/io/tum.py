@@ -1,7 +1,9 @@
 """TUM trajectory files: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
 
 Planar poses are written with z = 0 and a yaw-only quaternion, the form evo and most SLAM tools
-read. Timestamps keep microseconds (CARMEN relations match scans to 1e-4 s).
+read. Timestamps keep microseconds (CARMEN relations match scans to 1e-4 s). A file read must
+hold finite numbers and unit quaternions (norm 1 ± :data:`QUATERNION_TOLERANCE`): a zero or
+unnormalised quaternion has no rotation to read, and is an error naming the line.
 """
 
 from __future__ import annotations
@@ -17,6 +19,9 @@ from slam.io.atomic import write_text
 from slam.io.text import decode_utf8
 
 _TUM_LINE = "%.6f %.6f %.6f 0.000000 %.9f %.9f %.9f %.9f"
+
+QUATERNION_TOLERANCE = 1e-3
+"""How far from 1 a quaternion's norm may be: files written with 4 decimals stay within 2e-4."""
 
 
 def format_tum(times: NDArray[np.float64], poses: NDArray[np.float64]) -> str:
@@ -47,6 +52,7 @@ def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         raise DataError(f"{path}: cannot read trajectory ({exc.strerror or exc})") from None
     text = decode_utf8(path, raw)
     rows = []
+    linenos = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
@@ -61,11 +67,21 @@ def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
             rows.append([float(f) for f in fields])
         except ValueError:
             raise DataError(f"{path}:{lineno}: non-numeric field in {line!r}") from None
+        linenos.append(lineno)
     if not rows:
         raise DataError(f"{path}: no poses (expected lines 'timestamp tx ty tz qx qy qz qw')")
     data = np.asarray(rows)
     if not np.all(np.isfinite(data)):
         bad = int(np.argmax(~np.all(np.isfinite(data), axis=1)))
-        raise DataError(f"{path}: pose {bad + 1} has a NaN or infinite value")
+        raise DataError(f"{path}:{linenos[bad]}: pose {bad + 1} has a NaN or infinite value")
+    norm = np.linalg.norm(data[:, 4:8], axis=1)
+    off = np.abs(norm - 1.0) > QUATERNION_TOLERANCE
+    if off.any():
+        bad = int(np.argmax(off))
+        q = " ".join(f"{v:g}" for v in data[bad, 4:8])
+        raise DataError(
+            f"{path}:{linenos[bad]}: quaternion (qx qy qz qw) = ({q}) has norm {norm[bad]:.6g}; "
+            f"expected a unit quaternion (norm 1 ± {QUATERNION_TOLERANCE:g})"
+        )
     poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], axis=-1)
     return data[:, 0], poses

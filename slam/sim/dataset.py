@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import check_memory
 from slam.errors import UsageError
 from slam.io.atomic import atomic_dir, write_png
 from slam.io.ece276a import rgbd_dirs, rgbd_patterns, stream_file
@@ -70,6 +71,12 @@ PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]
 if hasattr(cv2, "IMWRITE_PNG_FILTER"):
     PNG_PARAMS += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
 
+MAX_DURATION_S = 3600.0
+"""Longest log ``slam sim`` writes (s): one hour, 29 times the demo."""
+SIM_BYTES_PER_SECOND = 3 << 20
+"""Memory the simulation holds per simulated second (measured 2.3 MiB/s with ``/usr/bin/time``
+on ``slam sim small --duration 180 --no-rgbd``: the 1 kHz trajectory and the scans), rounded up."""
+
 _NOISE_TABLE = 1 << 21
 _HOLE_TABLE = 1 << 20
 
@@ -100,8 +107,17 @@ class SimOptions:
             raise UsageError(f"--number: expected 0..99, found {self.number}")
         if not 0 < self.rgbd_rate <= 30:
             raise UsageError(f"--rgbd-rate: expected a rate in (0, 30] Hz, found {self.rgbd_rate}")
-        if self.duration is not None and not self.duration > 0:
-            raise UsageError(f"--duration: expected a positive number, found {self.duration}")
+        if self.duration is not None and not 0 < self.duration <= MAX_DURATION_S:
+            raise UsageError(
+                f"--duration: expected a number of seconds in (0, {MAX_DURATION_S:g}], "
+                f"found {self.duration:g}"
+            )
+        if self.duration is not None:
+            check_memory(
+                self.duration * SIM_BYTES_PER_SECOND,
+                f"--duration {self.duration:g}: a simulated log of {self.duration:g} s",
+                "simulate a shorter log",
+            )
 
 
 @dataclass
