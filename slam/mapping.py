@@ -9,6 +9,9 @@ that +y points up on screen.
   on demand.
 * :class:`ParticleMaps`: one truncated signed (point-to-plane) distance field per particle, stored
   as copy-on-write tiles (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
+
+Both refuse (one :class:`~slam.errors.UsageError` line) to grow an array past the memory budget of
+:mod:`slam.budget`: a diverged trajectory must not take the machine down.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import check_memory
 from slam.config import MapConfig
 from slam.io.atomic import atomic_path
 from slam.kernels.field import (
@@ -34,6 +38,18 @@ from slam.kernels.grid import integrate_rays
 F64 = NDArray[np.float64]
 
 
+def _check_growth(nbytes: float, what: str, width_m: float, height_m: float) -> None:
+    """Refuse a map allocation larger than the memory budget (:mod:`slam.budget`): the run's
+    up-front estimate covers maps around the odometry, so only a trajectory that left that area
+    (a diverged filter, corrupt odometry) gets here."""
+    check_memory(
+        nbytes,
+        f"{what} of {width_m:.0f} m × {height_m:.0f} m",
+        "the trajectory left the area the odometry covers (a diverged filter or corrupt "
+        "odometry); check the configuration",
+    )
+
+
 def _grow_extent(lo: float, hi: float, cur_lo: float, cur_hi: float, margin: float):
     new_lo = min(cur_lo, lo - margin) if lo < cur_lo else cur_lo
     new_hi = max(cur_hi, hi + margin) if hi > cur_hi else cur_hi
@@ -47,6 +63,8 @@ class OccupancyGrid:
         self.config = config
         self.resolution = float(config.resolution)
         cells = max(int(np.ceil(config.initial_size_m / self.resolution)), 1)
+        side = cells * self.resolution
+        _check_growth(4.0 * cells * cells, "an occupancy grid", side, side)
         self.origin = np.array(
             [center[0] - cells * self.resolution / 2, center[1] - cells * self.resolution / 2]
         )
@@ -93,6 +111,8 @@ class OccupancyGrid:
         bottom = int(np.ceil((y0 - ny0) / res))
         right = int(np.ceil((nx1 - x1) / res))
         top = int(np.ceil((ny1 - y1) / res))
+        rows, cols = self.shape[0] + bottom + top, self.shape[1] + left + right
+        _check_growth(4.0 * rows * cols, "an occupancy grid", cols * res, rows * res)
         self.log_odds = np.pad(self.log_odds, ((bottom, top), (left, right)))
         self.origin = self.origin - np.array([left * res, bottom * res])
 
@@ -231,6 +251,9 @@ class ParticleMaps:
         self.grow_margin_m = float(grow_margin_m)
         tile_m = self.tile * self.resolution
         n = max(int(np.ceil(size_m / tile_m)), 1)
+        _check_growth(
+            4.0 * particles * n * n, f"{particles} particle-map tables", n * tile_m, n * tile_m
+        )
         self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
         self.tables = np.full((particles, n, n), -1, dtype=np.int32)
         self.dist = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
@@ -262,6 +285,14 @@ class ParticleMaps:
     def _grow_pool(self) -> None:
         old = self.capacity
         new = old * 2
+        tile_m = self.tile * self.resolution
+        _, nty, ntx = self.tables.shape
+        _check_growth(
+            (new + old) * 8.0 * self.tile * self.tile,  # two layers, while the old ones are copied
+            f"a pool of {new} particle-map tiles",
+            ntx * tile_m,
+            nty * tile_m,
+        )
         for name in ("dist", "plane"):
             layer = np.empty((new, self.tile, self.tile), dtype=np.float32)
             layer[:old] = getattr(self, name)
@@ -289,6 +320,14 @@ class ParticleMaps:
         bottom = int(np.ceil((y0 - ny0) / tile_m))
         right = int(np.ceil((nx1 - x1) / tile_m))
         top = int(np.ceil((ny1 - y1) / tile_m))
+        rows, cols = nty + bottom + top, ntx + left + right
+        particles = self.tables.shape[0]
+        _check_growth(
+            8.0 * particles * rows * cols,  # the tables and their copy while resampling
+            f"{particles} particle-map tables",
+            cols * tile_m,
+            rows * tile_m,
+        )
         self.tables = np.pad(
             self.tables, ((0, 0), (bottom, top), (left, right)), constant_values=-1
         )
