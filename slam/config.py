@@ -551,7 +551,8 @@ def load_config(
         layers.apply(read_toml(Path(config_file)), str(config_file))
     for text in overrides:
         section, key, value = parse_override(text)
-        layers.apply({section: {key: value}}, f"--set {text}")
+        label = text if text.isprintable() else repr(text)
+        layers.apply({section: {key: value}}, f"--set {label}")
     config = layers.build(base)
     if dataset:
         config = dataclasses.replace(config, dataset=dataset)
@@ -561,6 +562,23 @@ def load_config(
 def to_dict(config: Any) -> dict[str, Any]:
     """Nested plain-dict view of a config dataclass."""
     return dataclasses.asdict(config)
+
+
+_TOML_ESCAPES = {
+    "\\": "\\\\",
+    '"': '\\"',
+    "\n": "\\n",
+    "\t": "\\t",
+    "\r": "\\r",
+    "\b": "\\b",
+    "\f": "\\f",
+}
+
+
+def _escape_control(char: str) -> str:
+    """A character of a TOML basic string: control characters as ``\\uXXXX``."""
+    code = ord(char)
+    return f"\\u{code:04x}" if code < 0x20 or code == 0x7F else char
 
 
 def _toml_value(value: Any) -> str:
@@ -575,8 +593,7 @@ def _toml_value(value: Any) -> str:
             return "nan"
         return repr(value)
     if isinstance(value, str):
-        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-        return f'"{escaped}"'
+        return '"' + "".join(_TOML_ESCAPES.get(c) or _escape_control(c) for c in value) + '"'
     if isinstance(value, list | tuple):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     raise ConfigError(f"cannot write {value!r} to TOML")

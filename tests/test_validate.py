@@ -24,11 +24,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from synthetic_logs import carmen_lines, write_carmen
 
-from slam.budget import check_memory, run_memory
 from slam.cli import main
-from slam.config import Config, dumps, load_config, section_types
+from slam.config import Config, dumps, load_config
 from slam.errors import ConfigError, UsageError
-from slam.validate import Bounds, field_types
+
+# Only what main has is imported at module level, so that each item test fails there for its own
+# reason; the validator's own names are imported where they are used.
 
 
 def one_line_error(capsys) -> str:
@@ -101,12 +102,12 @@ def test_every_field_declares_its_bounds():
     """Item 7: bounds sit next to every numeric and choice field (floats are finite, numbers have
     a range). On main: no field declares any (checks were scattered in __post_init__)."""
     undeclared = []
-    for section, cls in section_types().items():
+    for section, cls in _sections().items():
+        hints = typing.get_type_hints(cls)
         for f in dataclasses.fields(cls):
-            tp = field_types(cls)[f.name]
-            if tp is bool:
+            if hints[f.name] is bool:
                 continue
-            bounds: Bounds | None = f.metadata.get("bounds")
+            bounds = f.metadata.get("bounds")
             limits = (bounds.gt, bounds.ge, bounds.lt, bounds.le, bounds.choices, bounds.test)
             if bounds is None or all(v is None for v in limits):
                 undeclared.append(f"{section}.{f.name}")
@@ -147,6 +148,8 @@ def test_run_memory_estimate_refuses_before_allocating(carmen_dir, tmp_path, cap
 def test_run_memory_estimate_figures():
     """Item 7: the estimate's components for a known case (intel-sized: 13631 scans of 180
     beams, a 40 m × 30 m box, 27 m range)."""
+    from slam.budget import check_memory, run_memory
+
     parts = run_memory(Config(), 13631, 180, 40.0, 30.0, 27.0)
     assert parts["scans"] == 13631 * 180 * 12
     side_x, side_y = 40 + 2 * (27 + 10 + 1), 30 + 2 * (27 + 10 + 1)
@@ -248,6 +251,7 @@ def test_sim_duration_is_bounded(tmp_path, capsys):
     assert one_line_error(capsys) == (
         "slam: error: --duration: expected a number of seconds in (0, 3600], found 1e+09"
     )
+    from slam.budget import check_memory
     from slam.sim.dataset import SIM_BYTES_PER_SECOND
 
     with pytest.raises(UsageError, match=r"--duration 3000: a simulated log of 3000 s would need"):
@@ -258,12 +262,17 @@ def test_sim_duration_is_bounded(tmp_path, capsys):
 # --- fuzz: any value, any field ---------------------------------------------------------------
 
 
+def _sections() -> dict[str, type]:
+    hints = typing.get_type_hints(Config)
+    return {name: tp for name, tp in hints.items() if dataclasses.is_dataclass(tp)}
+
+
 def _fields() -> list[tuple[str, str, typing.Any]]:
-    return [
-        (section, name, tp)
-        for section, cls in section_types().items()
-        for name, tp in field_types(cls).items()
-    ]
+    out = []
+    for section, cls in _sections().items():
+        hints = typing.get_type_hints(cls)
+        out += [(section, f.name, hints[f.name]) for f in dataclasses.fields(cls)]
+    return out
 
 
 FIELDS = _fields()
@@ -307,7 +316,7 @@ def test_fuzz_any_value_gives_a_config_or_a_config_error(assignments):
 
 
 def _problem(section_obj: typing.Any, name: str) -> str | None:
-    from slam.validate import check_value
+    from slam.validate import Bounds, check_value, field_types
 
     f = next(f for f in dataclasses.fields(section_obj) if f.name == name)
     tp = field_types(type(section_obj))[name]
@@ -315,10 +324,10 @@ def _problem(section_obj: typing.Any, name: str) -> str | None:
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.sampled_from([cls for cls in section_types().values()]), st.data())
+@given(st.sampled_from(list(_sections().values())), st.data())
 def test_fuzz_direct_construction_only_raises_config_error(cls, data):
     """Building a section in Python with any values: the section or a ConfigError, nothing else."""
-    types_ = field_types(cls)
+    types_ = {f.name: f.type for f in dataclasses.fields(cls)}
     names = data.draw(st.lists(st.sampled_from(sorted(types_)), max_size=3, unique=True))
     kwargs = {n: data.draw(st.one_of(SCALARS, st.tuples(NUMBERS, NUMBERS, NUMBERS))) for n in names}
     with contextlib.suppress(ConfigError):
@@ -337,7 +346,7 @@ COSTLY = {
 below these caps so it finishes in seconds; every other field spans its whole declared range."""
 
 
-def _strategy_for(section: str, name: str, tp: typing.Any, bounds: Bounds) -> st.SearchStrategy:
+def _strategy_for(section: str, name: str, tp: typing.Any, bounds: typing.Any) -> st.SearchStrategy:
     if tp is bool:
         return st.booleans()
     if bounds.choices is not None:
@@ -376,12 +385,14 @@ def _strategy_for(section: str, name: str, tp: typing.Any, bounds: Bounds) -> st
 def valid_overrides(draw) -> dict[str, dict[str, typing.Any]]:
     """Random in-bounds values for a random handful of fields (rules may still refuse the mix:
     such draws are retried)."""
+    from slam.validate import Bounds
+
     chosen = draw(st.lists(st.sampled_from(FIELDS), min_size=1, max_size=8, unique=True))
     table: dict[str, dict[str, typing.Any]] = {}
     for section, name, tp in chosen:
         if section in ("texture", "viz"):
             continue  # a CARMEN log has no RGB-D frames; the recording is off
-        cls = section_types()[section]
+        cls = _sections()[section]
         bounds = next(f for f in dataclasses.fields(cls) if f.name == name).metadata.get(
             "bounds", Bounds()
         )
