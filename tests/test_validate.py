@@ -3,7 +3,8 @@
 Bounds are declared next to every field (:mod:`slam.validate`) and checked once when a
 configuration is built; the dataset registry, the grid scenarios and the maze robot's options use
 the same validator. Each item test names what today's ``main`` (before the fix) does instead;
-every one of them fails there. The two fuzz tests: any value for any field gives a valid
+every one of them fails there (checked: 2 control cases pass on main, the NaN CLI test makes
+main's pytest segfault). The two fuzz tests: any value for any field gives a valid
 configuration or one :class:`ConfigError`; any configuration that validates runs SLAM.
 """
 
@@ -79,7 +80,7 @@ def one_line_error(capsys) -> str:
 def test_out_of_bounds_values_name_key_bound_and_value(override, message):
     """Item 7: each value the issue lists. On main: NaN segfaults inside numba, the others give
     tracebacks, ask for terabytes, hang, or are silently accepted (no ConfigError)."""
-    if message is None:  # in bounds: accepted
+    if message is None:  # in bounds: accepted (the control case, true on main as well)
         assert load_config("intel", overrides=[override]).map.log_odds_min == -20.0
         return
     with pytest.raises(ConfigError) as info:
@@ -115,8 +116,9 @@ def test_every_field_declares_its_bounds():
 
 
 def test_bounds_are_judged_on_the_merged_layers():
-    """Item 7: checked once, when built: two overrides that are only consistent together are
-    accepted (a per-layer check would refuse the first)."""
+    """Item 7, a design check (not a regression; main also accepts this): bounds are checked once,
+    on the merged layers, so overrides that are only consistent together are accepted (a
+    per-layer check would refuse the first)."""
     config = load_config("intel", overrides=["lidar.range_min=30", "lidar.range_max=40",
                                              "lidar.no_return=80"])  # fmt: skip
     assert (config.lidar.range_min, config.lidar.range_max) == (30.0, 40.0)
