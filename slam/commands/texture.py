@@ -9,6 +9,7 @@ RGB-D frames along the trajectory, and rewrites ``texture.npz``, ``texture.png``
 from __future__ import annotations
 
 import argparse
+import sys
 import warnings
 from pathlib import Path
 
@@ -54,7 +55,7 @@ def run_texture(args: argparse.Namespace) -> int:
             progress=show_progress(args),
         )
     for message in sorted({str(w.message) for w in caught}):
-        print(f"slam: warning: {message}", flush=True)
+        print(f"slam: warning: {message}", file=sys.stderr, flush=True)
     parts = [
         f"{figures['frames_used']} frames used",
         f"{figures['frames_skipped']} skipped",
