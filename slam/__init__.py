@@ -3,9 +3,23 @@
 The package owns the whole pipeline of the toolkit: loaders (:mod:`slam.io`), odometry,
 numba kernels, the particle filter, texture mapping, the discrete (grid-world) filter, the
 micromouse maze robot, the simulator, evaluation and visualisation.
+
+Its public face is the online :class:`Slam` object and the one-call :func:`run` (docs/api.md)::
+
+    import slam
+    s = slam.Slam(slam.load_config("intel"), seed=0)
+    est = s.update(slam.Scan(t, ranges, angles), odometry=pose)   # one scan at a time
+    result = s.finish()                                           # trajectory, map, diagnostics
+
+    result = slam.run("intel", seed=0, max_scans=500)             # a recorded log in one call
+
+The names below are imported on first use (``import slam`` and ``slam --help`` stay fast: numba
+and rerun load only when a filter or a recorder is made).
 """
 
 import os as _os
+from importlib import import_module as _import_module
+from typing import Any as _Any
 
 # numba's OpenMP threads spin while idle by default; when the other cores are busy (a laptop
 # running anything else, CI), every parallel region then waits milliseconds for a descheduled
@@ -14,3 +28,34 @@ import os as _os
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
+
+_EXPORTS = {
+    "Slam": ("slam.online", "Slam"),
+    "Estimate": ("slam.online", "Estimate"),
+    "Result": ("slam.online", "Result"),
+    "Scan": ("slam.scans", "Scan"),
+    "Trajectory": ("slam.trajectory", "Trajectory"),
+    "Config": ("slam.config", "Config"),
+    "load_config": ("slam.config", "load_config"),
+    "run": ("slam.pipeline", "run_dataset"),
+    "Observer": ("slam.observers", "Observer"),
+    "StepRecord": ("slam.observers", "StepRecord"),
+    "SlamError": ("slam.errors", "SlamError"),
+}
+
+__all__ = [*_EXPORTS, "__version__"]
+
+
+def __getattr__(name: str) -> _Any:
+    """Import the public names of :data:`_EXPORTS` on first use."""
+    try:
+        module, attribute = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'slam' has no attribute {name!r}") from None
+    value = getattr(_import_module(module), attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -1,17 +1,68 @@
-"""Observers of a running filter: the progress bar, and a composite that feeds several at once.
+"""Observers of a running filter: what they receive, the progress bar, and a composite.
 
-An observer (see :class:`slam.particle_filter.Observer`) receives a :class:`StepRecord` after every
-processed scan, detailed ones (particles, scan endpoints) every ``detail_every`` steps, and the
-map every ``map_every`` steps. The rerun recorder is another observer.
+An :class:`Observer` attached to a :class:`slam.online.Slam` receives a :class:`StepRecord` after
+every processed scan, detailed ones (particles, scan endpoints) every ``detail_every`` steps, and
+the current map every ``map_every`` steps. The progress bar is one; the rerun recorder
+(:class:`slam.viz.recorder.RunRecorder`) is another; a test can be a third.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
-from slam.mapping import OccupancyGrid
-from slam.particle_filter import Observer, StepRecord
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from slam.mapping import OccupancyGrid
+
+F64 = NDArray[np.float64]
+
+
+@dataclass
+class StepRecord:
+    """What an observer sees after each processed scan."""
+
+    step: int
+    """Number of the processed scan (0-based)."""
+    scan_index: int
+    """Index of the scan in the log."""
+    time: float
+    """Scan time (s)."""
+    pose: F64
+    """Current estimate: the pose of the highest-weight particle."""
+    n_eff: float
+    """Effective sample size after weighting."""
+    max_weight: float
+    """Largest normalised weight."""
+    updated: bool
+    """Whether the filter ran an update on this scan (``rbpf`` skips scans between updates)."""
+    resampled: bool
+    """Whether the particles were resampled on this scan."""
+    particles: F64 | None = None
+    """``(P, 3)`` particle poses (only on detail steps)."""
+    weights: F64 | None = None
+    """``(P,)`` normalised weights (only on detail steps)."""
+    endpoints: F64 | None = None
+    """``(K, 2)`` world positions of the scan's returns from ``pose`` (only on detail steps)."""
+
+
+class Observer(Protocol):
+    """Receives the filter's progress: progress bars, the rerun recorder, tests."""
+
+    detail_every: int
+    """Steps between records carrying particles and endpoints (0: never)."""
+    map_every: int
+    """Steps between map snapshots (0: never)."""
+
+    def on_step(self, record: StepRecord) -> None:
+        """Called after every processed scan."""
+
+    def on_map(self, step: int, time: float, grid: OccupancyGrid) -> None:
+        """Called every ``map_every`` steps (on filter updates) with the current map."""
 
 
 class ProgressObserver:
@@ -20,7 +71,7 @@ class ProgressObserver:
     detail_every = 0
     map_every = 0
 
-    def __init__(self, total: int, enabled: bool, label: str = "") -> None:
+    def __init__(self, total: int | None, enabled: bool, label: str = "") -> None:
         self._bar = None
         if enabled:
             from tqdm import tqdm

@@ -18,20 +18,32 @@ for how many intervals and seconds.
 
 CARMEN logs carry odometry poses already; their motion between scans is the relative pose of
 consecutive odometry poses (:func:`scan_odometry`).
+
+Batch and online
+    :func:`dead_reckon_ece276a` integrates a whole recorded log: its gyro low-pass runs forward
+    and backward (zero phase), which needs the samples after each time. :class:`OdometryIntegrator`
+    is the causal form for a robot that feeds readings as they arrive (``Slam.add_encoders``,
+    ``Slam.add_imu``): the same arcs and the same IMU-gap rule, with a forward-only low-pass
+    (a lag of ``1/(2π f_c)``, 16 ms at 10 Hz) and the pose at a scan extrapolated from the last
+    encoder reading instead of interpolated towards the next one. With the low-pass off
+    (``robot.imu_lowpass_hz = 0``) both give the same poses at the encoder readings.
 """
 
 from __future__ import annotations
 
+import bisect
+import math
 import warnings
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from slam.config import RobotConfig
 from slam.errors import DataError
 from slam.geometry import interpolate_poses
 from slam.io.log import EncoderStream, ImuStream, Log
 from slam.kernels.filters import lowpass_first_order
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -100,11 +112,10 @@ def integrate_arcs(distance: F64, dtheta: F64, start: F64 | None = None) -> F64:
 
 def dead_reckon_ece276a(
     encoders: EncoderStream, imu: ImuStream | None, robot: RobotConfig
-) -> tuple[F64, F64]:
+) -> Trajectory:
     """Dead-reckoned robot poses at every encoder reading, starting at the origin.
 
-    Returns ``(times (N,), poses (N, 3))``. See the module docstring for the model and for what
-    happens outside the IMU's time range.
+    See the module docstring for the model and for what happens outside the IMU's time range.
     """
     times = np.asarray(encoders.time, dtype=np.float64)
     if times.shape[0] == 0:
@@ -119,7 +130,7 @@ def dead_reckon_ece276a(
                 OdometryWarning,
                 stacklevel=2,
             )
-        return times, integrate_arcs(distance, wheel_dtheta)
+        return Trajectory(times, integrate_arcs(distance, wheel_dtheta))
 
     if len(imu) < 2:
         raise DataError(f"IMU: need at least 2 samples to integrate yaw, found {len(imu)}")
@@ -144,7 +155,7 @@ def dead_reckon_ece276a(
             OdometryWarning,
             stacklevel=2,
         )
-    return times, integrate_arcs(distance, dtheta)
+    return Trajectory(times, integrate_arcs(distance, dtheta))
 
 
 def poses_at(times: F64, poses: F64, query: F64, what: str = "poses") -> F64:
@@ -172,8 +183,8 @@ def scan_odometry(log: Log, robot: RobotConfig) -> F64:
     if log.scans.odometry is not None:
         return np.asarray(log.scans.odometry, dtype=np.float64)
     if log.encoders is not None:
-        times, poses = dead_reckon_ece276a(log.encoders, log.imu, robot)
-        return poses_at(times, poses, log.scans.time, what="scan")
+        odometry = dead_reckon_ece276a(log.encoders, log.imu, robot)
+        return poses_at(odometry.times, odometry.poses, log.scans.time, what="scan")
     if log.odometry is not None:
         order = np.argsort(log.odometry.time, kind="stable")
         return poses_at(
@@ -182,7 +193,7 @@ def scan_odometry(log: Log, robot: RobotConfig) -> F64:
     raise DataError(f"{log.name}: the log has no odometry (no encoders, no ODOM messages)")
 
 
-def odometry_trajectory(log: Log, robot: RobotConfig) -> tuple[F64, F64]:
+def odometry_trajectory(log: Log, robot: RobotConfig) -> Trajectory:
     """The dead-reckoning trajectory of a log, at its natural rate.
 
     One pose per encoder reading when the log has encoders (ECE276A), else one pose per scan
@@ -191,7 +202,161 @@ def odometry_trajectory(log: Log, robot: RobotConfig) -> tuple[F64, F64]:
     if log.encoders is not None:
         return dead_reckon_ece276a(log.encoders, log.imu, robot)
     if log.scans is not None:
-        return np.asarray(log.scans.time, np.float64), scan_odometry(log, robot)
+        return Trajectory(log.scans.time, scan_odometry(log, robot))
     if log.odometry is not None:
-        return np.asarray(log.odometry.time, np.float64), np.asarray(log.odometry.poses)
+        return Trajectory(log.odometry.time, log.odometry.poses)
     raise DataError(f"{log.name}: the log has no odometry (no encoders, scans or ODOM messages)")
+
+
+class OdometryIntegrator:
+    """Causal dead reckoning of the ECE276A robot from readings fed as they arrive.
+
+    Feed gyro samples with :meth:`add_imu` and encoder readings with :meth:`add_encoders`, each
+    stream in time order; :meth:`pose_at` gives the pose at a scan time from what has arrived so
+    far. The model is :func:`dead_reckon_ece276a`'s (see the module docstring for the differences:
+    forward-only low-pass, extrapolation past the last encoder reading).
+    """
+
+    def __init__(self, robot: RobotConfig) -> None:
+        self.robot = robot
+        self._rc = 1.0 / (2.0 * math.pi * robot.imu_lowpass_hz) if robot.imu_lowpass_hz > 0 else 0.0
+        # the gyro: sample times, low-passed rates and the heading integral at each sample
+        self._imu_times: list[float] = []
+        self._rates: list[float] = []
+        self._headings: list[float] = []
+        # the encoders: reading times and poses (heading unwrapped), the IMU heading at each
+        self._times: list[float] = []
+        self._poses: list[tuple[float, float, float]] = []
+        self._imu_heading: float | None = None
+        self._speed = 0.0
+        self._turn_rate = 0.0
+        self._last_interval = 0.0
+        self.wheel_yaw_intervals = 0
+        """Encoder intervals whose yaw came from the wheels (outside the IMU's time range)."""
+
+    def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
+        """Add gyro z samples (rad/s) taken at ``time`` (s); scalars or arrays."""
+        times = np.atleast_1d(np.asarray(time, dtype=np.float64))
+        rates = np.atleast_1d(np.asarray(gyro_z, dtype=np.float64))
+        if times.shape != rates.shape:
+            raise DataError(f"IMU: {times.size} sample times for {rates.size} gyro readings")
+        for t, x in zip(times.tolist(), rates.tolist(), strict=True):
+            if not self._imu_times:
+                self._imu_times.append(t)
+                self._rates.append(x)
+                self._headings.append(0.0)
+                continue
+            last = self._imu_times[-1]
+            if t < last:
+                raise DataError(f"IMU: sample at {t:.6f} s comes after one at {last:.6f} s")
+            dt = t - last
+            y = self._rates[-1]
+            if self._rc > 0:
+                a = dt / (self._rc + dt) if dt > 0.0 else 0.0
+                y_new = y + a * (x - y)
+            else:
+                y_new = x
+            self._imu_times.append(t)
+            self._headings.append(self._headings[-1] + 0.5 * (y_new + y) * dt)
+            self._rates.append(y_new)
+
+    def _heading_at(self, t: float) -> float | None:
+        """The gyro's heading integral at ``t``, or ``None`` outside its range (± the gap)."""
+        times, gap = self._imu_times, self.robot.max_imu_gap_s
+        if self.robot.yaw_source != "imu" or not times:
+            return None
+        if t < times[0] - gap or t > times[-1] + gap:
+            return None
+        if t >= times[-1]:
+            return self._headings[-1] + self._rates[-1] * (t - times[-1])
+        if t <= times[0]:
+            return self._headings[0] - self._rates[0] * (times[0] - t)
+        j = bisect.bisect_right(times, t) - 1
+        slope = (self._headings[j + 1] - self._headings[j]) / (times[j + 1] - times[j])
+        return slope * (t - times[j]) + self._headings[j]
+
+    def add_encoders(self, time: ArrayLike, counts: ArrayLike) -> None:
+        """Add encoder readings: ``counts`` ``(4,)`` or ``(4, K)`` ticks (FR, FL, RR, RL) since
+        the previous reading, taken at ``time`` (s). The first reading ever only starts the clock
+        (its ticks were counted before it)."""
+        times = np.atleast_1d(np.asarray(time, dtype=np.float64))
+        ticks = np.asarray(counts, dtype=np.float64).reshape(4, -1)
+        if ticks.shape[1] != times.size:
+            raise DataError(f"encoders: {times.size} reading times for {ticks.shape[1]} readings")
+        m, track = self.robot.meters_per_tick, self.robot.track_width
+        for i, t in enumerate(times.tolist()):
+            heading = self._heading_at(t)
+            if not self._times:
+                self._times.append(t)
+                self._poses.append((0.0, 0.0, 0.0))
+                self._imu_heading = heading
+                continue
+            last = self._times[-1]
+            if t < last:
+                raise DataError(f"encoders: reading at {t:.6f} s comes after one at {last:.6f} s")
+            right = 0.5 * (ticks[0, i] + ticks[2, i]) * m
+            left = 0.5 * (ticks[1, i] + ticks[3, i]) * m
+            distance = 0.5 * (right + left)
+            dt = t - last
+            if heading is not None and self._imu_heading is not None:
+                dtheta = heading - self._imu_heading
+            else:
+                dtheta = (right - left) / track
+                self._count_wheel_yaw()
+            self._imu_heading = heading
+            self._poses.append(_advance(self._poses[-1], distance, dtheta))
+            self._times.append(t)
+            self._speed = distance / dt if dt > 0 else 0.0
+            self._turn_rate = dtheta / dt if dt > 0 else 0.0
+            self._last_interval = dt
+
+    def _count_wheel_yaw(self) -> None:
+        if self.robot.yaw_source == "imu" and self.wheel_yaw_intervals == 0:
+            warnings.warn(
+                "odometry: encoder intervals outside the IMU's time range (or before any IMU "
+                "sample); their yaw comes from the wheels",
+                OdometryWarning,
+                stacklevel=4,
+            )
+        self.wheel_yaw_intervals += 1
+
+    def pose_at(self, t: float) -> F64:
+        """The robot's pose at time ``t`` from the readings so far.
+
+        Between readings the poses are interpolated; before the first one it is the start pose;
+        past the last one the robot moves on at the last interval's speed (heading from the gyro
+        when it covers ``t``) for at most one interval, then stands.
+        """
+        if not self._times:
+            raise DataError(f"odometry: no encoder reading before the scan at {t:.6f} s")
+        times, poses = self._times, self._poses
+        if t <= times[0]:
+            return _wrapped(poses[0])
+        if t < times[-1]:
+            j = bisect.bisect_right(times, t) - 1
+            f = (t - times[j]) / (times[j + 1] - times[j])
+            a, b = poses[j], poses[j + 1]
+            return _wrapped(tuple(a[n] + f * (b[n] - a[n]) for n in range(3)))  # type: ignore[arg-type]
+        ahead = min(t - times[-1], self._last_interval)
+        heading, then = self._heading_at(times[-1] + ahead), self._imu_heading
+        turn = (
+            heading - then if heading is not None and then is not None else self._turn_rate * ahead
+        )
+        return _wrapped(_advance(poses[-1], self._speed * ahead, turn))
+
+
+def _advance(
+    pose: tuple[float, float, float], distance: float, dtheta: float
+) -> tuple[float, float, float]:
+    """``pose`` (heading unwrapped) moved along an arc of length ``distance`` turning ``dtheta``
+    (the rule of :func:`integrate_arcs`)."""
+    x, y, theta = pose
+    half = 0.5 * dtheta
+    chord = distance * float(np.sinc(half / np.pi))
+    theta_new = theta + dtheta
+    mid = theta_new - half  # as integrate_arcs computes it, so both agree to the last bit
+    return (x + chord * math.cos(mid), y + chord * math.sin(mid), theta_new)
+
+
+def _wrapped(pose: tuple[float, float, float]) -> F64:
+    return np.array([pose[0], pose[1], math.atan2(math.sin(pose[2]), math.cos(pose[2]))])

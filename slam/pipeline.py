@@ -1,8 +1,9 @@
 """The ``slam run`` pipeline: find the data, estimate, write the run folder.
 
 ``run(request)`` loads the log its NAME stands for (a registry dataset, the simulator's ``demo``,
-or a log file/folder given by path: :mod:`slam.io.sources` decides), runs the chosen method, and
-writes the run folder atomically (it appears complete or not at all):
+or a log file/folder given by path: :mod:`slam.io.sources` decides), feeds its scans one by one
+to a :class:`slam.online.Slam` (the object an online user has: batch and online runs agree bit
+for bit), and writes the run folder atomically (it appears complete or not at all):
 
 * ``config.toml``   — the exact configuration used (re-run with ``--config``);
 * ``trajectory.tum`` — one pose per processed scan (per encoder reading for ``odometry`` on
@@ -13,8 +14,8 @@ writes the run folder atomically (it appears complete or not at all):
 * ``metrics.json``  — sizes, timings (wall, scans/s, real-time factor, peak memory), filter
   diagnostics, and ATE/RPE when the dataset has a ground-truth trajectory.
 
-Later stages (texture mapping, the rerun recording) plug in here; estimation itself lives in
-:mod:`slam.odometry` and :mod:`slam.particle_filter`.
+The recorder and the progress bar watch the ``Slam`` object as observers; the texture stage runs
+on its result. :func:`run_dataset` (``slam.run``) is the same pipeline as one Python call.
 """
 
 from __future__ import annotations
@@ -24,22 +25,28 @@ import resource
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.config import Config, dumps
+from slam.config import Config, dumps, load_config
+from slam.errors import UsageError
 from slam.io import sources
 from slam.io.atomic import atomic_dir, write_png, write_text
+from slam.io.log import Log
 from slam.io.plausibility import check_plausibility
 from slam.io.sources import Source
 from slam.io.tum import format_tum
 from slam.mapping import OccupancyGrid
-from slam.particle_filter import Observer
+from slam.observers import Observer
+
+if TYPE_CHECKING:
+    from slam.online import Result
 
 F64 = NDArray[np.float64]
 
@@ -88,13 +95,6 @@ def default_run_dir(name: str) -> Path:
     return candidate
 
 
-def path_length(poses: F64) -> float:
-    """Length of the polyline through the poses' positions (m)."""
-    if poses.shape[0] < 2:
-        return 0.0
-    return float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
-
-
 def render_map(
     grid: OccupancyGrid, trajectory: F64, ground_truth: F64 | None = None
 ) -> NDArray[np.uint8]:
@@ -123,7 +123,14 @@ def _peak_rss_mb() -> float:
 
 
 def run(request: RunRequest) -> Path:
-    """Run ``slam run`` end to end; return the run folder.
+    """Run ``slam run`` end to end; return the run folder."""
+    folder = execute(request).folder
+    assert folder is not None
+    return folder
+
+
+def execute(request: RunRequest) -> Result:
+    """Run ``slam run`` end to end; return the result (with its metrics and run folder).
 
     The run folder is assembled in a temporary sibling from the start (so observers such as a
     recorder can write into it while the filter runs) and renamed into place only when every
@@ -140,11 +147,10 @@ def run(request: RunRequest) -> Path:
             warnings.simplefilter("always")
             source = sources.load(ref, config, _needs(config), request.progress)
             doubts = check_plausibility(source.log, config)  # time base, odometry jumps
-            observers: list[Observer] = []
             from slam.viz.recorder import start_recording
 
             recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
-            observers.extend([recorder] if recorder is not None else [])
+            observers = [recorder] if recorder is not None else []
             result = _estimate(source, config, request.progress, observers)
             from slam.texture import run_stage
 
@@ -152,112 +158,177 @@ def run(request: RunRequest) -> Path:
         messages = doubts + sorted({str(w.message) for w in caught})
         metrics = result.metrics
         metrics["warnings"] = messages + source.notes
-        if source.ground_truth is not None:
-            from slam.eval.trajectory import evaluate_against_reference
-
-            gt_times, gt_poses = source.ground_truth
-            ev = evaluate_against_reference(
-                result.times,
-                result.poses,
-                gt_times,
-                gt_poses,
-                estimate_name=f"{source.log.name} trajectory",
-                reference_name=f"its ground truth ({sources.GROUND_TRUTH_FILE})",
-            )
-            metrics["ate_rmse"] = ev["ate_rmse"]
-            metrics["ground_truth"] = ev
+        _evaluate(result, source)
         write_text(tmp / "config.toml", dumps(config))
-        write_text(tmp / "trajectory.tum", format_tum(result.times, result.poses))
+        write_text(tmp / "trajectory.tum", format_tum(result.trajectory))
         if result.grid is not None:
             result.grid.save_npz(tmp / "map.npz")
-            gt = None if source.ground_truth is None else source.ground_truth[1]
+            gt = None if source.ground_truth is None else source.ground_truth.poses
             write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
         if recorder is not None:  # last: the recording logs the texture when there is one
-            metrics["recording"] = recorder.finish(result.times, result.poses, result.grid, tmp)
+            metrics["recording"] = recorder.finish(result.trajectory, result.grid, tmp)
         metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
         metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     for message in messages:
         print(f"slam: warning: {message}", file=sys.stderr, flush=True)
-    return out
+    result.folder = out
+    return result
 
 
-def _check_memory(name: str, seq: Any, poses: F64, config: Config) -> None:
-    """Refuse, before the maps are allocated, a run that would not fit in memory."""
-    from slam.budget import check_run_memory, run_memory
+def _evaluate(result: Result, source: Source) -> None:
+    """ATE and RPE against the dataset's ground truth, when it has one, into the metrics."""
+    if source.ground_truth is not None:
+        from slam.eval.trajectory import evaluate_against_reference
 
-    span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
-    components = run_memory(
-        config, len(seq), seq.num_beams, float(span[0]), float(span[1]), seq.range_max
-    )
-    check_run_memory(name, components, config)
-
-
-@dataclass
-class Estimate:
-    """A trajectory, an optional map and the run's metrics."""
-
-    times: F64
-    poses: F64
-    grid: OccupancyGrid | None
-    metrics: dict[str, Any]
+        ev = evaluate_against_reference(
+            result.trajectory,
+            source.ground_truth,
+            estimate_name=f"{source.log.name} trajectory",
+            reference_name=f"its ground truth ({sources.GROUND_TRUTH_FILE})",
+        )
+        result.metrics["ate_rmse"] = ev["ate_rmse"]
+        result.metrics["ground_truth"] = ev
 
 
-def _estimate(
-    source: Source, config: Config, progress: bool, observers: list[Observer]
-) -> Estimate:
+RUN_OPTIONS = {
+    "method": "filter.method",
+    "particles": "filter.particles",
+    "every": "filter.every",
+    "max_scans": "filter.max_scans",
+}
+"""Keyword options of :func:`run_dataset`, and the configuration key each one sets."""
+
+
+def run_dataset(
+    name: str,
+    config: Config | None = None,
+    *,
+    seed: int | None = None,
+    data_dir: Path | str | None = None,
+    out: Path | str | None = None,
+    force: bool = False,
+    progress: bool = False,
+    overrides: Sequence[str] = (),
+    **options: Any,
+) -> Result:
+    """``slam.run``: run SLAM on a dataset in one call and return the :class:`~slam.online.Result`.
+
+    ``name`` is a registry dataset, ``"demo"`` or a path to a log, as for ``slam run``; ``config``
+    defaults to the dataset's (:func:`slam.config.load_config`); ``seed``, the ``options``
+    (``method``, ``particles``, ``every``, ``max_scans``) and ``overrides`` (``"section.key=value"``
+    strings, like ``--set``) change it. With ``out`` the run folder is written as ``slam run``
+    writes it (recording and texture as configured); without, nothing is written and the result's
+    ``metrics`` hold the sizes, timings and (with ground truth) the ATE.
+    """
+    from slam.io.datadir import resolve_data_dir
+
+    unknown = sorted(set(options) - set(RUN_OPTIONS))
+    if unknown:
+        raise UsageError(
+            f"slam.run: unknown option(s) {', '.join(unknown)}; expected {', '.join(RUN_OPTIONS)}"
+        )
+    settings = [
+        f'{RUN_OPTIONS[key]}="{value}"' if isinstance(value, str) else f"{RUN_OPTIONS[key]}={value}"
+        for key, value in options.items()
+    ]
+    if seed is not None:
+        settings.append(f"filter.seed={int(seed)}")
+    folder = resolve_data_dir(None if data_dir is None else Path(data_dir))
+    ref = sources.resolve(name, folder, where="slam.run")
+    base = config if config is not None else load_config(ref.config_name)
+    config = load_config(base.dataset, None, [*settings, *overrides], base=base)
+    if out is not None:
+        request = RunRequest(name, config, folder, out=Path(out), force=force, progress=progress)
+        return execute(request)
+    source = sources.load(ref, config, _needs(config), progress)
+    doubts = check_plausibility(source.log, config)  # time base, odometry jumps
+    result = _estimate(source, config, progress, [])
+    result.metrics["warnings"] = doubts + list(source.notes)
+    _evaluate(result, source)
+    return result
+
+
+def _estimate(source: Source, config: Config, progress: bool, observers: list[Observer]) -> Result:
     """Run the configured method; ``observers`` also watch the filter (with the progress bar)."""
     log = source.log
     method = config.filter.method
     base: dict[str, Any] = {"dataset": log.name, "method": method, "seed": config.filter.seed}
     if method == "odometry":
-        from slam.odometry import odometry_trajectory, scan_odometry
-        from slam.particle_filter import ScanSequence, build_map
+        return _dead_reckoning(log, config, base)
 
-        start = time.perf_counter()
-        times, poses = odometry_trajectory(log, config.robot)
-        grid = None
-        if log.scans is not None:
-            seq = ScanSequence.from_log(log, config)
-            scan_poses = scan_odometry(log, config.robot)[seq.indices]
-            _check_memory(log.name, seq, scan_poses, config)
-            grid = build_map(seq, scan_poses, np.arange(len(seq)), config)
-        wall = time.perf_counter() - start
-        duration = float(times.max() - times.min()) if times.size else 0.0
-        base.update(
-            poses=int(times.shape[0]),
-            duration_s=round(duration, 3),
-            path_length_m=round(path_length(poses), 3),
-            estimate_wall_s=round(wall, 3),
-        )
-        return Estimate(times, poses, grid, base)
+    from slam.observers import ProgressObserver
+    from slam.online import Slam
+    from slam.scans import LogScans
 
-    from slam.observers import CompositeObserver, ProgressObserver
-    from slam.particle_filter import ScanSequence, run_slam
-
-    seq = ScanSequence.from_log(log, config)
-    _check_memory(log.name, seq, seq.odometry, config)
-    bar = ProgressObserver(len(seq), enabled=progress, label=f"{log.name} {method}")
+    scans = LogScans.from_log(log, config)
+    beams = int(log.scans.ranges.shape[1])  # type: ignore[union-attr]
+    _check_memory(log.name, len(scans), beams, scans.odometry, scans.range_max, config)
+    bar = ProgressObserver(len(scans), enabled=progress, label=f"{log.name} {method}")
+    start = time.perf_counter()
     try:
-        result, wall = run_slam(seq, config, CompositeObserver([bar, *observers]))
+        slam = Slam(config, observers=[bar, *observers], scan_period=scans.scan_period())
+        for scan, odometry in scans:
+            slam.update(scan, odometry=odometry)
+        result = slam.finish()
     finally:
         bar.close()
-    duration = float(seq.times.max() - seq.times.min()) if len(seq) > 1 else 0.0
+    wall = time.perf_counter() - start
+    trajectory, grid = result.trajectory, result.grid
+    duration = trajectory.duration() if len(trajectory) > 1 else 0.0
+    assert grid is not None and result.n_eff is not None
     base.update(
-        poses=int(result.times.shape[0]),
-        scans=len(seq),
+        poses=len(trajectory),
+        scans=len(scans),
         particles=config.filter.particles,
         duration_s=round(duration, 3),
-        path_length_m=round(path_length(result.poses), 3),
+        path_length_m=round(trajectory.path_length(), 3),
         estimate_wall_s=round(wall, 3),
-        scans_per_s=round(len(seq) / wall, 1) if wall > 0 else None,
+        scans_per_s=round(len(scans) / wall, 1) if wall > 0 else None,
         real_time_factor=round(duration / wall, 2) if wall > 0 else None,
         n_eff_mean=round(float(result.n_eff.mean()), 2),
         n_eff_min=round(float(result.n_eff.min()), 2),
         resampling_count=int(result.stats.get("resamples", 0)),
         filter=result.stats,
-        map_shape=list(result.grid.shape),
-        map_resolution=result.grid.resolution,
-        map_origin=[float(v) for v in result.grid.origin],
+        map_shape=list(grid.shape),
+        map_resolution=grid.resolution,
+        map_origin=[float(v) for v in grid.origin],
     )
-    return Estimate(result.times, result.poses, result.grid, base)
+    result.metrics = base
+    return result
+
+
+def _check_memory(
+    name: str, scans: int, beams: int, poses: F64, range_max: float, config: Config
+) -> None:
+    """Refuse, before the maps are allocated, a run that would not fit in memory."""
+    from slam.budget import check_run_memory, run_memory
+
+    span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
+    components = run_memory(config, scans, beams, float(span[0]), float(span[1]), range_max)
+    check_run_memory(name, components, config)
+
+
+def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
+    """``method = "odometry"``: the odometry trajectory at its natural rate, and the map of the
+    scans at their odometry poses."""
+    from slam.odometry import odometry_trajectory
+    from slam.online import Result
+    from slam.scans import ScanSequence
+    from slam.stages import build_map
+
+    start = time.perf_counter()
+    trajectory = odometry_trajectory(log, config.robot)
+    grid = None
+    if log.scans is not None:
+        seq = ScanSequence.from_log(log, config)
+        _check_memory(log.name, len(seq), seq.num_beams, seq.odometry, seq.range_max, config)
+        grid = build_map(seq, seq.odometry, np.arange(len(seq)), config)
+    wall = time.perf_counter() - start
+    base.update(
+        poses=len(trajectory),
+        duration_s=round(trajectory.duration(), 3),
+        path_length_m=round(trajectory.path_length(), 3),
+        estimate_wall_s=round(wall, 3),
+    )
+    return Result(trajectory, grid, metrics=base)

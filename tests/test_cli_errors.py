@@ -9,6 +9,7 @@ import numpy as np
 
 from slam.cli import main
 from slam.io.tum import write_tum
+from slam.trajectory import Trajectory
 
 
 def one_line_error(capsys) -> str:
@@ -20,7 +21,7 @@ def one_line_error(capsys) -> str:
 
 def make_run(folder: Path) -> Path:
     folder.mkdir()
-    write_tum(folder / "trajectory.tum", np.array([1.0, 2.0]), np.zeros((2, 3)))
+    write_tum(folder / "trajectory.tum", Trajectory(np.array([1.0, 2.0]), np.zeros((2, 3))))
     return folder
 
 

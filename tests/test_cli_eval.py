@@ -14,6 +14,7 @@ import pytest
 from slam.cli import main
 from slam.geometry import compose, relative
 from slam.io.tum import write_tum
+from slam.trajectory import Trajectory
 
 TRUTH = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, np.pi / 2]])
 # Times like a CARMEN log's (1e9 s): the TUM file keeps microseconds, enough for 1e-4 s matching.
@@ -25,7 +26,7 @@ ESTIMATE = TRUTH + np.array([[0, 0, 0], [0.1, 0, 0], [0, 0, 0.1]])
 def run_dir(tmp_path: Path) -> Path:
     folder = tmp_path / "run"
     folder.mkdir()
-    write_tum(folder / "trajectory.tum", TIMES, ESTIMATE)
+    write_tum(folder / "trajectory.tum", Trajectory(TIMES, ESTIMATE))
     return folder
 
 
@@ -77,7 +78,7 @@ def test_unmatched_relations_warn_and_are_counted(run_dir, tmp_path, capsys):
 def test_reference_json(run_dir, tmp_path, capsys):
     reference = tmp_path / "truth.tum"
     moved = compose(np.array([1.0, -2.0, 0.5]), TRUTH)  # the truth in another frame
-    write_tum(reference, TIMES, moved)
+    write_tum(reference, Trajectory(TIMES, moved))
     code = main(["eval", str(run_dir), "--reference", str(reference), "--json", "--delta", "1"])
     assert code == 0
     printed = json.loads(capsys.readouterr().out)
@@ -92,7 +93,7 @@ def test_reference_json(run_dir, tmp_path, capsys):
 
 def test_reference_table(run_dir, tmp_path, capsys):
     reference = tmp_path / "truth.tum"
-    write_tum(reference, TIMES, ESTIMATE)
+    write_tum(reference, Trajectory(TIMES, ESTIMATE))
     assert main(["eval", str(run_dir), "--reference", str(reference)]) == 0
     out = capsys.readouterr().out
     assert "ATE        rmse 0.0000 m" in out
@@ -155,7 +156,7 @@ def test_intel_odometry_through_the_cli(carmen_dir, tmp_path, capsys):
 
     log = load_carmen(carmen_dir / "intel.clf.gz")
     folder = tmp_path / "intel-odometry"
-    write_tum(folder / "trajectory.tum", log.scans.time, log.scans.odometry)
+    write_tum(folder / "trajectory.tum", Trajectory(log.scans.time, log.scans.odometry))
     rel = carmen_dir / "relations" / "intel.relations"
     assert main(["eval", str(folder), "--relations", str(rel), "--json"]) == 0
     stats = json.loads(capsys.readouterr().out)["relations"]

@@ -19,6 +19,7 @@ from slam.eval.trajectory import (
     rpe_pairs,
 )
 from slam.geometry import compose, transform_points
+from slam.trajectory import Trajectory
 
 
 def wiggly_trajectory(n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -50,7 +51,7 @@ def test_align_se2_handles_half_turns():
 def test_ate_is_zero_on_a_rigidly_moved_copy():
     times, reference = wiggly_trajectory()
     moved = compose(np.array([-3.0, 5.0, 2.5]), reference)
-    result = ate(associate(times, moved, times, reference))
+    result = ate(associate(Trajectory(times, moved), Trajectory(times, reference)))
     summary = result.summary()
     assert summary["ate_rmse"] == pytest.approx(0, abs=1e-9)
     assert summary["ate_rot_rmse_deg"] == pytest.approx(0, abs=1e-9)
@@ -65,7 +66,7 @@ def test_ate_known_value_on_a_scaled_square():
     reference = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
     estimate = reference.copy()
     estimate[:, :2] = 0.5 + 1.1 * (reference[:, :2] - 0.5)
-    result = ate(associate(times, estimate, times, reference))
+    result = ate(associate(Trajectory(times, estimate), Trajectory(times, reference)))
     expected = 0.1 * math.sqrt(0.5)
     np.testing.assert_allclose(result.errors, expected, atol=1e-12)
     np.testing.assert_allclose(result.transform, 0.0, atol=1e-12)
@@ -79,7 +80,7 @@ def test_ate_without_alignment_sees_the_offset():
     times = np.arange(5.0)
     reference = np.column_stack([times, np.zeros(5), np.zeros(5)])
     estimate = reference + np.array([0.3, 0.4, 0.0])
-    association = associate(times, estimate, times, reference)
+    association = associate(Trajectory(times, estimate), Trajectory(times, reference))
     assert ate(association, Alignment.NONE).summary()["ate_rmse"] == pytest.approx(0.5)
     assert ate(association, Alignment.SE2).summary()["ate_rmse"] == pytest.approx(0, abs=1e-12)
 
@@ -89,7 +90,7 @@ def test_association_interpolates_and_excludes_outside_times():
     reference = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, np.pi / 2]])
     est_times = np.array([-1.0, 1.0, 3.0, 5.0, 6.0])
     estimate = np.array([[9, 9, 0], [1, 0, 0], [2, 1, np.pi / 4], [9, 9, 0], [9, 9, 0]], float)
-    association = associate(est_times, estimate, ref_times, reference)
+    association = associate(Trajectory(est_times, estimate), Trajectory(ref_times, reference))
     assert association.excluded == 3
     np.testing.assert_array_equal(association.time, [1.0, 3.0])
     np.testing.assert_allclose(association.reference, [[1, 0, 0], [2, 1, np.pi / 4]])
@@ -99,7 +100,8 @@ def test_association_interpolates_and_excludes_outside_times():
 def test_association_sorts_a_reference_in_file_order():
     ref_times = np.array([2.0, 0.0, 4.0])
     reference = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [4.0, 0.0, 0.0]])
-    association = associate(np.array([3.0, 1.0]), np.zeros((2, 3)), ref_times, reference)
+    estimate = Trajectory(np.array([3.0, 1.0]), np.zeros((2, 3)))
+    association = associate(estimate, Trajectory(ref_times, reference))
     np.testing.assert_allclose(association.reference[:, 0], [1.0, 3.0])
 
 
@@ -114,7 +116,7 @@ def straight_line(scale: float = 1.0, yaw_step: float = 0.0) -> tuple[np.ndarray
 def test_rpe_known_values_in_frames_and_seconds():
     times, reference = straight_line()
     _, estimate = straight_line(scale=1.1)  # every step 10 % too long
-    association = associate(times, estimate, times, reference)
+    association = associate(Trajectory(times, estimate), Trajectory(times, reference))
     one = rpe(association, 1, DeltaUnit.FRAMES).summary()
     assert one["rpe_pairs"] == 4
     assert one["rpe_trans_mean"] == pytest.approx(0.1)
@@ -130,7 +132,7 @@ def test_rpe_known_values_in_frames_and_seconds():
 def test_rpe_rotation_error():
     times, reference = straight_line()
     _, estimate = straight_line(yaw_step=0.01)  # turns 0.01 rad per step, reference does not
-    one = rpe(associate(times, estimate, times, reference), 1).summary()
+    one = rpe(associate(Trajectory(times, estimate), Trajectory(times, reference)), 1).summary()
     # pair k: δ = (1, 0, 0.01) vs δ* = (1, 0, 0): the error is a pure 0.01 rad turn.
     assert one["rpe_rot_mean_deg"] == pytest.approx(math.degrees(0.01))
     assert one["rpe_trans_mean"] == pytest.approx(0, abs=1e-12)
@@ -159,7 +161,10 @@ def test_no_overlap_is_a_data_error_naming_both():
     times, poses = straight_line()
     with pytest.raises(DataError, match="est.tum: no pose lies within the time span of ref.tum"):
         evaluate_against_reference(
-            times + 100, poses, times, poses, estimate_name="est.tum", reference_name="ref.tum"
+            Trajectory(times + 100, poses),
+            Trajectory(times, poses),
+            estimate_name="est.tum",
+            reference_name="ref.tum",
         )
 
 
@@ -167,7 +172,7 @@ def test_evaluate_against_reference_keys():
     times, reference = wiggly_trajectory(50)
     moved = compose(np.array([1.0, 2.0, 0.3]), reference)
     out = evaluate_against_reference(
-        times, moved, times, reference, delta=1.0, unit=DeltaUnit.SECONDS
+        Trajectory(times, moved), Trajectory(times, reference), delta=1.0, unit=DeltaUnit.SECONDS
     )
     assert out["matched"] == 50 and out["excluded"] == 0
     assert out["ate_rmse"] == pytest.approx(0, abs=1e-9)

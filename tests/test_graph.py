@@ -120,7 +120,7 @@ def small_log(tmp_path_factory):
     from slam.geometry import interpolate_poses
     from slam.io.ece276a import load_ece276a
     from slam.io.tum import read_tum
-    from slam.particle_filter import ScanSequence
+    from slam.scans import ScanSequence
     from slam.sim.dataset import SimOptions, generate_dataset
 
     folder = tmp_path_factory.mktemp("loops") / "small"

@@ -11,6 +11,7 @@ from slam.errors import DataError
 from slam.eval.relations import match_times, relation_errors
 from slam.geometry import relative
 from slam.io.relations import Relations, read_relations
+from slam.trajectory import Trajectory
 
 # --- the file format ------------------------------------------------------------------------------
 
@@ -104,7 +105,7 @@ def test_metric_is_zero_on_the_true_trajectory():
     truth = np.cumsum(rng.normal(0, 1, (50, 3)), axis=0)
     times = 1e9 + np.arange(50) * 0.2
     pairs = [(int(a), int(b)) for a, b in rng.integers(0, 50, (200, 2)) if a != b]
-    errors = relation_errors(times, truth, relations_of(truth, pairs, times))
+    errors = relation_errors(Trajectory(times, truth), relations_of(truth, pairs, times))
     s = errors.summary()
     assert s["count"] == len(pairs) and s["unmatched"] == 0
     assert s["trans_mean"] == pytest.approx(0, abs=1e-9)
@@ -119,7 +120,7 @@ def test_metric_on_a_known_perturbation():
     #   0->2: e = (0, 0, 0.1)       trans 0    rot 0.1
     estimate = TRUTH + np.array([[0, 0, 0], [0.1, 0, 0], [0, 0, 0.1]])
     rel = relations_of(TRUTH, [(0, 1), (1, 2), (0, 2)])
-    errors = relation_errors(TIMES, estimate, rel)
+    errors = relation_errors(Trajectory(TIMES, estimate), rel)
     np.testing.assert_allclose(errors.trans, [0.1, 0.1, 0.0], atol=1e-12)
     np.testing.assert_allclose(errors.rot, [0.0, 0.1, 0.1], atol=1e-12)
     s = errors.summary()
@@ -140,27 +141,27 @@ def test_unmatched_relations_are_counted_not_dropped():
     t1[1] += 2e-4  # beyond the 1e-4 s tolerance
     t1[2] += 5e-5  # within it
     shifted = Relations(t1=t1, t2=t2, x=rel.x, y=rel.y, yaw=rel.yaw)
-    errors = relation_errors(TIMES, TRUTH, shifted)
+    errors = relation_errors(Trajectory(TIMES, TRUTH), shifted)
     assert errors.count == 1 and errors.unmatched == 2 and errors.total == 3
     np.testing.assert_array_equal(errors.unmatched_index, [0, 1])
     np.testing.assert_array_equal(errors.matched_index, [2])
-    wider = relation_errors(TIMES, TRUTH, shifted, tolerance=3e-4)
+    wider = relation_errors(Trajectory(TIMES, TRUTH), shifted, tolerance=3e-4)
     assert wider.count == 2 and wider.unmatched == 1
 
 
 def test_metric_does_not_depend_on_pose_order_or_frame():
     estimate = TRUTH + np.array([[0, 0, 0], [0.1, 0, 0], [0, 0, 0.1]])
     rel = relations_of(TRUTH, [(0, 1), (1, 2), (0, 2)])
-    base = relation_errors(TIMES, estimate, rel).summary()
+    base = relation_errors(Trajectory(TIMES, estimate), rel).summary()
     order = [2, 0, 1]  # poses in "file order" with non-monotonic times
     moved = relative(np.array([3.0, -2.0, 1.0]), estimate)  # a rigid change of frame
-    again = relation_errors(TIMES[order], moved[order], rel).summary()
+    again = relation_errors(Trajectory(TIMES[order], moved[order]), rel).summary()
     for key in ("trans_mean", "trans_std", "rot_mean_deg", "rot_std_deg"):
         assert again[key] == pytest.approx(base[key], abs=1e-12)
 
 
 def test_no_match_gives_nan_statistics():
     rel = relations_of(TRUTH, [(0, 1)], times=TIMES + 50)
-    s = relation_errors(TIMES, TRUTH, rel).summary()
+    s = relation_errors(Trajectory(TIMES, TRUTH), rel).summary()
     assert s["count"] == 0 and s["unmatched"] == 1
     assert math.isnan(s["trans_mean"])

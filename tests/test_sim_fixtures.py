@@ -33,7 +33,7 @@ def test_scan_endpoints_fall_on_the_walls_grown_around_the_path(dataset20_sim_li
     world = fx.world
     log = load_ece276a(fx.folder, 20, need=("scans",))
     lidar = LidarSpec()
-    laser = compose(fx.poses, np.array([lidar.x, 0.0, 0.0]))
+    laser = compose(fx.trajectory.poses, np.array([lidar.x, 0.0, 0.0]))
     r = log.scans.ranges.astype(np.float64)
     hit = np.isfinite(r) & (r < log.scans.no_return)
     assert hit.mean() > 0.95
@@ -48,10 +48,10 @@ def test_scan_endpoints_fall_on_the_walls_grown_around_the_path(dataset20_sim_li
     assert near.mean() >= 0.999
     assert (world.labels[rows, cols] > 0).mean() > 0.5
     # The path keeps its clearance: no pose closer than 0.6 m to an obstacle.
-    rows, cols = world.cell_of(fx.poses[:, 0], fx.poses[:, 1])
+    rows, cols = world.cell_of(fx.trajectory.poses[:, 0], fx.trajectory.poses[:, 1])
     assert dist[rows, cols].min() >= 0.6
     t, poses = read_tum(fx.folder / "groundtruth.tum")
-    np.testing.assert_allclose(poses, fx.poses, atol=2e-6)
+    np.testing.assert_allclose(poses, fx.trajectory.poses, atol=2e-6)
 
 
 def test_slam_run_dataset20_goes_end_to_end(dataset20_sim_lidar, tmp_path):

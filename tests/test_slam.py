@@ -120,13 +120,13 @@ def test_existing_run_folder_is_refused_and_kept(small, rbpf_run, capsys):
 
 
 def test_failed_run_leaves_no_folder(small, tmp_path, monkeypatch, capsys):
-    import slam.particle_filter as pf
     from slam.errors import DataError
+    from slam.online import Slam
 
     def broken(*args, **kwargs):
         raise DataError("injected failure in the middle of the run")
 
-    monkeypatch.setattr(pf, "run_slam", broken)
+    monkeypatch.setattr(Slam, "finish", broken)
     out = tmp_path / "broken"
     assert main(["run", str(small), "--out", str(out), "--quiet"]) == 2
     assert "injected failure" in capsys.readouterr().err

@@ -17,6 +17,7 @@ from slam.texture import (
     evaluate_texture,
     pair_frames,
 )
+from slam.trajectory import Trajectory
 
 pytestmark = pytest.mark.data
 
@@ -87,7 +88,7 @@ def test_simulated_frames_at_real_timestamps_texture_the_floor(kinect20, tmp_pat
     poses = traj.pose_at(times)
     grid = OccupancyGrid(MapConfig())
     with pytest.warns(TextureWarning, match="skipped 4 RGB frame"):
-        result = build_texture(log.rgbd, times, poses, grid, TextureConfig())
+        result = build_texture(log.rgbd, Trajectory(times, poses), grid, TextureConfig())
     expected_rgb, expected_disp = _brute_force_pairs(rgb_t, disp_t, 0.1)
     np.testing.assert_array_equal(result.plan.rgb, expected_rgb)
     np.testing.assert_array_equal(result.plan.disparity, expected_disp)

@@ -16,6 +16,7 @@ from slam.config import MapConfig, TextureConfig
 from slam.io.ece276a import load_ece276a
 from slam.mapping import OccupancyGrid
 from slam.texture import TextureWarning, build_texture, evaluate_texture, load_ground_truth
+from slam.trajectory import Trajectory
 
 RUN = ["--method", "odometry", "--set", "viz.record=false", "--quiet"]
 """Fast runs: dead reckoning (the map still comes from the scans), no recording."""
@@ -44,7 +45,9 @@ def _texture_with_ground_truth_path(folder: Path, mode: str):
     config = TextureConfig(mode=mode)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TextureWarning)  # the simulator drops a few frames
-        result = build_texture(log.rgbd, gt.times, gt.poses, OccupancyGrid(MapConfig()), config)
+        result = build_texture(
+            log.rgbd, Trajectory(gt.times, gt.poses), OccupancyGrid(MapConfig()), config
+        )
     used_times = result.plan.disparity_time[result.used]
     return result, evaluate_texture(result.texture, gt, used_times, config)
 

@@ -128,7 +128,8 @@ def test_map_image_is_placed_at_its_lower_left_corner(scripted):
 def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_path):
     from slam.config import MapConfig
     from slam.mapping import OccupancyGrid
-    from slam.particle_filter import StepRecord
+    from slam.observers import StepRecord
+    from slam.trajectory import Trajectory
     from slam.viz.recorder import RunRecorder
 
     recorder = RunRecorder(tmp_path / "r.rrd", VizConfig(map_every=4, detail_every=2))
@@ -143,7 +144,7 @@ def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_pat
     grid.integrate(np.zeros(2), wall, np.ones(50, dtype=bool))
     recorder.on_map(9, 9.0, grid)  # not due: the last snapshot was at 8
     recorder.on_map(13, 13.0, grid)  # due (≥ 12)
-    recorder.finish(np.arange(9.0), np.zeros((9, 3)), None)
+    recorder.finish(Trajectory(np.arange(9.0), np.zeros((9, 3))), None)
     snapshots = rows(tmp_path / "r.rrd", bp.MAP, "Image:format")
     assert [i for i, _ in snapshots] == [4, 8, 13]
     # the preview holds the wall: occupied (dark) pixels in the top rows of the image

@@ -53,7 +53,8 @@ def write_reference(path: Path) -> Path:
 
     from slam.config import MapConfig, VizConfig
     from slam.mapping import OccupancyGrid
-    from slam.particle_filter import StepRecord
+    from slam.observers import StepRecord
+    from slam.trajectory import Trajectory
     from slam.viz.recorder import RunRecorder
 
     viz = VizConfig(map_every=10, detail_every=5, scan_points=24, map_levels=16)
@@ -70,7 +71,7 @@ def write_reference(path: Path) -> Path:
     )
     poses = scripted_poses()
     times = 1000.0 + 0.1 * np.arange(STEPS)
-    recorder.log_ground_truth(poses + np.array([0.02, -0.02, 0.0]))
+    recorder.log_ground_truth(Trajectory(times, poses + np.array([0.02, -0.02, 0.0])))
     grid = OccupancyGrid(map_config, center=(0.0, 1.0))
     wall = np.stack([np.linspace(-2.5, 2.5, 36), np.full(36, 2.6)], axis=1)
     offsets = np.linspace(-0.05, 0.05, 8)
@@ -103,7 +104,7 @@ def write_reference(path: Path) -> Path:
             resolution=np.float64(0.5),
             origin=np.array([-1.0, 0.0]),
         )
-        recorder.finish(times, poses, grid, Path(folder))
+        recorder.finish(Trajectory(times, poses), grid, Path(folder))
     return path
 
 

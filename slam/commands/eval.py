@@ -14,10 +14,13 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from slam.commands._common import add_data_dir_argument, data_dir_from
 from slam.errors import DataError, UsageError
+
+if TYPE_CHECKING:
+    from slam.trajectory import Trajectory
 
 TRAJECTORY_FILE = "trajectory.tum"
 """The trajectory a run folder holds."""
@@ -101,15 +104,15 @@ def run_eval(args: argparse.Namespace) -> int:
     relations, reference = args.relations, args.reference
     if relations is None and reference is None:
         result["dataset"], relations, reference = _dataset_ground_truth(args, run_dir)
-    times, poses = read_tum(run_dir / TRAJECTORY_FILE)
-    result["poses"] = int(times.shape[0])
+    trajectory = read_tum(run_dir / TRAJECTORY_FILE)
+    result["poses"] = len(trajectory)
     if relations is not None:
         result["relations"] = _relations(
-            times, poses, relations, args.tolerance, run_dir / TRAJECTORY_FILE
+            trajectory, relations, args.tolerance, run_dir / TRAJECTORY_FILE
         )
     if reference is not None:
         result["reference"] = str(reference)
-        result.update(_reference(times, poses, reference, args))
+        result.update(_reference(trajectory, reference, args))
 
     try:
         write_eval_json(run_dir, result)
@@ -120,16 +123,17 @@ def run_eval(args: argparse.Namespace) -> int:
 
 
 def _relations(
-    times: Any, poses: Any, path: Path, tolerance: float, trajectory: Path
+    trajectory: Trajectory, path: Path, tolerance: float, trajectory_file: Path
 ) -> dict[str, Any]:
     from slam.eval.relations import relation_errors
     from slam.io.relations import read_relations
 
     relations = read_relations(path)
-    errors = relation_errors(times, poses, relations, tolerance)
+    errors = relation_errors(trajectory, relations, tolerance)
+    times = trajectory.times
     if errors.count == 0:
         raise DataError(
-            f"{path}: none of its {len(relations)} relations matches two poses of {trajectory} "
+            f"{path}: none of its {len(relations)} relations matches two poses of {trajectory_file} "
             f"within {tolerance:g} s (relations span {relations.t1.min():.6f}.."
             f"{relations.t2.max():.6f} s, trajectory {times.min():.6f}..{times.max():.6f} s): "
             "is it the same log?"
@@ -178,16 +182,13 @@ def _dataset_ground_truth(
     return name, relations, reference
 
 
-def _reference(times: Any, poses: Any, path: Path, args: argparse.Namespace) -> dict[str, Any]:
+def _reference(trajectory: Trajectory, path: Path, args: argparse.Namespace) -> dict[str, Any]:
     from slam.eval.trajectory import Alignment, DeltaUnit, evaluate_against_reference
     from slam.io.tum import read_tum
 
-    ref_times, ref_poses = read_tum(path)
     return evaluate_against_reference(
-        times,
-        poses,
-        ref_times,
-        ref_poses,
+        trajectory,
+        read_tum(path),
         alignment=Alignment(args.align),
         delta=args.delta,
         unit=DeltaUnit(args.delta_unit),

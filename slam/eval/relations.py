@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.geometry import relative
 from slam.io.relations import Relations
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -103,16 +104,12 @@ class RelationErrors:
 
 
 def relation_errors(
-    times: ArrayLike,
-    poses: ArrayLike,
+    trajectory: Trajectory,
     relations: Relations,
     tolerance: float = DEFAULT_TOLERANCE_S,
 ) -> RelationErrors:
-    """Errors of the trajectory ``(times (N,), poses (N, 3))`` against ``relations``."""
-    times = np.asarray(times, dtype=np.float64)
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if times.shape[0] != poses.shape[0]:
-        raise ValueError(f"{times.shape[0]} times for {poses.shape[0]} poses")
+    """Errors of ``trajectory`` against ``relations``."""
+    times, poses = trajectory.times, trajectory.poses
     i = match_times(times, relations.t1, tolerance)
     j = match_times(times, relations.t2, tolerance)
     ok = (i >= 0) & (j >= 0)

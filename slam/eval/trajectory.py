@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.errors import DataError, UsageError
 from slam.geometry import compose, interpolate_poses, relative, wrap_angle
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -85,14 +86,10 @@ class Association:
         return int(self.time.shape[0])
 
 
-def associate(
-    est_times: ArrayLike, est_poses: ArrayLike, ref_times: ArrayLike, ref_poses: ArrayLike
-) -> Association:
+def associate(estimate: Trajectory, reference: Trajectory) -> Association:
     """Pair each estimate pose with the reference interpolated at its time."""
-    est_times, est_poses = _checked(est_times, est_poses, "estimate")
-    ref_times, ref_poses = _checked(ref_times, ref_poses, "reference")
-    ref_order = np.argsort(ref_times, kind="stable")
-    ref_times, ref_poses = ref_times[ref_order], ref_poses[ref_order]
+    est_times, est_poses = _checked(estimate, "estimate")
+    ref_times, ref_poses = _checked(reference.sorted_by_time(), "reference")
     inside = (est_times >= ref_times[0]) & (est_times <= ref_times[-1])
     est_order = np.argsort(est_times[inside], kind="stable")
     time = est_times[inside][est_order]
@@ -106,14 +103,10 @@ def associate(
     )
 
 
-def _checked(times: ArrayLike, poses: ArrayLike, what: str) -> tuple[F64, F64]:
-    times = np.asarray(times, dtype=np.float64).reshape(-1)
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if times.shape[0] != poses.shape[0]:
-        raise ValueError(f"{what}: {times.shape[0]} times for {poses.shape[0]} poses")
-    if times.size == 0:
+def _checked(trajectory: Trajectory, what: str) -> tuple[F64, F64]:
+    if len(trajectory) == 0:
         raise UsageError(f"{what} trajectory has no poses")
-    return times, poses
+    return trajectory.times, trajectory.poses
 
 
 def align_se2(source_xy: ArrayLike, target_xy: ArrayLike) -> F64:
@@ -244,10 +237,8 @@ def rpe(
 
 
 def evaluate_against_reference(
-    est_times: ArrayLike,
-    est_poses: ArrayLike,
-    ref_times: ArrayLike,
-    ref_poses: ArrayLike,
+    estimate: Trajectory,
+    reference: Trajectory,
     *,
     alignment: Alignment = Alignment.SE2,
     delta: float = 1,
@@ -261,8 +252,8 @@ def evaluate_against_reference(
     :class:`DataError` when fewer than :data:`MIN_MATCHED_POSES` estimate poses at distinct
     times lie within the reference's time span, or when no RPE pair is ``delta`` apart.
     """
-    association = associate(est_times, est_poses, ref_times, ref_poses)
-    _require_matches(association, est_times, ref_times, estimate_name, reference_name)
+    association = associate(estimate, reference)
+    _require_matches(association, estimate.times, reference.times, estimate_name, reference_name)
     ate_result = ate(association, alignment)
     out: dict[str, Any] = {"matched": len(association), "excluded": association.excluded}
     out.update(ate_result.summary())

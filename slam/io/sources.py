@@ -35,6 +35,7 @@ from slam.errors import DataError, UsageError
 if TYPE_CHECKING:
     from slam.config import Config
     from slam.io.log import Log
+    from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -97,8 +98,8 @@ class Source:
     """A loaded log and what we know about it."""
 
     log: Log
-    ground_truth: tuple[F64, F64] | None = None
-    """``(times, poses)`` of the true trajectory when the dataset has one (simulated logs)."""
+    ground_truth: Trajectory | None = None
+    """The true trajectory when the dataset has one (simulated logs)."""
     notes: list[str] = field(default_factory=list)
     """Lines for the run's ``warnings`` (where the demo is)."""
 

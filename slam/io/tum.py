@@ -1,9 +1,10 @@
 """TUM trajectory files: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
 
 Planar poses are written with z = 0 and a yaw-only quaternion, the form evo and most SLAM tools
-read. Timestamps keep microseconds (CARMEN relations match scans to 1e-4 s). A file read must
-hold finite numbers and unit quaternions (norm 1 ± :data:`QUATERNION_TOLERANCE`): a zero or
-unnormalised quaternion has no rotation to read, and is an error naming the line.
+read. Timestamps keep microseconds (CARMEN relations match scans to 1e-4 s). Trajectories are
+:class:`slam.trajectory.Trajectory` values both ways. A file read must hold finite numbers and
+unit quaternions (norm 1 ± :data:`QUATERNION_TOLERANCE`): a zero or unnormalised quaternion has
+no rotation to read, and is an error naming the line.
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
 from slam.errors import DataError
 from slam.geometry import quaternion_to_yaw, yaw_to_quaternion
 from slam.io.atomic import write_text
 from slam.io.text import decode_utf8
+from slam.trajectory import Trajectory
 
 _TUM_LINE = "%.6f %.6f %.6f 0.000000 %.9f %.9f %.9f %.9f"
 
@@ -24,25 +25,23 @@ QUATERNION_TOLERANCE = 1e-3
 """How far from 1 a quaternion's norm may be: files written with 4 decimals stay within 2e-4."""
 
 
-def format_tum(times: NDArray[np.float64], poses: NDArray[np.float64]) -> str:
-    """TUM text of ``(N,)`` times and ``(N, 3)`` planar poses."""
-    times = np.asarray(times, dtype=np.float64)
-    poses = np.asarray(poses, dtype=np.float64)
-    if times.shape[0] != poses.shape[0]:
-        raise ValueError(f"{times.shape[0]} times for {poses.shape[0]} poses")
+def format_tum(trajectory: Trajectory) -> str:
+    """TUM text of a planar trajectory."""
+    times, poses = trajectory.times, trajectory.poses
     rows = np.column_stack([times, poses[:, :2], yaw_to_quaternion(poses[:, 2])]).tolist()
     lines = ["# timestamp tx ty tz qx qy qz qw"]
     lines += [_TUM_LINE % tuple(row) for row in rows]  # Python floats format faster than numpy
     return "\n".join(lines) + "\n"
 
 
-def write_tum(path: Path, times: NDArray[np.float64], poses: NDArray[np.float64]) -> None:
+def write_tum(path: Path, trajectory: Trajectory) -> None:
     """Write a planar trajectory to ``path`` atomically."""
-    write_text(Path(path), format_tum(times, poses))
+    write_text(Path(path), format_tum(trajectory))
 
 
-def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Read a TUM file; return ``(times (N,), poses (N, 3))`` with yaw from the quaternion."""
+def read_tum(path: Path) -> Trajectory:
+    """Read a TUM file: the trajectory, with yaw from the quaternion (it unpacks as
+    ``times, poses``)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -84,4 +83,4 @@ def read_tum(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
             f"expected a unit quaternion (norm 1 ± {QUATERNION_TOLERANCE:g})"
         )
     poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], axis=-1)
-    return data[:, 0], poses
+    return Trajectory(data[:, 0], poses)

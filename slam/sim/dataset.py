@@ -57,6 +57,7 @@ from slam.sim.sensors import (
     simulate_lidar,
 )
 from slam.sim.world import WALL, World
+from slam.trajectory import Trajectory
 
 SIM_VERSION = 2
 """Version of the generator; bump it whenever outputs change for the same options."""
@@ -325,7 +326,7 @@ def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
     if log.disparity_time is not None:
         parts += [log.disparity_time, log.rgb_time]
     times = np.unique(np.concatenate(parts))
-    (folder / "groundtruth.tum").write_text(format_tum(times, traj.pose_at(times)))
+    (folder / "groundtruth.tum").write_text(format_tum(Trajectory(times, traj.pose_at(times))))
     save_npz(folder / "groundtruth_map.npz", map_arrays(world))
     save_npz(
         folder / "groundtruth_texture.npz",

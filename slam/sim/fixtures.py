@@ -27,6 +27,7 @@ from slam.odometry import OdometryWarning, dead_reckon_ece276a
 from slam.sim.dataset import hokuyo_arrays, map_arrays, save_npz
 from slam.sim.sensors import LidarSpec, NoiseConfig, measure_ranges, mount_laser, true_ranges
 from slam.sim.world import World, world_around_path
+from slam.trajectory import Trajectory
 
 REAL_FILES = ("Encoders20.npz", "Imu20.npz", "Kinect20.npz")
 """The real files of dataset20 the fixture links beside its simulated ``Hokuyo20.npz``."""
@@ -40,10 +41,9 @@ class SimLidarDataset:
     """Data directory to pass as ``--data-dir`` (holds ``ece276a/``)."""
     world: World
     """The building the laser was simulated in."""
-    times: np.ndarray
-    """Scan times (the real encoder time stamps)."""
-    poses: np.ndarray
-    """Robot poses at the scan times (the dead-reckoned path the building was grown around)."""
+    trajectory: Trajectory
+    """Robot poses at the scan times (the real encoder time stamps): the dead-reckoned path the
+    building was grown around."""
 
     @property
     def folder(self) -> Path:
@@ -89,7 +89,8 @@ def assemble_dataset20_with_sim_lidar(
     with warnings.catch_warnings():
         # The real IMU stops ~1.7 s before the encoders; the wheels carry the yaw there.
         warnings.simplefilter("ignore", OdometryWarning)
-        times, poses = dead_reckon_ece276a(log.encoders, log.imu, RobotConfig())
+        trajectory = dead_reckon_ece276a(log.encoders, log.imu, RobotConfig())
+    times, poses = trajectory.times, trajectory.poses
 
     rng = np.random.default_rng(seed)
     world = world_around_path(rng, poses[:, :2])
@@ -99,6 +100,6 @@ def assemble_dataset20_with_sim_lidar(
     ranges = measure_ranges(ranges, incidence, rng, noise, lidar)
 
     save_npz(stream_file(folder, 20, "scans"), hokuyo_arrays(lidar, times, ranges))
-    write_tum(folder / "groundtruth.tum", times, poses)
+    write_tum(folder / "groundtruth.tum", trajectory)
     save_npz(folder / "groundtruth_map.npz", map_arrays(world))
-    return SimLidarDataset(Path(data_dir), world, times, poses)
+    return SimLidarDataset(Path(data_dir), world, trajectory)

@@ -33,6 +33,7 @@ from slam.texture.kernels import (
     kinect_model,
 )
 from slam.texture.pairing import FramePlan, frame_poses, plan_frames, warn_skips
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -181,20 +182,18 @@ def _read_ahead(
 
 def build_texture(
     index: RgbdIndex,
-    times: F64,
-    poses: F64,
+    trajectory: Trajectory,
     grid: OccupancyGrid,
     config: TextureConfig,
     progress: bool = False,
 ) -> TextureResult:
-    """Texture of the frames of ``index`` seen along the trajectory ``(times, poses)`` on ``grid``.
+    """Texture of the frames of ``index`` seen along ``trajectory`` on ``grid``.
 
     Frames are decoded ``config.read_threads`` at a time ahead of the accumulation. Skipped frames
     are counted in the result's plan and reported as
     :class:`~slam.texture.pairing.TextureWarning` (one per reason).
     """
-    times = np.asarray(times, dtype=np.float64)
-    poses = np.asarray(poses, dtype=np.float64)
+    times = trajectory.times
     warm_up()
     start = time.perf_counter()
     time_range = (float(times.min()), float(times.max())) if times.size else (0.0, -1.0)
@@ -204,7 +203,7 @@ def build_texture(
     n = plan.rgb.size
     used = np.zeros(n, dtype=bool)
     if n:
-        pose_d, pose_r = frame_poses(plan, times, poses)
+        pose_d, pose_r = frame_poses(plan, trajectory)
     bar = None
     if progress and n:
         from tqdm import tqdm

@@ -22,6 +22,7 @@ from slam.errors import DataError
 from slam.geometry import interpolate_poses, inverse, transform_points
 from slam.texture.accumulate import TextureMap
 from slam.texture.kernels import camera_in_world, camera_parameters, kinect_model, mark_swept
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -193,7 +194,7 @@ def evaluate_texture(
     gt: GroundTruth,
     frame_times: F64,
     config: TextureConfig,
-    trajectory: tuple[F64, F64] | None = None,
+    trajectory: Trajectory | None = None,
 ) -> dict[str, Any]:
     """Colour error and coverage of ``texture`` against the ground truth (docs/texture.md).
 
@@ -226,7 +227,7 @@ def evaluate_texture(
         "coverage": _rounded((swept & coloured).sum() / n_swept if n_swept else None, 4),
         "coloured_outside_floor_cells": int((coloured & ~floor).sum()),
     }
-    if trajectory is not None and len(trajectory[0]) > 1:
+    if trajectory is not None and len(trajectory) > 1:
         out.update(_aligned_figures(texture, gt, truth, swept, trajectory))
     return out
 
@@ -236,14 +237,14 @@ def _aligned_figures(
     gt: GroundTruth,
     truth: TrueTexture,
     swept: NDArray[np.bool_],
-    trajectory: tuple[F64, F64],
+    trajectory: Trajectory,
 ) -> dict[str, Any]:
     """``alignment``, ``colour_mae_aligned`` and ``coverage_aligned`` of :func:`evaluate_texture`
     (empty when fewer than two poses of the trajectory lie within the ground truth's time span)."""
     from slam.eval.trajectory import align_se2
 
     shape, res, coloured = texture.count.shape, texture.resolution, texture.coloured
-    times, poses = (np.asarray(a, dtype=np.float64) for a in trajectory)
+    times, poses = trajectory.times, trajectory.poses
     inside = (times >= gt.times[0]) & (times <= gt.times[-1])
     if inside.sum() <= 1:
         return {}

@@ -24,8 +24,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import TextureConfig
-from slam.geometry import interpolate_poses
 from slam.io.log import RgbdIndex
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -223,13 +223,10 @@ def plan_frames(
     return plan
 
 
-def frame_poses(plan: FramePlan, times: F64, poses: F64) -> tuple[F64, F64]:
+def frame_poses(plan: FramePlan, trajectory: Trajectory) -> tuple[F64, F64]:
     """Robot poses ``(N, 3)`` at the disparity and at the RGB time of each planned pair,
-    interpolated from the trajectory ``(times, poses)`` (angles unwrapped)."""
-    return (
-        interpolate_poses(times, poses, plan.disparity_time),
-        interpolate_poses(times, poses, plan.rgb_time),
-    )
+    interpolated along ``trajectory`` (angles unwrapped)."""
+    return trajectory.at(plan.disparity_time), trajectory.at(plan.rgb_time)
 
 
 def warn_skips(plan: FramePlan, index: RgbdIndex) -> list[str]:

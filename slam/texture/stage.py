@@ -29,6 +29,7 @@ from slam.texture.accumulate import build_texture
 from slam.texture.evaluate import evaluate_texture, load_ground_truth, load_npz
 from slam.texture.outputs import write_outputs
 from slam.texture.pairing import TextureWarning
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -48,14 +49,13 @@ def images_missing(log: Log) -> str | None:
 
 def texture_stage(
     log: Log,
-    times: F64,
-    poses: F64,
+    trajectory: Trajectory,
     grid: OccupancyGrid,
     config: Config,
     out_dir: Path,
     progress: bool = False,
 ) -> dict[str, Any]:
-    """Compute the texture of ``log`` along ``(times, poses)`` on ``grid``, write the outputs into
+    """Compute the texture of ``log`` along ``trajectory`` on ``grid``, write the outputs into
     ``out_dir`` and return the figures for ``metrics.json`` (with the ground-truth evaluation when
     the log's folder is a simulated dataset).
 
@@ -70,7 +70,7 @@ def texture_stage(
         message = f"texture: skipped, RGB-D image folders {why}"
         warnings.warn(message, TextureWarning, stacklevel=2)
         return {"skipped": message}
-    result = build_texture(index, times, poses, grid, tc, progress)
+    result = build_texture(index, trajectory, grid, tc, progress)
     write_outputs(out_dir, result.texture, grid)
     plan = result.plan
     used = int(result.used.sum())
@@ -98,7 +98,7 @@ def texture_stage(
     gt = load_ground_truth(source) if source is not None else None
     if gt is not None:
         metrics["ground_truth"] = evaluate_texture(
-            result.texture, gt, plan.disparity_time[result.used], tc, (times, poses)
+            result.texture, gt, plan.disparity_time[result.used], tc, trajectory
         )
     return metrics
 
@@ -106,15 +106,15 @@ def texture_stage(
 def run_stage(
     log: Log, estimate: Any, config: Config, out_dir: Path, progress: bool = False
 ) -> dict[str, Any]:
-    """The texture stage as ``slam run`` calls it, on an estimate with ``times``, ``poses`` and
-    ``grid``: ``{"texture": figures}``, or ``{}`` when the stage does not apply (disabled, or no
+    """The texture stage as ``slam run`` calls it, on a :class:`slam.online.Result` (its
+    ``trajectory`` and ``grid``): ``{"texture": figures}``, or ``{}`` when the stage does not apply (disabled, or no
     RGB-D stream); without a map (dead reckoning without scans) the figures say it was skipped."""
     grid = getattr(estimate, "grid", None)
     if not config.texture.enabled or log.rgbd is None:
         return {}
     if grid is None:
         return {"texture": {"skipped": "no occupancy map to put the texture on"}}
-    figures = texture_stage(log, estimate.times, estimate.poses, grid, config, out_dir, progress)
+    figures = texture_stage(log, estimate.trajectory, grid, config, out_dir, progress)
     return {"texture": figures}
 
 
@@ -172,7 +172,7 @@ def recompute_run(
     where = "--dataset" if dataset else f"{run_dir / 'config.toml'}: dataset"
     hint = "" if dataset else "give the dataset with --dataset NAME_OR_PATH"
     ref = sources.resolve(name, data_dir, where=where, hint=hint)
-    times, poses = read_tum(run_dir / "trajectory.tum")
+    trajectory = read_tum(run_dir / "trajectory.tum")
     grid = read_map(run_dir / "map.npz", config)
     log = sources.load(ref, config, need=("kinect",), progress=progress).log
     if log.rgbd is None:
@@ -180,7 +180,7 @@ def recompute_run(
     why = images_missing(log)
     if why is not None:
         raise DataError(f"dataset {name}: RGB-D image folders {why}")
-    figures = texture_stage(log, times, poses, grid, config, run_dir, progress)
+    figures = texture_stage(log, trajectory, grid, config, run_dir, progress)
     update_metrics(run_dir / "metrics.json", figures)
     return figures
 

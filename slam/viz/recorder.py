@@ -1,6 +1,6 @@
 """The recorder of ``slam run``: a filter observer that writes ``recording.rrd`` as the run goes.
 
-:class:`RunRecorder` implements :class:`slam.particle_filter.Observer`. Timelines: ``scan`` (the
+:class:`RunRecorder` implements :class:`slam.observers.Observer`. Timelines: ``scan`` (the
 number of the processed scan, 0-based) and ``time`` (the scan's log timestamp). Entities (paths in
 :mod:`slam.viz.blueprint`):
 
@@ -50,7 +50,8 @@ from numpy.typing import NDArray
 
 from slam.config import Config, MapConfig, VizConfig
 from slam.mapping import OccupancyGrid
-from slam.particle_filter import StepRecord
+from slam.observers import StepRecord
+from slam.trajectory import Trajectory
 from slam.viz import blueprint as bp
 from slam.viz.images import PlacedImage, as_image, occupancy_image, texture_image
 from slam.viz.stream import close_stream, open_stream, set_time, spawn_viewer, time_columns
@@ -295,10 +296,10 @@ class RunRecorder:
         self.spent_s += time.perf_counter() - start
 
     # -- before and after the filter
-    def log_ground_truth(self, poses: F64) -> None:
+    def log_ground_truth(self, trajectory: Trajectory) -> None:
         """The true trajectory (static), when the dataset has one."""
         start = time.perf_counter()
-        xy = thin(np.asarray(poses, dtype=np.float64)[:, :2], GROUND_TRUTH_POINTS)
+        xy = thin(trajectory.poses[:, :2], GROUND_TRUTH_POINTS)
         self.rec.log(
             bp.GROUND_TRUTH,
             rr.LineStrips2D([xy], colors=[_GREEN], radii=rr.Radius.ui_points(1.5), draw_order=25.0),
@@ -308,8 +309,7 @@ class RunRecorder:
 
     def finish(
         self,
-        times: F64,
-        poses: F64,
+        trajectory: Trajectory,
         grid: OccupancyGrid | None,
         run_folder: Path | None = None,
     ) -> dict[str, Any]:
@@ -318,13 +318,14 @@ class RunRecorder:
         start = time.perf_counter()
         self._send_rows()
         rec = self.rec
+        times = trajectory.times
         if self.steps:
             step, stamp = self._last
         else:
             step, stamp = max(len(times) - 1, 0), float(times[-1]) if len(times) else None
         set_time(rec, step, stamp)
-        if len(poses):
-            rec.log(bp.TRAJECTORY_FINAL, rr.LineStrips2D([np.asarray(poses)[:, :2]]))
+        if len(trajectory):
+            rec.log(bp.TRAJECTORY_FINAL, rr.LineStrips2D([trajectory.poses[:, :2]]))
         if grid is not None:
             image = occupancy_image(grid, self.config.map_levels)
             if image is not None:
@@ -350,13 +351,13 @@ class RunRecorder:
 def start_recording(
     folder: Path,
     config: Config,
-    ground_truth: tuple[F64, F64] | None = None,
+    ground_truth: Trajectory | None = None,
     viewer: bool = False,
 ) -> RunRecorder | None:
     """The recorder of a ``slam run`` writing ``folder/recording.rrd`` (``viz.record``) and/or
     streaming to a newly spawned viewer (``viewer``); ``None`` when neither is asked for.
 
-    ``ground_truth`` is ``(times, poses)`` of the true trajectory, logged right away.
+    ``ground_truth``, the true trajectory, is logged right away.
     """
     if not config.viz.record and not viewer:
         return None
@@ -365,5 +366,5 @@ def start_recording(
     name = f"slam run {config.dataset or Path(folder).name} ({config.filter.method})"
     recorder = RunRecorder(path, config.viz, map_config=config.map, name=name, viewer_url=url)
     if ground_truth is not None:
-        recorder.log_ground_truth(ground_truth[1])
+        recorder.log_ground_truth(ground_truth)
     return recorder

@@ -105,7 +105,7 @@ def noise_free_accuracy() -> dict:
     """The acceptance figures on the noise-free demo (Kinect at 2 Hz to keep it short): dead
     reckoning vs ground truth, scan endpoints on occupied cells, floor pixels on the right colour."""
     from slam.config import load_config
-    from slam.geometry import interpolate_poses, wrap_angle
+    from slam.geometry import wrap_angle
     from slam.io.ece276a import load_ece276a
     from slam.io.tum import read_tum
     from slam.kinect import KinectModel
@@ -120,15 +120,16 @@ def noise_free_accuracy() -> dict:
             folder, SimOptions(scenario="demo", seed=20, rgbd_rate=2.0, noise=NoiseConfig.off())
         )
         log = load_ece276a(folder, 20, need=("encoders", "imu", "scans", "kinect"))
-        gt_t, gt = read_tum(folder / "groundtruth.tum")
-        times, poses = dead_reckon_ece276a(log.encoders, log.imu, load_config("demo").robot)
-        truth = interpolate_poses(gt_t, gt, times)
+        reference = read_tum(folder / "groundtruth.tum")
+        odometry = dead_reckon_ece276a(log.encoders, log.imu, load_config("demo").robot)
+        times, poses = odometry.times, odometry.poses
+        truth = reference.at(times)
         err = np.hypot(*(poses[:, :2] - truth[:, :2]).T)
-        length = float(np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T)))
+        length = odometry.with_poses(truth).path_length()
 
         with np.load(folder / "groundtruth_map.npz") as f:
             occ, res, origin = f["occupancy"], float(f["resolution"]), f["origin"]
-        scan_poses = interpolate_poses(gt_t, gt, log.scans.time)
+        scan_poses = reference.at(log.scans.time)
         lx = scan_poses[:, 0] + LidarSpec().x * np.cos(scan_poses[:, 2])
         ly = scan_poses[:, 1] + LidarSpec().x * np.sin(scan_poses[:, 2])
         r = log.scans.ranges.astype(np.float64)
@@ -144,7 +145,7 @@ def noise_free_accuracy() -> dict:
         rgbd = log.rgbd
         matched = total = 0
         for k in range(len(rgbd.disparity_time)):
-            pose = interpolate_poses(gt_t, gt, rgbd.disparity_time[k : k + 1])[0]
+            pose = reference.at(rgbd.disparity_time[k : k + 1])[0]
             disparity, rgb = rgbd.load_disparity(k), rgbd.load_rgb(k)
             points, valid = model.disparity_to_world(disparity, pose)
             i, j = np.nonzero(valid & (np.abs(points[..., 2]) < 0.03))

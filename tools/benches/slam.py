@@ -61,14 +61,14 @@ def _speed(particles: int, method: str = "rbpf") -> dict:
 
 
 def _true_length() -> float:
-    import numpy as np
 
     from slam.io.datadir import resolve_cache_dir
     from slam.io.tum import read_tum
     from slam.sim.demo import ensure_demo
 
-    _, poses = read_tum(ensure_demo(resolve_cache_dir(data_dir())) / "groundtruth.tum")
-    return round(float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))), 2)
+    return round(
+        read_tum(ensure_demo(resolve_cache_dir(data_dir())) / "groundtruth.tum").path_length(), 2
+    )
 
 
 def _accuracy(name: str, method: str = "rbpf", extra: list[str] | None = None) -> dict:
@@ -86,8 +86,8 @@ def _accuracy(name: str, method: str = "rbpf", extra: list[str] | None = None) -
     with tempfile.TemporaryDirectory(prefix="slam-bench-") as tmp:
         for label, meth in (("odometry", "odometry"), (method, method)):
             m = _run(name, [f'filter.method="{meth}"', *(extra or [])], Path(tmp) / label)
-            times, poses = read_tum(Path(tmp) / label / "trajectory.tum")
-            err = relation_errors(times, poses, relations).summary()
+            err = relation_errors(read_tum(Path(tmp) / label / "trajectory.tum"), relations)
+            err = err.summary()
             out[label] = {
                 "trans_mean": round(err["trans_mean"], 4),
                 "trans_std": round(err["trans_std"], 4),

@@ -38,6 +38,7 @@ def demo_ground_truth_path() -> dict:
     from slam.config import MapConfig, TextureConfig
     from slam.mapping import OccupancyGrid
     from slam.texture import build_texture, evaluate_texture, load_ground_truth, warm_up
+    from slam.trajectory import Trajectory
 
     folder, log = _demo_log()
     gt = load_ground_truth(Path(folder))
@@ -47,7 +48,9 @@ def demo_ground_truth_path() -> dict:
     cpu = time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = build_texture(log.rgbd, gt.times, gt.poses, OccupancyGrid(MapConfig()), config)
+        result = build_texture(
+            log.rgbd, Trajectory(gt.times, gt.poses), OccupancyGrid(MapConfig()), config
+        )
     cpu = time.process_time() - cpu
     used = int(result.used.sum())
     start = time.perf_counter()

@@ -1,0 +1,343 @@
+"""The ``Slam`` object: the package's public face, fed one scan at a time.
+
+::
+
+    import slam
+    s = slam.Slam(slam.load_config("intel"), seed=0)
+    for scan, odom in my_robot():                  # slam.Scan values and odometry poses
+        est = s.update(scan, odometry=odom)        # slam.Estimate: pose, covariance, n_eff, ...
+    result = s.finish()                            # slam.Result: trajectory, grid, diagnostics
+
+:meth:`Slam.update` appends the scan to the run's :class:`~slam.scans.ScanSequence` and advances
+the filter by one step (:mod:`slam.particle_filter`); observers (progress bar, rerun recorder,
+:mod:`slam.observers`) see every step. :meth:`Slam.finish` ends the filter and runs the
+post-filter stages (:mod:`slam.stages`). ``slam run`` feeds recorded logs through this same object
+(:mod:`slam.pipeline`), so a batch run and an online run of the same scans agree bit for bit.
+
+Robots without an odometry pose (the ECE276A robot: wheel encoders and a gyro) feed their
+readings instead — :meth:`Slam.add_encoders` and :meth:`Slam.add_imu`, or ``encoders=`` and
+``imu=`` of :meth:`Slam.update` — and a causal integrator (:class:`slam.odometry.OdometryIntegrator`)
+gives the odometry at each scan. docs/api.md describes the whole interface.
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slam.config import Config
+from slam.errors import ConfigError, UsageError
+from slam.geometry import compose, transform_points
+from slam.mapping import OccupancyGrid
+from slam.observers import CompositeObserver, Observer, StepRecord
+from slam.particle_filter import (
+    ClassicFilter,
+    RbpfFilter,
+    StepOutcome,
+    cloud_covariance,
+    integrate_scan,
+    make_filter,
+)
+from slam.scans import Scan, ScanSequence
+from slam.stages import Stage, default_stages, run_stages
+from slam.trajectory import Trajectory
+
+F64 = NDArray[np.float64]
+
+DETAIL_BEAMS = 720
+"""Endpoints an observer's detail record carries on scans the filter did not weigh."""
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """The filter's state after one :meth:`Slam.update`."""
+
+    step: int
+    """Number of the processed scan (0-based)."""
+    scan_index: int
+    """The scan's index in its log (:attr:`Scan.index`, else ``step``)."""
+    time: float
+    """Scan time (s)."""
+    pose: F64
+    """``(3,)`` current pose: the highest-weight particle (between ``rbpf`` updates moved on by
+    odometry)."""
+    n_eff: float
+    """Effective sample size ``1/Σw²`` after weighting."""
+    max_weight: float
+    """Largest normalised weight."""
+    updated: bool
+    """Whether the filter weighed this scan (``rbpf`` updates only after enough motion)."""
+    resampled: bool
+    """Whether the particles were resampled on this scan."""
+    particles: F64
+    """``(P, 3)`` particle poses (between ``rbpf`` updates moved on by odometry)."""
+    weights: F64
+    """``(P,)`` normalised particle weights (uniform right after a resampling)."""
+
+    @property
+    def covariance(self) -> F64:
+        """``(3, 3)`` weighted covariance of the particle cloud (x, y, θ)."""
+        return cloud_covariance(self.particles, self.weights)
+
+
+@dataclass(eq=False)
+class Result:
+    """What a run produces: the trajectory, the map and the filter's diagnostics."""
+
+    trajectory: Trajectory
+    """One pose per processed scan (``scan_indices``: their log indices); for dead reckoning
+    (``method = "odometry"``) one per odometry reading."""
+    grid: OccupancyGrid | None
+    """The occupancy grid (``None`` for dead reckoning of a log without scans)."""
+    n_eff: F64 | None = None
+    """``(N,)`` effective sample size per processed scan (``None`` without a filter)."""
+    max_weight: F64 | None = None
+    """``(N,)`` largest normalised weight per processed scan."""
+    stats: dict[str, Any] = field(default_factory=dict)
+    """Filter and stage counters: updates, resamplings, particle-map memory, loop closures."""
+    metrics: dict[str, Any] = field(default_factory=dict)
+    """What ``metrics.json`` holds (sizes, timings, ATE...), filled by :func:`slam.run`."""
+    folder: Path | None = None
+    """The run folder, when :func:`slam.run` wrote one."""
+
+    @property
+    def times(self) -> F64:
+        """``(N,)`` trajectory times (s)."""
+        return self.trajectory.times
+
+    @property
+    def poses(self) -> F64:
+        """``(N, 3)`` trajectory poses."""
+        return self.trajectory.poses
+
+
+class _RunningMedian:
+    """The median of the positive time steps between the scans seen so far (a causal stand-in
+    for the nominal scan period of a recorded log)."""
+
+    def __init__(self) -> None:
+        self._steps: list[float] = []
+        self._last: float | None = None
+
+    def add(self, time: float) -> None:
+        if self._last is not None and time > self._last:
+            bisect.insort(self._steps, time - self._last)
+        self._last = time
+
+    @property
+    def value(self) -> float:
+        n = len(self._steps)
+        if n == 0:
+            return 0.0
+        mid = n // 2
+        return self._steps[mid] if n % 2 else 0.5 * (self._steps[mid - 1] + self._steps[mid])
+
+
+class Slam:
+    """Online SLAM: feed scans with :meth:`update`, get the result from :meth:`finish`.
+
+    ``config`` is the run's configuration (default: :class:`~slam.config.Config`'s defaults, the
+    ``rbpf`` method); ``seed`` replaces ``filter.seed``. ``observers`` watch every step
+    (:class:`slam.observers.Observer`); ``stages`` replace the post-filter stages of the method
+    (:func:`slam.stages.default_stages`). ``scan_period`` is the sensor's nominal time between
+    scans, the clock of ``rbpf``'s interval update rule; without it the median time step of the
+    scans so far stands in (a recorded log's batch run passes the median over the whole log).
+    """
+
+    def __init__(
+        self,
+        config: Config | None = None,
+        seed: int | None = None,
+        *,
+        observers: Iterable[Observer] = (),
+        stages: Iterable[Stage] | None = None,
+        scan_period: float | None = None,
+    ) -> None:
+        config = Config() if config is None else config
+        if not isinstance(config, Config):
+            raise UsageError(
+                f"Slam(config): expected a slam.Config (slam.load_config(...)), found "
+                f"{type(config).__name__}"
+            )
+        if seed is not None:
+            config = dataclasses.replace(
+                config, filter=dataclasses.replace(config.filter, seed=int(seed))
+            )
+        if config.filter.method not in ("rbpf", "classic"):
+            raise ConfigError(
+                f"filter.method: Slam runs the particle filters 'rbpf' and 'classic', found "
+                f"{config.filter.method!r} (dead reckoning: slam.run(..., method='odometry'))"
+            )
+        if scan_period is not None and not scan_period >= 0:
+            raise UsageError(f"scan_period: expected seconds ≥ 0, found {scan_period}")
+        self.config = config
+        self.scans = ScanSequence()
+        """Every scan processed so far, with its odometry (what the stages read)."""
+        self.stages: list[Stage] = default_stages(config) if stages is None else list(stages)
+        self._observers: list[Observer] = list(observers)
+        self._observer = CompositeObserver(self._observers) if self._observers else None
+        self._scan_period = scan_period
+        self._running_period = _RunningMedian()
+        self._rng = np.random.default_rng(config.filter.seed)
+        self._filter: RbpfFilter | ClassicFilter | None = None
+        self._odometry: Any = None
+        self._live_map: OccupancyGrid | None = None
+        self._finished = False
+
+    # -- inputs
+    def add_observer(self, observer: Observer) -> None:
+        """Let ``observer`` watch the steps from now on."""
+        self._observers.append(observer)
+        self._observer = CompositeObserver(self._observers)
+
+    @property
+    def odometry(self) -> Any:
+        """The causal encoder + IMU integrator (:class:`slam.odometry.OdometryIntegrator`),
+        made on first use."""
+        if self._odometry is None:
+            from slam.odometry import OdometryIntegrator
+
+            self._odometry = OdometryIntegrator(self.config.robot)
+        return self._odometry
+
+    def add_encoders(self, time: ArrayLike, counts: ArrayLike) -> None:
+        """Feed wheel encoder readings (ECE276A robot): ``counts`` ``(4,)`` or ``(4, K)`` ticks
+        FR, FL, RR, RL since the previous reading, at ``time`` (s)."""
+        self.odometry.add_encoders(time, counts)
+
+    def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
+        """Feed gyro z samples (rad/s) at ``time`` (s)."""
+        self.odometry.add_imu(time, gyro_z)
+
+    # -- the filter
+    def update(
+        self,
+        scan: Scan,
+        odometry: ArrayLike | None = None,
+        *,
+        encoders: tuple[ArrayLike, ArrayLike] | None = None,
+        imu: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> Estimate:
+        """Process one scan; return the estimate after it.
+
+        ``odometry`` is the robot's odometry pose ``(x, y, θ)`` at the scan (any fixed frame: the
+        map starts at the first one). Without it the pose comes from the encoder and IMU
+        readings fed so far; ``encoders=(times, counts)`` and ``imu=(times, gyro_z)`` feed the
+        readings since the previous scan first.
+        """
+        if self._finished:
+            raise UsageError("Slam.update: the run is finished (make a new Slam)")
+        if not isinstance(scan, Scan):
+            raise UsageError(f"Slam.update: expected a slam.Scan, found {type(scan).__name__}")
+        if imu is not None:
+            self.add_imu(*imu)
+        if encoders is not None:
+            self.add_encoders(*encoders)
+        if odometry is None:
+            if self._odometry is None:
+                raise UsageError(
+                    "Slam.update: give odometry= (a pose) or feed encoders and IMU readings"
+                )
+            odometry = self._odometry.pose_at(scan.time)
+        k = self.scans.append(scan.resolved(self.config.lidar), odometry)
+        self._running_period.add(scan.time)
+        if self._filter is None:
+            self._filter = make_filter(self.scans, self.config, self._rng)
+            outcome = self._filter.first
+        else:
+            period = self._scan_period
+            outcome = self._filter.step(k, self._running_period.value if period is None else period)
+        if self._observer is not None:
+            self._notify(self._observer, outcome)
+        return self._estimate(outcome)
+
+    def _estimate(self, outcome: StepOutcome) -> Estimate:
+        k = outcome.step
+        particles = outcome.particles
+        if outcome.motion is not None:
+            particles = compose(particles, outcome.motion)
+        weights = outcome.weights
+        if outcome.resampled:
+            weights = np.full(particles.shape[0], 1.0 / particles.shape[0])
+        return Estimate(
+            step=k,
+            scan_index=int(self.scans.indices[k]),
+            time=float(self.scans.times[k]),
+            pose=np.array(outcome.pose, dtype=np.float64),
+            n_eff=float(outcome.n_eff),
+            max_weight=float(outcome.max_weight),
+            updated=outcome.updated,
+            resampled=outcome.resampled,
+            particles=np.array(particles, dtype=np.float64),
+            weights=np.array(weights, dtype=np.float64),
+        )
+
+    def _notify(self, observer: CompositeObserver, outcome: StepOutcome) -> None:
+        """Send the step's record (with particles and endpoints on detail steps) and, every
+        ``map_every`` updates, the current map."""
+        k = outcome.step
+        record = StepRecord(
+            step=k,
+            scan_index=int(self.scans.indices[k]),
+            time=float(self.scans.times[k]),
+            pose=np.array(outcome.pose, dtype=np.float64),
+            n_eff=float(outcome.n_eff),
+            max_weight=float(outcome.max_weight),
+            updated=outcome.updated,
+            resampled=outcome.resampled,
+        )
+        if observer.detail_every and k % observer.detail_every == 0:
+            record.particles = outcome.particles.copy()
+            record.weights = outcome.weights.copy()
+            ex, ey = outcome.hits if outcome.hits is not None else self.scans.hits(k, DETAIL_BEAMS)
+            record.endpoints = transform_points(record.pose, np.stack([ex, ey], axis=1))
+        observer.on_step(record)
+        if observer.map_every and outcome.updated:
+            grid = self._current_map(outcome)
+            if k > 0 and k % observer.map_every == 0:
+                observer.on_map(k, record.time, grid)
+
+    def _current_map(self, outcome: StepOutcome) -> OccupancyGrid:
+        """The map so far: ``classic``'s own; for ``rbpf`` a grid of the best particle's scans
+        kept for observers that ask for maps."""
+        if isinstance(self._filter, ClassicFilter):
+            return self._filter.grid
+        if self._live_map is None:
+            start = self.scans.odometry[0]
+            self._live_map = OccupancyGrid(self.config.map, center=(start[0], start[1]))
+        integrate_scan(self._live_map, self.scans, outcome.step, outcome.pose)
+        return self._live_map
+
+    @property
+    def steps(self) -> int:
+        """Scans processed so far."""
+        return len(self.scans)
+
+    def finish(self) -> Result:
+        """End the run: the filter's output through the post-filter stages."""
+        if self._filter is None:
+            raise UsageError("Slam.finish: no scan was processed (call update() first)")
+        if self._finished:
+            raise UsageError("Slam.finish: the run is already finished")
+        self._finished = True
+        output = run_stages(self._filter.finish(), self.stages, self.config)
+        if output.poses is None:
+            raise UsageError("Slam.finish: the stages placed no scan (keep BetweenUpdates)")
+        stats = dict(output.stats)
+        if self._odometry is not None and self._odometry.wheel_yaw_intervals:
+            stats["odometry_wheel_yaw_intervals"] = self._odometry.wheel_yaw_intervals
+        seq = output.scans
+        return Result(
+            trajectory=Trajectory(seq.times.copy(), output.poses, seq.indices.copy()),
+            grid=output.grid,
+            n_eff=output.n_eff,
+            max_weight=output.max_weight,
+            stats=stats,
+        )

@@ -1,0 +1,450 @@
+"""Laser scans as the filter sees them: one :class:`Scan`, and the :class:`ScanSequence` of a run.
+
+* :class:`Scan` is the value a user hands to :meth:`slam.online.Slam.update`: a time, the ranges
+  and the beam angles, and optionally the range semantics (``range_min``, ``range_max``,
+  ``no_return``) and the laser's pose on the robot. What a scan leaves out comes from the
+  configuration's ``[lidar]`` section (:meth:`Scan.resolved`).
+* :class:`ScanSequence` holds the scans a run has processed, in order, with the odometry pose of
+  each. It grows one scan at a time while the filter runs, and the post-filter stages
+  (:mod:`slam.stages`) read the whole of it afterwards: robot-frame hits (thinned to a beam
+  budget, with surface normals for the signed field) and rays for occupancy updates.
+* :class:`LogScans` turns a recorded :class:`~slam.io.log.Log` into the scans a ``slam run``
+  processes (``filter.every``, ``filter.max_scans``), with the log's odometry at each: the
+  batch pipeline feeds them to the same :class:`~slam.online.Slam` object an online user has.
+
+Ranges are stored as float32 (the :class:`~slam.io.log.Log`'s convention: a laser's millimetres
+are far above float32's precision), angles and poses as float64.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slam.config import Config, LidarConfig
+from slam.errors import DataError, UsageError
+from slam.io.log import Log
+
+F64 = NDArray[np.float64]
+F32 = NDArray[np.float32]
+
+
+def nominal_scan_period(times: ArrayLike) -> float:
+    """Nominal time between scans: the median positive time step (robust to CARMEN logs whose
+    time stamps go backwards now and then); 0 when there is none."""
+    steps = np.diff(np.asarray(times, dtype=np.float64))
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One 2D laser scan (see the module docstring)."""
+
+    time: float
+    """Time the scan was taken (s)."""
+    ranges: F32
+    """``(B,)`` ranges (m); NaN (or anything below ``range_min``) marks an invalid beam."""
+    angles: F64
+    """``(B,)`` beam angles in the laser frame (rad, counter-clockwise, 0 = forward)."""
+    range_min: float | None = None
+    """Shortest valid range (m); ``None``: ``lidar.range_min``, else 0."""
+    range_max: float | None = None
+    """Longest range that counts as an obstacle hit (m); ``None``: ``lidar.range_max``, else no
+    limit (capped at ``no_return`` in any case)."""
+    no_return: float | None = None
+    """Readings at or beyond this mean "no return" (m); ``None``: ``lidar.no_return``, else none do."""
+    laser_offset: F64 | None = None
+    """``(3,)`` laser pose in the robot frame; ``None``: ``(lidar.x, lidar.y, lidar.yaw)``."""
+    index: int | None = None
+    """The scan's index in its log (the result's ``scan_indices``); ``None``: its position in the
+    run."""
+    _ends: tuple[F32, F32] | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        time = float(self.time)
+        if not np.isfinite(time):
+            raise DataError(f"scan: time must be a finite number of seconds, found {self.time!r}")
+        ranges = np.array(self.ranges, dtype=np.float32).reshape(-1)
+        angles = np.array(self.angles, dtype=np.float64).reshape(-1)
+        if ranges.shape != angles.shape:
+            raise DataError(
+                f"scan at t={time:.6f}: {ranges.size} ranges for {angles.size} beam angles"
+            )
+        object.__setattr__(self, "time", time)
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "angles", angles)
+        if self.laser_offset is not None:
+            offset = np.array(self.laser_offset, dtype=np.float64).reshape(-1)
+            if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+                raise DataError(
+                    f"scan at t={time:.6f}: laser_offset must be 3 finite numbers (x, y, yaw), "
+                    f"found {self.laser_offset!r}"
+                )
+            object.__setattr__(self, "laser_offset", offset)
+        for name in ("range_min", "range_max", "no_return"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, float(value))
+
+    @classmethod
+    def from_angle_range(
+        cls,
+        time: float,
+        ranges: ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        **fields: object,
+    ) -> Scan:
+        """A scan whose beam ``i`` points at ``angle_min + i · angle_increment`` (ROS
+        ``LaserScan`` style); ``fields`` are the other :class:`Scan` fields."""
+        ranges = np.asarray(ranges)
+        angles = angle_min + angle_increment * np.arange(ranges.size, dtype=np.float64)
+        return cls(time, ranges, angles, **fields)  # type: ignore[arg-type]
+
+    @property
+    def num_beams(self) -> int:
+        """Beams in the scan."""
+        return int(self.ranges.shape[0])
+
+    @property
+    def is_resolved(self) -> bool:
+        """Whether every optional field has a value (the filter needs them all)."""
+        fields = (self.range_min, self.range_max, self.no_return, self.laser_offset)
+        return all(value is not None for value in fields)
+
+    def resolved(self, lidar: LidarConfig) -> Scan:
+        """This scan with what it leaves out taken from ``lidar`` (see the field docs)."""
+        if self.is_resolved:
+            return self
+
+        def pick(own: float | None, configured: float | None, default: float) -> float:
+            if own is not None:
+                return own
+            return configured if configured is not None else default
+
+        no_return = pick(self.no_return, lidar.no_return, np.inf)
+        range_max = pick(self.range_max, lidar.range_max, np.inf)
+        offset = self.laser_offset
+        if offset is None:
+            offset = np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64)
+        return replace(
+            self,
+            range_min=pick(self.range_min, lidar.range_min, 0.0),
+            range_max=float(min(range_max, no_return)),
+            no_return=no_return,
+            laser_offset=offset,
+        )
+
+    def _require_resolved(self) -> None:
+        if not self.is_resolved:
+            raise UsageError(
+                f"scan at t={self.time:.6f}: range_min, range_max, no_return and laser_offset "
+                "must be known; call scan.resolved(config.lidar) first"
+            )
+
+    def endpoints(self) -> tuple[F32, F32]:
+        """Robot-frame endpoints ``(ex, ey)``, each ``(B,)`` float32, NaN where not a return.
+
+        Computed once and kept (the scan is immutable).
+        """
+        if self._ends is None:
+            self._require_resolved()
+            r, a = self.ranges, self.angles
+            ok = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min) & (r < self.range_max)
+            lx, ly, lt = self.laser_offset  # type: ignore[misc]
+            rr = np.where(ok, r, np.nan).astype(np.float32)
+            ex = (lx + rr * np.cos(lt + a)).astype(np.float32)
+            ey = (ly + rr * np.sin(lt + a)).astype(np.float32)
+            object.__setattr__(self, "_ends", (ex, ey))
+        return self._ends  # type: ignore[return-value]
+
+    def hits(self, max_beams: int = 0) -> tuple[F64, F64]:
+        """Robot-frame endpoints ``(ex, ey)`` of the obstacle returns.
+
+        With ``max_beams`` the returns are thinned to at most that many, evenly spread.
+        """
+        ex_all, ey_all = self.endpoints()
+        valid = np.flatnonzero(~np.isnan(ex_all))
+        if max_beams and valid.size > max_beams:
+            valid = valid[np.linspace(0, valid.size - 1, max_beams).round().astype(np.int64)]
+        return (
+            np.ascontiguousarray(ex_all[valid], dtype=np.float64),
+            np.ascontiguousarray(ey_all[valid], dtype=np.float64),
+        )
+
+    def hits_with_normals(self, max_beams: int = 0) -> tuple[F64, F64, F64, F64]:
+        """Robot-frame endpoints and unit surface normals ``(ex, ey, nx, ny)``.
+
+        See :func:`surface_normals`; normals are estimated before thinning to ``max_beams``.
+        """
+        ex, ey = self.hits()
+        lx, ly, _ = self.laser_offset  # type: ignore[misc]
+        nx, ny = surface_normals(ex, ey, lx, ly)
+        if max_beams and ex.size > max_beams:
+            pick = np.linspace(0, ex.size - 1, max_beams).round().astype(np.int64)
+            ex, ey, nx, ny = ex[pick], ey[pick], nx[pick], ny[pick]
+        return (
+            np.ascontiguousarray(ex),
+            np.ascontiguousarray(ey),
+            np.ascontiguousarray(nx),
+            np.ascontiguousarray(ny),
+        )
+
+    def rays(self, free_range_no_return: float, stride: int = 1) -> tuple[F64, NDArray[np.bool_]]:
+        """Robot-frame ray ends ``(K, 2)`` and hit flags for an occupancy update.
+
+        Returns are hits; readings between ``range_max`` and ``no_return`` clear free space up to
+        ``range_max``; "no return" readings clear up to ``free_range_no_return`` (0: not at all).
+        Only every ``stride``-th non-hit ray is kept (hits are always kept).
+        """
+        self._require_resolved()
+        r = self.ranges.astype(np.float64)
+        a = self.angles
+        valid = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min)
+        hit = valid & (r < self.range_max)
+        length = np.where(r < self.no_return, np.minimum(r, self.range_max), free_range_no_return)
+        keep = hit | (valid & (length > 0))
+        if stride > 1:
+            thin = np.zeros_like(keep)
+            thin[::stride] = True
+            keep &= hit | thin
+        lx, ly, lt = self.laser_offset  # type: ignore[misc]
+        c, s = np.cos(lt + a[keep]), np.sin(lt + a[keep])
+        ends = np.stack([lx + length[keep] * c, ly + length[keep] * s], axis=1)
+        return ends, hit[keep]
+
+
+def surface_normals(
+    ex: F64, ey: F64, sx: float, sy: float, gap: float = 0.1, relative_gap: float = 0.02
+) -> tuple[F64, F64]:
+    """Unit normals at scan endpoints ``(ex, ey)`` (in beam order), facing the sensor ``(sx, sy)``.
+
+    The tangent at a point is the chord between its two neighbours when both are close (closer
+    than ``gap + relative_gap·range``), else the chord to the one close neighbour; points with no
+    close neighbour (isolated returns) face the sensor along their beam.
+    """
+    n = ex.shape[0]
+    bx = sx - ex
+    by = sy - ey
+    rng = np.hypot(bx, by)
+    rng = np.where(rng > 0, rng, 1.0)
+    tx = np.zeros(n)
+    ty = np.zeros(n)
+    if n >= 2:
+        dx = np.diff(ex)
+        dy = np.diff(ey)
+        limit = gap + relative_gap * np.minimum(rng[1:], rng[:-1])
+        close = np.hypot(dx, dy) < limit
+        # chord to the next neighbour (forward) and from the previous one (backward)
+        fwd = np.zeros(n, dtype=bool)
+        bwd = np.zeros(n, dtype=bool)
+        fwd[:-1] = close
+        bwd[1:] = close
+        tx[:-1] += np.where(close, dx, 0.0)
+        ty[:-1] += np.where(close, dy, 0.0)
+        tx[1:] += np.where(close, dx, 0.0)
+        ty[1:] += np.where(close, dy, 0.0)
+        has = fwd | bwd
+    else:
+        has = np.zeros(n, dtype=bool)
+    norm = np.hypot(tx, ty)
+    has &= norm > 1e-9
+    norm = np.where(has, norm, 1.0)
+    nx = np.where(has, -ty / norm, bx / rng)
+    ny = np.where(has, tx / norm, by / rng)
+    flip = nx * bx + ny * by < 0
+    nx = np.where(flip, -nx, nx)
+    ny = np.where(flip, -ny, ny)
+    return nx, ny
+
+
+class ScanSequence:
+    """The scans a run has processed, in order, with the odometry pose of each.
+
+    Grows by :meth:`append` (amortised O(1): times, odometry and indices live in arrays that double
+    when full); ``times``, ``odometry`` and ``indices`` are views of the filled part.
+    """
+
+    def __init__(self, capacity: int = 1024) -> None:
+        capacity = max(int(capacity), 1)
+        self._scans: list[Scan] = []
+        self._times = np.empty(capacity)
+        self._odometry = np.empty((capacity, 3))
+        self._indices = np.empty(capacity, dtype=np.int64)
+        self._beams = 0
+
+    def __len__(self) -> int:
+        return len(self._scans)
+
+    def append(self, scan: Scan, odometry: ArrayLike) -> int:
+        """Add a resolved scan taken at the odometry pose ``odometry``; return its number."""
+        if not scan.is_resolved:
+            raise UsageError(f"scan at t={scan.time:.6f}: resolve it (Scan.resolved) before a run")
+        pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise DataError(
+                f"scan at t={scan.time:.6f}: odometry must be a finite pose (x, y, theta), "
+                f"found {odometry!r}"
+            )
+        k = len(self._scans)
+        if k == self._times.shape[0]:
+            self._times = np.concatenate([self._times, np.empty(k)])
+            self._odometry = np.concatenate([self._odometry, np.empty((k, 3))])
+            self._indices = np.concatenate([self._indices, np.empty(k, dtype=np.int64)])
+        self._scans.append(scan)
+        self._times[k] = scan.time
+        self._odometry[k] = pose
+        self._indices[k] = k if scan.index is None else int(scan.index)
+        self._beams = max(self._beams, scan.num_beams)
+        return k
+
+    @property
+    def times(self) -> F64:
+        """``(N,)`` scan times (s)."""
+        return self._times[: len(self)]
+
+    @property
+    def odometry(self) -> F64:
+        """``(N, 3)`` odometry pose of the robot at each scan."""
+        return self._odometry[: len(self)]
+
+    @property
+    def indices(self) -> NDArray[np.int64]:
+        """``(N,)`` index of each scan in its log."""
+        return self._indices[: len(self)]
+
+    @property
+    def laser_offset(self) -> F64:
+        """``(3,)`` laser pose in the robot frame (of the first scan)."""
+        if not self._scans:
+            raise UsageError("scan sequence: no scans yet")
+        return self._scans[0].laser_offset  # type: ignore[return-value]
+
+    @property
+    def num_beams(self) -> int:
+        """Beams per scan (the widest scan when beam counts vary)."""
+        return self._beams
+
+    def scan(self, k: int) -> Scan:
+        """Scan number ``k``."""
+        return self._scans[k]
+
+    def scan_period(self) -> float:
+        """Nominal time between the scans (:func:`nominal_scan_period`)."""
+        return nominal_scan_period(self.times)
+
+    def hits(self, k: int, max_beams: int = 0) -> tuple[F64, F64]:
+        """Robot-frame obstacle returns of scan ``k`` (:meth:`Scan.hits`)."""
+        return self._scans[k].hits(max_beams)
+
+    def hits_with_normals(self, k: int, max_beams: int = 0) -> tuple[F64, F64, F64, F64]:
+        """Returns and surface normals of scan ``k`` (:meth:`Scan.hits_with_normals`)."""
+        return self._scans[k].hits_with_normals(max_beams)
+
+    def rays(
+        self, k: int, free_range_no_return: float, stride: int = 1
+    ) -> tuple[F64, NDArray[np.bool_]]:
+        """Rays of scan ``k`` for an occupancy update (:meth:`Scan.rays`)."""
+        return self._scans[k].rays(free_range_no_return, stride)
+
+    @classmethod
+    def from_log(cls, log: Log, config: Config) -> ScanSequence:
+        """The scans a run of ``log`` processes (:class:`LogScans`), with their odometry."""
+        source = LogScans.from_log(log, config)
+        seq = cls(len(source))
+        for scan, odometry in source:
+            seq.append(scan, odometry)
+        return seq
+
+
+@dataclass(frozen=True, eq=False)
+class LogScans:
+    """The scans of a recorded log that a run processes, ready to be fed one by one."""
+
+    log: Log
+    """The log."""
+    indices: NDArray[np.int64]
+    """``(M,)`` log index of each selected scan (``filter.every``, ``filter.max_scans``)."""
+    odometry: F64
+    """``(M, 3)`` odometry pose of the robot at each selected scan."""
+    range_min: float
+    """Shortest valid range (m): ``lidar.range_min``, else the log's."""
+    range_max: float
+    """Longest hit (m): ``lidar.range_max``, else the log's; at most ``no_return``."""
+    no_return: float
+    """"No return" reading (m): ``lidar.no_return``, else the log's."""
+
+    @classmethod
+    def from_log(cls, log: Log, config: Config) -> LogScans:
+        """Select the scans to process, with the odometry at each (:func:`slam.odometry.scan_odometry`:
+        computed from the whole log, so ECE276A logs get the zero-phase filtered gyro).
+
+        :class:`DataError` when no selected scan has a valid beam, a :class:`DataWarning` when
+        too many are sparse (:func:`slam.io.plausibility.check_valid_beams`).
+        """
+        from slam.io.plausibility import DataWarning, check_valid_beams
+        from slam.odometry import scan_odometry
+
+        if log.scans is None:
+            raise DataError(f"{log.name}: the log has no laser scans to run SLAM on")
+        scans = log.scans
+        odometry = scan_odometry(log, config.robot)
+        idx = np.arange(len(scans), dtype=np.int64)[:: config.filter.every]
+        if config.filter.max_scans:
+            idx = idx[: config.filter.max_scans]
+        if idx.size == 0:
+            raise DataError(f"{log.name}: no scans selected (every={config.filter.every})")
+        lidar = config.lidar
+        range_max = lidar.range_max if lidar.range_max is not None else scans.range_max
+        no_return = lidar.no_return if lidar.no_return is not None else scans.no_return
+        range_min = lidar.range_min if lidar.range_min is not None else scans.range_min
+        sparse = check_valid_beams(
+            log, scans.ranges[idx], range_min, min(range_max, no_return), no_return, config.checks
+        )
+        if sparse is not None:  # the pipeline records warnings in metrics.json and on stderr
+            warnings.warn(sparse, DataWarning, stacklevel=2)
+        return cls(
+            log=log,
+            indices=idx,
+            odometry=np.ascontiguousarray(odometry[idx], dtype=np.float64),
+            range_min=float(range_min),
+            range_max=float(min(range_max, no_return)),
+            no_return=float(no_return),
+        )
+
+    def __len__(self) -> int:
+        return int(self.indices.shape[0])
+
+    @property
+    def times(self) -> F64:
+        """``(M,)`` times of the selected scans (s)."""
+        return np.asarray(self.log.scans.time[self.indices], np.float64)  # type: ignore[union-attr]
+
+    def scan_period(self) -> float:
+        """Nominal time between the selected scans (:func:`nominal_scan_period`)."""
+        return nominal_scan_period(self.times)
+
+    def scan(self, i: int) -> Scan:
+        """Selected scan ``i`` as a resolved :class:`Scan` (laser offset: the log's)."""
+        scans = self.log.scans
+        k = int(self.indices[i])
+        return Scan(
+            time=float(scans.time[k]),  # type: ignore[union-attr]
+            ranges=scans.ranges[k],  # type: ignore[union-attr]
+            angles=scans.scan_angles(k),  # type: ignore[union-attr]
+            range_min=self.range_min,
+            range_max=self.range_max,
+            no_return=self.no_return,
+            laser_offset=scans.laser_offset,  # type: ignore[union-attr]
+            index=k,
+        )
+
+    def __iter__(self) -> Iterator[tuple[Scan, F64]]:
+        """``(scan, odometry pose)`` for every selected scan, in order."""
+        for i in range(len(self)):
+            yield self.scan(i), self.odometry[i]

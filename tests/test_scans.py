@@ -1,0 +1,81 @@
+"""Scans as the filter sees them: the Scan value, its defaults, the growing ScanSequence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.config import LidarConfig
+from slam.errors import DataError, UsageError
+from slam.scans import Scan, ScanSequence, nominal_scan_period
+
+LIDAR = LidarConfig(x=0.1, y=0.0, yaw=0.0, range_min=0.2, range_max=5.0, no_return=8.0)
+
+
+def test_scan_from_angle_range_and_validation():
+    scan = Scan.from_angle_range(3.0, [1.0, 2.0, 3.0], -0.5, 0.25)
+    np.testing.assert_allclose(scan.angles, [-0.5, -0.25, 0.0])
+    assert scan.ranges.dtype == np.float32 and scan.num_beams == 3
+    with pytest.raises(DataError, match="3 ranges for 2 beam angles"):
+        Scan(0.0, [1.0, 2.0, 3.0], [0.0, 0.1])
+    with pytest.raises(DataError, match="time must be a finite number"):
+        Scan(np.nan, [1.0], [0.0])
+    with pytest.raises(DataError, match="laser_offset must be 3 finite numbers"):
+        Scan(0.0, [1.0], [0.0], laser_offset=[0.0, 0.0])
+
+
+def test_scan_keeps_a_copy_of_the_callers_arrays():
+    ranges = np.array([1.0, 2.0])
+    scan = Scan(0.0, ranges, np.zeros(2))
+    ranges[:] = 9.0  # a driver reusing its buffer
+    np.testing.assert_array_equal(scan.ranges, [1.0, 2.0])
+
+
+def test_resolved_fills_what_the_scan_leaves_out_from_the_lidar_section():
+    scan = Scan(0.0, [1.0], [0.0], range_max=12.0).resolved(LIDAR)
+    assert (scan.range_min, scan.range_max, scan.no_return) == (0.2, 8.0, 8.0)  # capped
+    np.testing.assert_array_equal(scan.laser_offset, [0.1, 0.0, 0.0])
+    bare = Scan(0.0, [1.0], [0.0]).resolved(LidarConfig(x=0.0))
+    assert (bare.range_min, bare.range_max, bare.no_return) == (0.0, np.inf, np.inf)
+    assert bare.resolved(LIDAR) is bare  # nothing left to fill
+    with pytest.raises(UsageError, match="call scan.resolved"):
+        Scan(0.0, [1.0], [0.0]).endpoints()
+
+
+def test_hits_and_rays_follow_the_range_semantics():
+    # beams: a hit straight ahead, one too short, one beyond range_max (free space only),
+    # a "no return", and NaN
+    ranges = [1.0, 0.1, 6.0, 8.0, np.nan]
+    angles = [0.0, 0.0, np.pi / 2, np.pi, 0.0]
+    scan = Scan(0.0, ranges, angles).resolved(LIDAR)
+    ex, ey = scan.hits()
+    np.testing.assert_allclose(ex, [1.1])  # 0.1 m laser offset ahead of the robot centre
+    np.testing.assert_allclose(ey, [0.0], atol=1e-7)
+    ends, hit = scan.rays(free_range_no_return=2.0)
+    np.testing.assert_array_equal(hit, [True, False, False])
+    np.testing.assert_allclose(ends, [[1.1, 0.0], [0.1, 5.0], [-1.9, 0.0]], atol=1e-6)
+    ends, hit = scan.rays(free_range_no_return=0.0)  # "no return" clears nothing
+    assert hit.tolist() == [True, False]
+
+
+def test_scan_sequence_grows_and_keeps_every_scan():
+    seq = ScanSequence(capacity=2)
+    for k in range(5):
+        scan = Scan(10.0 + 0.1 * k, [1.0, 2.0], [0.0, 0.5], index=100 + k).resolved(LIDAR)
+        assert seq.append(scan, [k, 0.0, 0.0]) == k
+    assert len(seq) == 5 and seq.num_beams == 2
+    np.testing.assert_allclose(seq.times, 10.0 + 0.1 * np.arange(5))
+    np.testing.assert_array_equal(seq.odometry[:, 0], np.arange(5))
+    np.testing.assert_array_equal(seq.indices, 100 + np.arange(5))
+    np.testing.assert_array_equal(seq.laser_offset, [0.1, 0.0, 0.0])
+    assert seq.scan_period() == pytest.approx(0.1)
+    np.testing.assert_allclose(seq.hits(3)[0], [1.1, 0.1 + 2.0 * np.cos(0.5)], rtol=1e-6)
+    with pytest.raises(UsageError, match="resolve it"):
+        seq.append(Scan(0.0, [1.0], [0.0]), [0.0, 0.0, 0.0])
+    with pytest.raises(DataError, match="odometry must be a finite pose"):
+        seq.append(Scan(0.0, [1.0], [0.0]).resolved(LIDAR), [0.0, np.nan, 0.0])
+
+
+def test_nominal_scan_period_ignores_steps_back_in_time():
+    assert nominal_scan_period([0.0, 0.1, 0.2, 0.15, 0.3, 0.4]) == pytest.approx(0.1)
+    assert nominal_scan_period([1.0]) == 0.0
