@@ -16,6 +16,7 @@ from slam.geometry import relative
 from slam.io import sources
 from slam.io.sources import Kind
 from slam.io.tum import read_tum, write_tum
+from slam.trajectory import Trajectory
 
 POSES = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.1], [1.5, 0.05, 0.2]])
 """FLASER poses (= odometry) of the small CARMEN log below."""
@@ -151,8 +152,8 @@ def test_load_simulated_folder_brings_its_ground_truth(tmp_path):
     source = sources.load(ref, load_config(ref.config_name), need=("encoders", "imu", "scans"))
     assert source.log.name == "tiny" and source.log.scans is not None
     times, poses = read_tum(folder / "groundtruth.tum")
-    np.testing.assert_array_equal(source.ground_truth[0], times)
-    np.testing.assert_array_equal(source.ground_truth[1], poses)
+    np.testing.assert_array_equal(source.ground_truth.times, times)
+    np.testing.assert_array_equal(source.ground_truth.poses, poses)
 
 
 # ------------------------------------------------------------------- the commands use it
@@ -190,9 +191,11 @@ def test_eval_uses_the_ground_truth_of_a_simulated_folder(tmp_path, capsys):
     folder = ece276a_folder(tmp_path / "sim")
     times = np.array([1.0, 2.0, 3.0])
     truth = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, np.pi / 2]])
-    write_tum(folder / "groundtruth.tum", times, truth)
+    write_tum(folder / "groundtruth.tum", Trajectory(times, truth))
     run = tmp_path / "run"
-    write_tum(run / "trajectory.tum", times, truth + [[0, 0, 0], [0.1, 0, 0], [0, 0, 0]])
+    write_tum(
+        run / "trajectory.tum", Trajectory(times, truth + [[0, 0, 0], [0.1, 0, 0], [0, 0, 0]])
+    )
     (run / "config.toml").write_text('dataset = "sim"\n')  # runs from a folder record its stem
     assert main(["eval", str(run), "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -207,7 +210,7 @@ def test_eval_uses_the_ground_truth_of_a_simulated_folder(tmp_path, capsys):
 
 def test_eval_on_a_dataset_without_ground_truth_says_so(tmp_path, capsys):
     run = tmp_path / "run"
-    write_tum(run / "trajectory.tum", np.array([1.0, 2.0]), np.zeros((2, 3)))
+    write_tum(run / "trajectory.tum", Trajectory(np.array([1.0, 2.0]), np.zeros((2, 3))))
     (run / "config.toml").write_text('dataset = "dataset20"\n')
     assert main(["eval", str(run), "--data-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -221,7 +224,7 @@ def test_eval_on_a_dataset_without_ground_truth_says_so(tmp_path, capsys):
 def test_texture_and_run_refuse_an_unknown_name_in_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     run = tmp_path / "run"
-    write_tum(run / "trajectory.tum", np.array([1.0, 2.0]), np.zeros((2, 3)))
+    write_tum(run / "trajectory.tum", Trajectory(np.array([1.0, 2.0]), np.zeros((2, 3))))
     (run / "config.toml").write_text('dataset = "demo"\n')
     np.savez(run / "map.npz", log_odds=np.zeros((4, 4)), resolution=0.05, origin=np.zeros(2))
     assert main(["texture", str(run), "--dataset", "nosuch", "--quiet"]) == 2
