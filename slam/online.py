@@ -254,9 +254,10 @@ class Slam:
         else:
             period = self._scan_period
             outcome = self._filter.step(k, self._running_period.value if period is None else period)
+        estimate = self._estimate(outcome)
         if self._observer is not None:
-            self._notify(self._observer, outcome)
-        return self._estimate(outcome)
+            self._notify(self._observer, outcome, estimate)
+        return estimate
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:
         k = outcome.step
@@ -279,20 +280,14 @@ class Slam:
             weights=np.array(weights, dtype=np.float64),
         )
 
-    def _notify(self, observer: CompositeObserver, outcome: StepOutcome) -> None:
+    def _notify(self, observer: CompositeObserver, outcome: StepOutcome, est: Estimate) -> None:
         """Send the step's record (with particles and endpoints on detail steps) and, every
         ``map_every`` updates, the current map."""
         k = outcome.step
         record = StepRecord(
-            step=k,
-            scan_index=int(self.scans.indices[k]),
-            time=float(self.scans.times[k]),
-            pose=np.array(outcome.pose, dtype=np.float64),
-            n_eff=float(outcome.n_eff),
-            max_weight=float(outcome.max_weight),
-            updated=outcome.updated,
-            resampled=outcome.resampled,
-        )
+            k, est.scan_index, est.time, est.pose.copy(), est.n_eff, est.max_weight, est.updated,
+            est.resampled,
+        )  # fmt: skip
         if observer.detail_every and k % observer.detail_every == 0:
             record.particles = outcome.particles.copy()
             record.weights = outcome.weights.copy()
