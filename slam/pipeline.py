@@ -322,7 +322,8 @@ def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
     grid = None
     if log.scans is not None:
         seq = ScanSequence.from_log(log, config)
-        _check_memory(log.name, len(seq), seq.num_beams, seq.odometry, seq.range_max, config)
+        reach = float(seq.scan(0).range_max)  # type: ignore[arg-type]
+        _check_memory(log.name, len(seq), seq.num_beams, seq.odometry, reach, config)
         grid = build_map(seq, seq.odometry, np.arange(len(seq)), config)
     wall = time.perf_counter() - start
     base.update(

@@ -24,6 +24,7 @@ from slam.errors import DataError, UsageError
 from slam.io.carmen import load_carmen
 from slam.io.ece276a import load_ece276a
 from slam.io.tum import write_tum
+from slam.trajectory import Trajectory
 
 RUN = ["--no-record", "--no-texture", "--quiet"]
 
@@ -84,7 +85,9 @@ def test_many_sparse_scans_are_a_loud_warning(tmp_path, capsys):
 def _run_with(tmp_path: Path, times, poses) -> Path:
     run = tmp_path / "run"
     run.mkdir()
-    write_tum(run / "trajectory.tum", np.asarray(times, float), np.asarray(poses, float))
+    write_tum(
+        run / "trajectory.tum", Trajectory(np.asarray(times, float), np.asarray(poses, float))
+    )
     return run
 
 
@@ -92,7 +95,7 @@ def test_one_pose_reference_is_refused(tmp_path, capsys):
     """Item 5: a 1-pose reference 100 m off. On main: exit 0 and ATE rmse 0.0000 m."""
     run = _run_with(tmp_path, np.arange(10.0), np.zeros((10, 3)))
     reference = tmp_path / "ref.tum"
-    write_tum(reference, np.array([5.0]), np.array([[100.0, 0.0, 0.0]]))
+    write_tum(reference, Trajectory(np.array([5.0]), np.array([[100.0, 0.0, 0.0]])))
     assert main(["eval", str(run), "--reference", str(reference)]) == 2
     line = one_line_error(capsys)
     assert f"{run / 'trajectory.tum'}: only 1 pose time(s) match {reference}" in line
@@ -104,7 +107,7 @@ def test_one_pose_estimate_is_refused(tmp_path, capsys):
     """Item 5: a 1-pose estimate. On main: exit 0 and ATE rmse 0.0000 m."""
     run = _run_with(tmp_path, [5.0], [[3.0, 4.0, 0.0]])
     reference = tmp_path / "ref.tum"
-    write_tum(reference, np.arange(10.0), np.zeros((10, 3)))
+    write_tum(reference, Trajectory(np.arange(10.0), np.zeros((10, 3))))
     assert main(["eval", str(run), "--reference", str(reference)]) == 2
     assert "only 1 pose time(s) match" in one_line_error(capsys)
 
@@ -114,7 +117,7 @@ def test_poses_at_one_time_are_one_match(tmp_path, capsys):
     On main: exit 0 and ATE 2e-16 m."""
     run = _run_with(tmp_path, np.full(50, 5.0), np.zeros((50, 3)))
     reference = tmp_path / "ref.tum"
-    write_tum(reference, np.arange(10.0), np.c_[np.arange(10.0), np.zeros((10, 2))])
+    write_tum(reference, Trajectory(np.arange(10.0), np.c_[np.arange(10.0), np.zeros((10, 2))]))
     assert main(["eval", str(run), "--reference", str(reference)]) == 2
     assert "only 1 pose time(s) match" in one_line_error(capsys)
 
@@ -142,7 +145,7 @@ def test_rpe_without_pairs_is_refused(tmp_path, capsys):
     """Item 5: --delta longer than the trajectory. On main: exit 0 with NaN RPE figures."""
     run = _run_with(tmp_path, np.arange(10.0), np.zeros((10, 3)))
     reference = tmp_path / "ref.tum"
-    write_tum(reference, np.arange(10.0), np.zeros((10, 3)))
+    write_tum(reference, Trajectory(np.arange(10.0), np.zeros((10, 3))))
     code = main(["eval", str(run), "--reference", str(reference), "--delta", "100",
                  "--delta-unit", "seconds"])  # fmt: skip
     assert code == 2
@@ -378,7 +381,7 @@ def test_eval_no_overlap_names_the_trajectory_file(tmp_path, capsys):
     time range" without any file, and the relations case does not name the trajectory."""
     run = _run_with(tmp_path, 1000.0 + np.arange(10.0), np.zeros((10, 3)))
     reference = tmp_path / "ref.tum"
-    write_tum(reference, np.arange(10.0), np.zeros((10, 3)))
+    write_tum(reference, Trajectory(np.arange(10.0), np.zeros((10, 3))))
     assert main(["eval", str(run), "--reference", str(reference)]) == 2
     line = one_line_error(capsys)
     assert f"{run / 'trajectory.tum'}: no pose lies within the time span of {reference}" in line
