@@ -24,3 +24,13 @@ class ConfigError(SlamError):
 
 class UsageError(SlamError):
     """A command was called with arguments that cannot work together."""
+
+
+class Terminated(KeyboardInterrupt):
+    """A termination signal (SIGTERM, SIGHUP) received by the CLI, raised like Ctrl-C's
+    :class:`KeyboardInterrupt` so that outputs being assembled are removed the same way; the CLI
+    exits with ``128 + signum`` (143 for SIGTERM)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum

@@ -21,6 +21,7 @@ on its result. :func:`run_dataset` (``slam.run``) is the same pipeline as one Py
 from __future__ import annotations
 
 import json
+import os
 import resource
 import sys
 import time
@@ -37,7 +38,7 @@ from numpy.typing import NDArray
 from slam.config import Config, dumps, load_config
 from slam.errors import UsageError
 from slam.io import sources
-from slam.io.atomic import atomic_dir, write_png, write_text
+from slam.io.atomic import atomic_dir, check_output_dir, write_png, write_text
 from slam.io.log import Log
 from slam.io.plausibility import check_plausibility
 from slam.io.sources import Source
@@ -64,7 +65,9 @@ class RunRequest:
     out: Path | None = None
     """Run folder; default ``runs/<name>-<YYYYmmdd-HHMMSS>``."""
     force: bool = False
-    """Replace an existing run folder."""
+    """Replace an existing run folder of ``slam run`` (:func:`slam.io.runfolder.is_own_output`)."""
+    inputs: tuple[Path, ...] = ()
+    """Further files the run reads (the ``--config`` file): ``out`` may not hold them."""
     progress: bool = False
     """Show a progress bar."""
     viewer: bool = False
@@ -85,11 +88,14 @@ def load_source(name: str, data_dir: Path, config: Config, progress: bool = Fals
 
 
 def default_run_dir(name: str) -> Path:
-    """``runs/<name>-<YYYYmmdd-HHMMSS>`` (with a numeric suffix if it already exists), ``name``
-    being the dataset's configuration name (the file or folder name up to its first dot)."""
+    """``runs/<name>-<YYYYmmdd-HHMMSS>`` (with a numeric suffix if it already exists or another
+    live run is writing it), ``name`` being the dataset's configuration name (the file or folder
+    name up to its first dot)."""
+    from slam.io.runfolder import live_writers
+
     base = Path("runs") / f"{name or 'run'}-{datetime.now():%Y%m%d-%H%M%S}"
     candidate, k = base, 1
-    while candidate.exists():
+    while os.path.lexists(candidate) or live_writers(candidate.parent, candidate.name):
         k += 1
         candidate = base.with_name(f"{base.name}-{k}")
     return candidate
@@ -132,17 +138,19 @@ def run(request: RunRequest) -> Path:
 def execute(request: RunRequest) -> Result:
     """Run ``slam run`` end to end; return the result (with its metrics and run folder).
 
-    The run folder is assembled in a temporary sibling from the start (so observers such as a
+    The run folder is assembled in a partial sibling from the start (so observers such as a
     recorder can write into it while the filter runs) and renamed into place only when every
-    output is written.
+    output is written (:func:`slam.io.atomic.atomic_dir`: ``--force`` replaces only a run folder
+    of ``slam run`` that holds none of the run's inputs; a folder that appears meanwhile is
+    never replaced).
     """
     config = request.config
     ref = sources.resolve(request.name, request.data_dir, where="slam run NAME")
     out = request.out or default_run_dir(ref.config_name)
-    if out.exists() and not request.force and any(out.iterdir()):
-        raise FileExistsError(f"{out}: output folder exists and is not empty")
+    inputs = (*request.inputs, request.data_dir, ref.path)
+    check_output_dir(out, "run", request.force, inputs)  # before loading anything
     wall_start = time.perf_counter()
-    with atomic_dir(out, overwrite=request.force) as tmp:
+    with atomic_dir(out, overwrite=request.force, kind="run", inputs=inputs) as tmp:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             source = sources.load(ref, config, _needs(config), request.progress)

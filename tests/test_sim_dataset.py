@@ -166,10 +166,13 @@ def test_cli_errors_are_one_line_and_exit_2(tmp_path, capsys):
     assert _sim(tmp_path / "z", "--no-rgbd") == 2
     assert "exists" in capsys.readouterr().err
     assert (tmp_path / "z" / "keep.txt").read_text() == "mine"
-    assert _sim(tmp_path / "z", "--no-rgbd", "--force") == 0
-    assert (tmp_path / "z" / "Hokuyo20.npz").is_file() and not (
-        tmp_path / "z" / "keep.txt"
-    ).exists()
+    assert _sim(tmp_path / "z", "--no-rgbd", "--force") == 2  # not a dataset of slam sim
+    assert "--force replaces only a simulated dataset" in capsys.readouterr().err
+    assert (tmp_path / "z" / "keep.txt").read_text() == "mine"
+    assert _sim(tmp_path / "sim", "--no-rgbd") == 0
+    assert _sim(tmp_path / "sim", "--no-rgbd", "--force") == 0  # its own output: replaced
+    assert (tmp_path / "sim" / "Hokuyo20.npz").is_file()
+    assert (tmp_path / "sim" / ".slam-sim").is_file()
 
 
 def test_cli_prints_a_summary(tmp_path, capsys):

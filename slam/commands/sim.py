@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from slam.commands._common import show_progress
-from slam.errors import DataError
+from slam.io.atomic import check_output_dir
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -44,7 +44,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--noise-free", action="store_true", help="exact sensors: no noise, jitter or drops"
     )
-    parser.add_argument("--force", action="store_true", help="replace an existing output folder")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing dataset folder written by slam sim (never any other folder)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(func=run_sim)
 
@@ -56,8 +60,7 @@ def run_sim(args: argparse.Namespace) -> int:
     from slam.sim.sensors import NoiseConfig
 
     get_scenario(args.name)  # UsageError for an unknown name, before any work
-    if args.out.exists() and not args.out.is_dir():
-        raise DataError(f"{args.out}: --out expected a folder to create, found a file")
+    check_output_dir(args.out, "sim", args.force)  # before any work
     options = SimOptions(
         scenario=args.name,
         seed=args.seed,

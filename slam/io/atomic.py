@@ -1,34 +1,112 @@
-"""Atomic writes: outputs appear whole or not at all.
+"""Atomic writes: outputs appear whole or not at all, and replace only what slam wrote.
 
-Files are written to a temporary sibling and renamed into place; run folders are assembled in a
-temporary sibling folder and renamed when complete, so an interrupted or failed run leaves no
-half-written output behind. :func:`write_png` is the project's one PNG writer (run pictures,
-simulated frames, maze and grid-study plots).
+Files are written to a temporary sibling and renamed into place. Output folders (a run folder,
+a simulated dataset) are assembled in a partial sibling folder (:mod:`slam.io.runfolder`) and
+renamed into place when complete, so an interrupted or failed command leaves no half-written
+output behind. Everything is created with the modes ``mkdir`` and ``open`` give under the
+process's umask (folders ``0o777 & ~umask``, files ``0o666 & ~umask``). :func:`write_png` is the
+project's one PNG writer (run pictures, simulated frames, maze and grid-study plots).
+
+The folder protocol (:func:`atomic_dir`):
+
+* before any work, :func:`check_output_dir` refuses a destination that is a symbolic link, a
+  file, under a file, a mount point, ends in ``..``, holds one of the command's inputs, or exists
+  and is not empty — unless ``force`` is given and it is a finished output folder of the same
+  kind (:func:`slam.io.runfolder.is_own_output`);
+* stale partial folders of dead processes in the destination's parent are removed, and a live
+  process writing the same destination makes this one stop (exit 2) before it starts;
+* the final rename never replaces a folder that appeared meanwhile: ``renameat2`` with
+  ``RENAME_NOREPLACE`` (Linux), else an exclusive ``mkdir`` of the destination followed by a
+  rename onto that still-empty folder (a rename onto a non-empty folder fails). With ``force``
+  the old folder is swapped out with ``RENAME_EXCHANGE`` (else moved aside first) and deleted
+  only after checking it is the very folder (same device and inode) found to be ours.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
 import os
-import shutil
-import tempfile
-from collections.abc import Iterator, Sequence
+import secrets
+import signal
+import stat
+import sys
+import threading
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from slam.errors import Terminated, UsageError
+from slam.io.runfolder import (
+    OWNER_FILE,
+    OutputKind,
+    clean_stale_partials,
+    get_kind,
+    is_own_output,
+    live_writers,
+    make_partial,
+    remove_owned_tree,
+    write_marker,
+    write_owner,
+)
+
+OUTPUT_SPACE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO})
+"""Errors writing an output that say where the output goes is unusable (full, read-only)."""
+
+
+# --- files ---------------------------------------------------------------------------------
+
+
+def _first_existing_ancestor(path: Path) -> Path:
+    probe = Path(os.path.abspath(path)).parent
+    while not os.path.lexists(probe) and probe.parent != probe:
+        probe = probe.parent
+    return probe
+
+
+def check_output_file(path: Path, option: str = "output") -> Path:
+    """``path`` if a file can be written there: not a folder, not under a file.
+
+    An existing file (or symbolic link) at ``path`` is replaced by the rename; the target of a
+    link is never written.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"{path}: {option} expected a file name, found a folder")
+    ancestor = _first_existing_ancestor(path)
+    if not ancestor.is_dir():
+        raise UsageError(f"{path}: {option} cannot be created: {ancestor} is a file")
+    return path
+
+
+def _temp_file(parent: Path, prefix: str, suffix: str) -> tuple[int, Path]:
+    """A new file ``parent/<prefix><random><suffix>`` opened for writing, mode ``0o666 & ~umask``."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        path = parent / f"{prefix}{secrets.token_hex(4)}{suffix}"
+        try:
+            return os.open(path, flags, 0o666), path
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{parent}: could not find a free temporary file name")
 
 
 def write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename)."""
-    path = Path(path)
+    path = check_output_file(Path(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _temp_file(path.parent, f".{path.name}.", ".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
+            raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the real file
         raise
 
 
@@ -56,42 +134,336 @@ def atomic_path(path: Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds.
 
     For writers that insist on a file name of their own (``np.savez``, ``cv2.imwrite``): the
-    temporary name keeps the final suffix so such writers pick the right format.
+    temporary name keeps the final suffix so such writers pick the right format. The temporary
+    file exists (empty, mode ``0o666 & ~umask``) when the block starts; writers that open it
+    for writing keep that mode.
     """
-    path = Path(path)
+    path = check_output_file(Path(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    fd, tmp = _temp_file(path.parent, f".{path.stem}.", path.suffix)
     os.close(fd)
     try:
-        yield Path(tmp)
+        yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
+            raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the real file
         raise
 
 
-@contextlib.contextmanager
-def atomic_dir(path: Path, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a temporary folder beside ``path``; rename it to ``path`` when the block succeeds.
+# --- renames that never replace ------------------------------------------------------------
 
-    With ``overwrite`` an existing ``path`` is replaced (only once the new folder is complete);
-    otherwise an existing non-empty ``path`` is an error raised before any work is done.
+_AT_FDCWD = -100
+_RENAME_NOREPLACE = 1
+_RENAME_EXCHANGE = 2
+_renameat2_cache: list = []
+
+
+def _renameat2_function():  # noqa: ANN202 - a ctypes function or None
+    if not _renameat2_cache:
+        fn = None
+        if sys.platform.startswith("linux"):
+            try:
+                fn = ctypes.CDLL(None, use_errno=True).renameat2
+                fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p]
+                fn.argtypes += [ctypes.c_uint]
+                fn.restype = ctypes.c_int
+            except (OSError, AttributeError):
+                fn = None
+        _renameat2_cache.append(fn)
+    return _renameat2_cache[0]
+
+
+def _renameat2(src: Path, dst: Path, flags: int) -> bool:
+    """``renameat2(src, dst, flags)``; ``False`` when the system or file system lacks it."""
+    fn = _renameat2_function()
+    if fn is None:
+        return False
+    if fn(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), flags) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(src), None, str(dst))
+
+
+def rename_noreplace(src: Path, dst: Path) -> None:
+    """Rename folder ``src`` to ``dst``; :class:`FileExistsError` if ``dst`` exists, even if it
+    appears while this runs (never replaced, not even an empty folder)."""
+    if _renameat2(src, dst, _RENAME_NOREPLACE):
+        return
+    os.mkdir(dst, 0o700)  # claims the name: FileExistsError when taken
+    try:
+        os.rename(src, dst)  # onto our own empty claim; fails if anyone wrote into it
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.rmdir(dst)  # our claim, only while still empty
+        if exc.errno in (errno.ENOTEMPTY, errno.EEXIST):
+            raise FileExistsError(errno.EEXIST, "appeared meanwhile", str(dst)) from None
+        raise
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap ``a`` and ``b`` atomically; ``False`` when not supported here."""
+    return _renameat2(a, b, _RENAME_EXCHANGE)
+
+
+# --- output folders ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OutputPlan:
+    """What :func:`check_output_dir` found at the destination."""
+
+    path: Path
+    kind: OutputKind
+    existing: str
+    """``"none"``, ``"empty"`` (an empty folder, replaced) or ``"own"`` (replaced with force)."""
+    identity: tuple[int, int] | None = None
+    """``(st_dev, st_ino)`` of the folder to replace (``"own"``)."""
+
+
+def _contains(folder: Path, path: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def check_output_dir(
+    path: Path,
+    kind: str | OutputKind = "run",
+    force: bool = False,
+    inputs: Iterable[Path | None] = (),
+    option: str = "--out",
+) -> OutputPlan:
+    """Check that an output folder of ``kind`` may be written at ``path``; raise
+    :class:`~slam.errors.UsageError` naming it otherwise (see the module docstring).
+
+    ``inputs`` are the files and folders the command reads: ``path`` may not be one of them or
+    an ancestor of one.
+    """
+    spec = get_kind(kind)
+    path = Path(path)
+    if path.name in ("", ".", ".."):
+        raise UsageError(
+            f"{path}: {option} expected a path ending in a new folder's name, found "
+            f"{path.name or str(path)!r}"
+        )
+    if os.path.islink(path):
+        raise UsageError(
+            f"{path}: {option} is a symbolic link; slam never writes or replaces through a link "
+            "(give the real folder)"
+        )
+    ancestor = _first_existing_ancestor(path)
+    if not ancestor.is_dir():
+        raise UsageError(f"{path}: {option} cannot be created: {ancestor} is a file")
+    if not os.path.lexists(path):
+        return OutputPlan(path, spec, "none")
+    if not path.is_dir():
+        raise UsageError(f"{path}: {option} expected a folder to create, found a file")
+    if os.path.ismount(path):
+        raise UsageError(
+            f"{path}: {option} is a mount point; slam cannot replace it (write into a new "
+            "folder inside it)"
+        )
+    resolved = path.resolve()
+    for item in inputs:
+        if item is not None and os.path.lexists(item) and _contains(resolved, Path(item).resolve()):
+            raise UsageError(
+                f"{path}: {option} holds an input of this command ({item}); slam never "
+                f"replaces its inputs (choose another {option})"
+            )
+    if not any(path.iterdir()):
+        return OutputPlan(path, spec, "empty")
+    own = is_own_output(path, spec)
+    if not force:
+        hint = (
+            "use --force to replace it"
+            if own
+            else f"it is not a {spec.label} of slam, so --force would not replace it either"
+        )
+        raise UsageError(f"{path}: output folder exists and is not empty ({hint})")
+    if not own:
+        raise UsageError(
+            f"{path}: --force replaces only a {spec.label} written by `{spec.command}` (a folder "
+            f"holding {spec.marker}, {' and '.join(spec.required)}); this folder is not one, so it "
+            "was left alone"
+        )
+    st = os.lstat(path)
+    return OutputPlan(path, spec, "own", (st.st_dev, st.st_ino))
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM/SIGHUP during a cleanup and deliver them after it (main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    signums = [signal.SIGINT, signal.SIGTERM] + (
+        [signal.SIGHUP] if hasattr(signal, "SIGHUP") else []
+    )
+    previous = {}
+    for signum in signums:
+        handler = signal.getsignal(signum)
+        if callable(handler):  # only signals that would raise; ignored/default stay as they are
+            previous[signum] = signal.signal(signum, lambda s, f: pending.append(s))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in pending[:1]:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise Terminated(signum)
+
+
+def _appeared(path: Path) -> UsageError:
+    return UsageError(
+        f"{path}: another process created this folder while this command was running; this "
+        "command's result was discarded and nothing was replaced"
+    )
+
+
+def _changed(path: Path) -> UsageError:
+    return UsageError(
+        f"{path}: the folder changed while this command was running (another process replaced "
+        "it); this command's result was discarded and nothing was replaced"
+    )
+
+
+def _is_planned_folder(folder: Path, plan: OutputPlan) -> bool:
+    try:
+        st = os.lstat(folder)
+    except OSError:
+        return False
+    same = stat.S_ISDIR(st.st_mode) and (st.st_dev, st.st_ino) == plan.identity
+    return same and is_own_output(folder, plan.kind)
+
+
+class _Staging:
+    """The partial folder and whether what sits at its path is still ours to delete."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.ours = True
+
+
+def _commit_new(staging: _Staging, plan: OutputPlan) -> None:
+    path = plan.path
+    if plan.existing == "empty":
+        try:
+            os.rmdir(path)  # only while still empty: whatever was put in it meanwhile stays
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            if exc.errno in (errno.ENOTEMPTY, errno.EEXIST):
+                raise _appeared(path) from None
+            raise
+    try:
+        rename_noreplace(staging.path, path)
+    except FileExistsError:
+        raise _appeared(path) from None
+    staging.ours = False  # renamed: the partial path is free again
+
+
+def _commit_replacing(staging: _Staging, plan: OutputPlan) -> None:
+    path, parent = plan.path, plan.path.parent
+    if not os.path.lexists(path):  # removed meanwhile: nothing to replace
+        _commit_new(staging, OutputPlan(path, plan.kind, "none"))
+        return
+    if _exchange(staging.path, path):
+        if not _is_planned_folder(staging.path, plan):
+            if not _exchange(staging.path, path):  # pragma: no cover - exchange just worked
+                staging.ours = False
+            raise _changed(path)
+        with contextlib.suppress(OSError):
+            write_owner(staging.path, path.name)  # a crash while deleting leaves a stale partial
+        remove_owned_tree(staging.path)  # the replaced folder, now at the partial's name
+        staging.ours = False
+        return
+    aside = parent / f".{path.name}.{secrets.token_hex(4)}.partial"
+    os.rename(path, aside)  # a fresh name: nothing is replaced
+    if not _is_planned_folder(aside, plan):
+        with contextlib.suppress(OSError):
+            if not os.path.lexists(path):
+                os.rename(aside, path)  # put back whatever was there
+        raise _changed(path)
+    with contextlib.suppress(OSError):
+        write_owner(aside, path.name)
+    try:
+        _commit_new(staging, OutputPlan(path, plan.kind, "none"))
+    except BaseException:
+        with contextlib.suppress(OSError):
+            rename_noreplace(aside, path)
+        raise
+    remove_owned_tree(aside)
+
+
+def _about_the_output(exc: BaseException, staging: Path) -> bool:
+    """Whether ``exc`` says the output cannot be written (full, read-only) while writing into
+    ``staging`` (or without naming a file, as writers of npz archives and recordings do)."""
+    if not isinstance(exc, OSError) or exc.errno not in OUTPUT_SPACE_ERRNOS:
+        return False
+    return exc.filename is None or str(exc.filename).startswith(str(staging))
+
+
+def _announce_cleaned(parent: Path) -> None:
+    cleaned = clean_stale_partials(parent)
+    if cleaned:
+        print(
+            f"slam: removed {len(cleaned)} stale partial folder(s) of interrupted runs in "
+            f"{parent} (their processes are gone)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+@contextlib.contextmanager
+def atomic_dir(
+    path: Path,
+    overwrite: bool = False,
+    *,
+    kind: str | OutputKind = "run",
+    inputs: Iterable[Path | None] = (),
+    option: str = "--out",
+) -> Iterator[Path]:
+    """Yield a partial folder beside ``path``; rename it to ``path`` when the block succeeds.
+
+    ``overwrite`` (``--force``) lets a finished output folder of ``kind`` be replaced, once the
+    new one is complete; anything else at ``path`` is an error raised before any work is done,
+    and a folder appearing at ``path`` meanwhile is never replaced (see the module docstring).
+    The kind's marker is written into the folder just before the rename.
     """
     path = Path(path)
-    if path.exists() and not overwrite and any(path.iterdir()):
-        raise FileExistsError(f"{path}: output folder exists and is not empty")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    inputs = tuple(inputs)
+    plan = check_output_dir(path, kind, overwrite, inputs, option)
+    parent = path.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    _announce_cleaned(parent)
+    writers = live_writers(parent, path.name)
+    if writers:
+        record = writers[0].record or {}
+        raise UsageError(
+            f"{path}: another slam process (pid {record.get('pid')}, started "
+            f"{record.get('started', '?')}) is writing this folder; wait for it to finish or "
+            f"choose another {option}"
+        )
+    staging = _Staging(make_partial(parent, path.name))
     try:
-        yield tmp
-        if path.exists():
-            old = path.with_name(f".{path.name}.old-{os.getpid()}")
-            os.replace(path, old)
-            os.replace(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
+        yield staging.path
+        write_marker(staging.path, plan.kind)
+        if plan.existing == "own":
+            _commit_replacing(staging, plan)
         else:
-            os.replace(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+            _commit_new(staging, plan)
+        with contextlib.suppress(OSError):
+            os.unlink(path / OWNER_FILE)
+    except BaseException as exc:
+        with _signals_deferred():
+            if staging.ours:
+                remove_owned_tree(staging.path)
+        if _about_the_output(exc, staging.path):
+            raise OSError(exc.errno, f"{exc.strerror}; nothing was written", str(path)) from None
         raise

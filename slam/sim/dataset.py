@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import time
 import zipfile
 from collections import deque
@@ -459,10 +458,12 @@ def _summary(log: SimulatedLog) -> dict[str, Any]:
 def generate_dataset(
     out: Path, options: SimOptions, progress: bool = False, overwrite: bool = False
 ) -> dict[str, Any]:
-    """Simulate and write a dataset into ``out`` atomically; return its summary with timings."""
+    """Simulate and write a dataset into ``out`` atomically; return its summary with timings.
+
+    ``overwrite`` replaces only a simulated dataset written by ``slam sim`` (its ``.slam-sim``
+    marker and ``simulation.json``), see :func:`slam.io.atomic.atomic_dir`."""
     clock = time.perf_counter()
-    with atomic_dir(Path(out), overwrite=overwrite) as tmp:
-        os.chmod(tmp, 0o755)  # the temporary folder is private; the dataset is ordinary data
+    with atomic_dir(Path(out), overwrite=overwrite, kind="sim") as tmp:
         log = simulate_log(options)
         summary = write_dataset(log, tmp, progress=progress)
     summary["timings"]["total_s"] = time.perf_counter() - clock

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
+from slam.io.atomic import rename_noreplace
+from slam.io.runfolder import OWNER_FILE, clean_stale_partials, make_partial, remove_owned_tree
 from slam.sim.dataset import RGBD_RATE_HZ, SIM_VERSION, SimOptions, write_dataset
 
 DEMO_NUMBER = 20
@@ -45,7 +45,9 @@ def ensure_demo(cache_dir: Path, *, progress: bool = False, rgbd: bool = True) -
     With ``rgbd=False`` a complete demo with Kinect frames is reused when present; otherwise a
     lighter one without them is generated. Generation happens in a temporary sibling folder that
     is renamed into place only when complete, so an interrupted run leaves nothing half-written and
-    two processes generating at once both end up with one complete folder.
+    two processes generating at once both end up with one complete folder. A generation killed
+    outright (SIGKILL) leaves a partial folder with its owner record, removed by the next call
+    (:func:`slam.io.runfolder.clean_stale_partials`).
     """
     cache_dir = Path(cache_dir)
     full = demo_dir(cache_dir, rgbd=True)
@@ -61,19 +63,20 @@ def ensure_demo(cache_dir: Path, *, progress: bool = False, rgbd: bool = True) -
             file=sys.stderr,
             flush=True,
         )
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".partial", dir=cache_dir))
+    clean_stale_partials(cache_dir)  # of generations killed before they finished
+    staging = make_partial(cache_dir, target.name)
     try:
         from slam.sim.dataset import simulate_log
 
         write_dataset(simulate_log(demo_options(rgbd)), staging, progress=progress)
-        os.chmod(staging, 0o755)  # mkdtemp makes it private; the cache is ordinary data
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(staging / OWNER_FILE)
         try:
-            os.rename(staging, target)
-        except OSError:
+            rename_noreplace(staging, target)
+        except FileExistsError:
             # Another process finished first: its folder is complete, keep it.
             if not target.is_dir():
                 raise
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            shutil.rmtree(staging)
+        remove_owned_tree(staging)
     return target
