@@ -3,19 +3,38 @@
 Each command module exposes ``register(subparsers)``, which adds its parser and sets ``func``.
 Heavy imports (numba kernels, rerun) happen inside the handlers so ``slam --help`` stays instant.
 Errors meant for people (:class:`~slam.errors.SlamError`) print one line and exit with code 2.
+
+What the user's environment does to a command is also one line, not a traceback:
+
+* an :class:`OSError` of the environment (:data:`ENVIRONMENT_ERRNOS`: disk full, read-only file
+  system, permission denied, a path under a file, ...) prints the path and the reason, exit 2;
+  any other exception is a bug and keeps its traceback;
+* Ctrl-C (SIGINT) exits 130; SIGTERM and SIGHUP are raised like Ctrl-C (as
+  :class:`~slam.errors.Terminated`) so outputs being assembled are removed the same way, exit
+  ``128 + signum`` (143 for SIGTERM). An interrupt that numba's dispatcher wraps into a
+  ``SystemError`` counts as the interrupt;
+* a closed standard output (``slam grid run X --json | head``) ends the command quietly, exit 141
+  (``128 + SIGPIPE``, what a shell reports for a program killed by SIGPIPE).
+
+Rerun's own log lines are off unless ``RUST_LOG`` says otherwise: a recording that cannot be
+written is reported by slam itself (one line), not by rerun's logger.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import importlib
 import os
 import pkgutil
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 
 from slam import __version__
-from slam.errors import SlamError
+from slam.errors import SlamError, Terminated
 
 COMMAND_ORDER: tuple[str, ...] = (
     "run",
@@ -26,6 +45,7 @@ COMMAND_ORDER: tuple[str, ...] = (
     "view",
     "grid",
     "maze",
+    "runs",
 )
 """Order of the sub-commands in ``slam --help``; any other module of the package comes after."""
 
@@ -57,22 +77,132 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+ENVIRONMENT_ERRNOS: frozenset[int] = frozenset(
+    {
+        errno.ENOSPC,
+        errno.EDQUOT,
+        errno.EFBIG,
+        errno.EROFS,
+        errno.EACCES,
+        errno.EPERM,
+        errno.ENOTDIR,
+        errno.EISDIR,
+        errno.EEXIST,
+        errno.ENOTEMPTY,
+        errno.ENOENT,
+        errno.ENAMETOOLONG,
+        errno.ELOOP,
+        errno.EXDEV,
+        errno.EBUSY,
+        errno.EMFILE,
+        errno.ENFILE,
+        errno.EIO,
+        errno.ETXTBSY,
+    }
+)
+"""Errors of the user's environment (not of slam): one line naming the path, exit 2."""
+
+NO_SPACE_ERRNOS: frozenset[int] = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+"""Environment errors reported even when the writer did not say which file it was writing."""
+
+TERMINATING_SIGNALS: tuple[str, ...] = ("SIGTERM", "SIGHUP")
+"""Signals raised as :class:`~slam.errors.Terminated` while a command runs (when not ignored)."""
+
+EXIT_BROKEN_PIPE = 128 + 13
+"""Exit code when standard output is closed under us (128 + SIGPIPE)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def _termination_as_interrupt() -> Iterator[None]:
+    """Turn SIGTERM and SIGHUP into :class:`~slam.errors.Terminated` (main thread only; a
+    signal the parent told us to ignore, as ``nohup`` does for SIGHUP, stays ignored)."""
+    previous: dict[int, object] = {}
+    if threading.current_thread() is threading.main_thread():
+        for name in TERMINATING_SIGNALS:
+            signum = getattr(signal, name, None)
+            if signum is not None and signal.getsignal(signum) == signal.SIG_DFL:
+                previous[signum] = signal.signal(signum, _raise_terminated)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The :class:`KeyboardInterrupt` that caused ``exc`` (numba's dispatcher turns one raised
+    while it converts arguments or results into ``SystemError: ... returned a result with an
+    exception set``)."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
+def _interrupted(exc: KeyboardInterrupt) -> int:
+    signum = getattr(exc, "signum", signal.SIGINT)
+    if signum == signal.SIGINT:
+        print("slam: interrupted", file=sys.stderr)
+    else:
+        print(f"slam: terminated by {signal.Signals(signum).name}", file=sys.stderr)
+    return 128 + int(signum)
+
+
+def environment_message(exc: OSError) -> str:
+    """One line for an environment error: the path(s), then the reason."""
+    reason = exc.strerror or str(exc)
+    if exc.filename is not None and exc.filename2 is not None:
+        return f"{exc.filename} -> {exc.filename2}: {reason}"
+    if exc.filename is not None:
+        return f"{exc.filename}: {reason}"
+    return reason
+
+
+def _silence_stdout() -> None:
+    """Point standard output at /dev/null so the interpreter's last flush stays quiet."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the process exit code."""
     os.environ.setdefault("RERUN_ANALYTICS", "0")
+    os.environ.setdefault("RUST_LOG", "off")
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = args.func(args)
+        with _termination_as_interrupt():
+            code = args.func(args)
+            sys.stdout.flush()
     except SlamError as exc:
         print(f"slam: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except FileExistsError as exc:
-        print(f"slam: error: {exc} (use --force to replace it)", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        return _interrupted(exc)
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except SystemError as exc:
+        interrupt = _interrupt_in(exc)
+        if interrupt is None:
+            raise
+        return _interrupted(interrupt)
+    except OSError as exc:
+        named = exc.filename is not None or exc.errno in NO_SPACE_ERRNOS
+        if exc.errno not in ENVIRONMENT_ERRNOS or not named:
+            raise
+        print(f"slam: error: {environment_message(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("slam: interrupted", file=sys.stderr)
-        return 130
     return int(code or 0)
 
 

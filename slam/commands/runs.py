@@ -1,0 +1,86 @@
+"""``slam runs clean [DIR ...]``: remove the partial folders that killed runs left behind.
+
+A command writing an output folder assembles it in a partial sibling folder
+``.<name>.<random>.partial`` holding an owner record (pid, host, start time). Ctrl-C, SIGTERM and
+errors remove it; SIGKILL, a crash or a power cut cannot. The next command writing into the same
+folder removes such stale partial folders, and so does this command: it removes those whose
+process is gone, and never a live one, one of another user or host, or anything without a
+readable owner record (:mod:`slam.io.runfolder`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from slam.errors import UsageError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``slam runs`` and its sub-command ``clean``."""
+    parser = subparsers.add_parser(
+        "runs",
+        help="manage run folders: remove partial folders left by killed runs (runs clean)",
+        description="Manage the folders slam writes.",
+    )
+    sub = parser.add_subparsers(dest="runs_command", metavar="SUBCOMMAND")
+    sub.required = True
+    clean = sub.add_parser(
+        "clean",
+        help="remove stale partial folders (.NAME.XXXX.partial) whose process is gone",
+        description=__doc__.split("\n\n", 1)[1].replace("``", "'"),
+    )
+    clean.add_argument(
+        "dirs",
+        nargs="*",
+        type=Path,
+        metavar="DIR",
+        help="folders holding run folders (default: runs); only their direct children are looked at",
+    )
+    clean.add_argument("--dry-run", action="store_true", help="only list what would be removed")
+    clean.set_defaults(func=clean_command)
+
+
+def _mb(size: int) -> str:
+    return f"{size / 2**20:.1f} MB"
+
+
+def clean_command(args: argparse.Namespace) -> int:
+    """Remove (or list) stale partial folders; print one line per folder and a summary."""
+    from slam.io.runfolder import find_partials, folder_size, remove_owned_tree
+
+    dirs = args.dirs or [Path("runs")]
+    for folder in dirs:
+        if not folder.is_dir():
+            raise UsageError(f"{folder}: expected a folder holding run folders, found none")
+    removed = kept = 0
+    freed = 0
+    for folder in dirs:
+        for partial in find_partials(folder):
+            record = partial.record or {}
+            who = (
+                f"pid {record.get('pid')} on {record.get('host')}, started {record.get('started')}"
+            )
+            if partial.stale:
+                size = folder_size(partial.path)
+                if args.dry_run:
+                    print(f"would remove {partial.path} ({who}: gone; {_mb(size)})")
+                elif remove_owned_tree(partial.path):
+                    print(f"removed {partial.path} ({who}: gone; {_mb(size)})")
+                else:
+                    print(f"could not remove all of {partial.path} ({who}: gone)")
+                    continue
+                removed += 1
+                freed += size
+            elif partial.state == "live":
+                print(f"kept {partial.path} ({who}: still running)")
+                kept += 1
+            elif partial.state == "unknown":
+                print(f"kept {partial.path} ({who}: another host, cannot tell)")
+                kept += 1
+            else:
+                print(f"left {partial.path} (no owner record of yours: not a slam partial folder)")
+                kept += 1
+    verb = "would remove" if args.dry_run else "removed"
+    print(f"{verb} {removed} stale partial folder(s) ({_mb(freed)}); kept {kept}")
+    return 0
