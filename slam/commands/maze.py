@@ -219,6 +219,8 @@ def convert_maze(args: argparse.Namespace) -> int:
     from slam.maze.formats import detect_format, locate_maze, parse_maze, read_maze_text, write_maze
 
     path = locate_maze(args.maze, data_dir_from(args))
+    if args.out.exists() and args.out.samefile(path):
+        raise UsageError(f"{args.out}: OUT is the maze being converted; write to another file")
     text = read_maze_text(path)
     source_format = detect_format(text, str(path))
     maze = parse_maze(text, str(path), name=path.stem, fmt=source_format)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
@@ -46,14 +47,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
     )
-    parser.add_argument("--force", action="store_true", help="replace an existing run folder")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing run folder of slam run (never any other folder)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_command)
 
 
 def overrides_from(args: argparse.Namespace) -> list[str]:
-    """``--set`` values plus the shortcut flags, as ``section.key=value`` strings."""
+    """``--set`` values (untouched: a TOML literal string ``'a "b"'`` stays one) plus the
+    shortcut flags, as ``section.key=value`` strings (string values as TOML basic strings)."""
     out = list(args.set)
     for flag, key in (
         ("method", "filter.method"),
@@ -64,18 +70,16 @@ def overrides_from(args: argparse.Namespace) -> list[str]:
     ):
         value = getattr(args, flag, None)
         if value is not None:
-            out.append(f"{key}={value!r}" if isinstance(value, str) else f"{key}={value}")
+            out.append(f"{key}={json.dumps(value)}" if isinstance(value, str) else f"{key}={value}")
     if getattr(args, "no_texture", False):
         out.append("texture.enabled=false")
     if getattr(args, "no_record", False):
         out.append("viz.record=false")
-    return [o.replace("'", '"') for o in out]
+    return out
 
 
 def run_command(args: argparse.Namespace) -> int:
     """Resolve the configuration, run, and print where the results are."""
-    import json
-
     from slam.config import load_config
     from slam.io.sources import resolve
     from slam.pipeline import RunRequest, run
@@ -90,6 +94,7 @@ def run_command(args: argparse.Namespace) -> int:
             data_dir=data_dir,
             out=args.out,
             force=args.force,
+            inputs=(args.config,) if args.config is not None else (),
             progress=show_progress(args),
             viewer=getattr(args, "viewer", False),
         )

@@ -4,7 +4,9 @@
 * ``slam view RUN_DIR --web`` — serve the web viewer on 127.0.0.1 and print its URL; it runs
   until interrupted (Ctrl-C).
 
-Every server it starts listens on 127.0.0.1 only (rerun's own default is every interface).
+Every server it starts listens on 127.0.0.1 only (rerun's own default is every interface). A
+port already taken is one line and exit 2 before anything starts. The viewer process dies with
+``slam view`` (Linux: ``PR_SET_PDEATHSIG``), even when ``slam view`` is killed with SIGKILL.
 """
 
 from __future__ import annotations
@@ -70,17 +72,31 @@ def _check_port(port: int | None) -> None:
 
 def view_command(args: argparse.Namespace) -> int:
     """Start the viewer on the recording; with ``--web`` print the URL and serve until stopped."""
-    from slam.viz.stream import free_port, viewer_command, viewer_env, wait_for_port, web_url
+    from slam.viz.stream import (
+        check_port_free,
+        die_with_parent,
+        free_port,
+        viewer_command,
+        viewer_env,
+        wait_for_port,
+        web_url,
+    )
 
     rrd = find_recording(args.run_dir)
     _check_port(args.port)
+    if args.port is not None or args.web:
+        check_port_free(args.port or 9090, "--port")
     if not args.web:
         cmd = viewer_command(rrd, port=args.port or free_port())
-        return subprocess.run(cmd, env=viewer_env(), check=False).returncode
+        return subprocess.run(
+            cmd, env=viewer_env(), check=False, preexec_fn=die_with_parent()
+        ).returncode
     web_port = args.port or 9090
     grpc_port = free_port()
     cmd = viewer_command(rrd, web=True, port=grpc_port, web_port=web_port)
-    process = subprocess.Popen(cmd, env=viewer_env(), stdout=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        cmd, env=viewer_env(), stdout=subprocess.DEVNULL, preexec_fn=die_with_parent()
+    )
 
     def stop(signum: int, frame: object) -> None:
         raise SystemExit(0)

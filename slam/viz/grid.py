@@ -94,7 +94,7 @@ def _write_grid(result: RunResult, path: Path, recording_id: str | None = None) 
         rec.log(POSTERIOR, as_image(heat_map(posterior, world.blocked)))
         rec.log(MAX_PROBABILITY, rr.Scalars(float(posterior.max())))
         rec.log(STEPS, rr.TextLog(f"{record.after} {record.action}"))
-    close_stream(rec)
+    close_stream(rec, Path(path))
     return len(result.steps)
 
 

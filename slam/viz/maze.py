@@ -135,7 +135,7 @@ def _write_maze(result: TrialResult, path: Path, recording_id: str | None = None
                 rec.log(KNOWN_WALLS, rr.LineStrips2D(segments))
                 rec.log(KNOWN_COUNT, rr.Scalars(count))
                 last_known = count
-    close_stream(rec)
+    close_stream(rec, Path(path))
     return len(result.step) + 1
 
 

@@ -38,6 +38,7 @@ map, logged by :meth:`RunRecorder.finish`, is the run's own map (``map.npz``).
 
 from __future__ import annotations
 
+import sys
 import time
 from collections import deque
 from collections.abc import Callable
@@ -49,6 +50,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from slam.config import Config, MapConfig, VizConfig
+from slam.errors import UsageError
 from slam.mapping import OccupancyGrid
 from slam.observers import StepRecord
 from slam.trajectory import Trajectory
@@ -334,7 +336,7 @@ class RunRecorder:
         texture = texture_image(run_folder) if run_folder is not None else None
         if texture is not None:
             log_placed(rec, bp.TEXTURE, texture, draw_order=-10.0, static=True)
-        close_stream(rec)
+        close_stream(rec, self.path)
         self.spent_s += time.perf_counter() - start
         out: dict[str, Any] = {
             "steps": self.steps,
@@ -348,6 +350,10 @@ class RunRecorder:
         return out
 
 
+_LIVE_VIEWERS: list = []
+"""Viewer processes spawned by this process (kept so that they are never garbage collected)."""
+
+
 def start_recording(
     folder: Path,
     config: Config,
@@ -357,11 +363,27 @@ def start_recording(
     """The recorder of a ``slam run`` writing ``folder/recording.rrd`` (``viz.record``) and/or
     streaming to a newly spawned viewer (``viewer``); ``None`` when neither is asked for.
 
-    ``ground_truth``, the true trajectory, is logged right away.
+    ``ground_truth``, the true trajectory, is logged right away. A viewer that cannot start (no
+    display) is one warning on stderr; the run goes on without it (and still writes
+    ``recording.rrd`` unless ``viz.record`` is off).
     """
     if not config.viz.record and not viewer:
         return None
-    url = spawn_viewer()[1] if viewer else None
+    url = None
+    if viewer:
+        try:
+            process, url = spawn_viewer()
+            _LIVE_VIEWERS.append(process)  # it outlives the run: no "still running" warning
+        except UsageError as exc:
+            then = (
+                "the run goes on and writes recording.rrd: open it later with "
+                "'slam view RUN_DIR --web'"
+                if config.viz.record
+                else "the run goes on without a live view (--no-record: no recording either)"
+            )
+            print(f"slam: warning: {exc}; {then}", file=sys.stderr, flush=True)
+            if not config.viz.record:
+                return None
     path = Path(folder) / RECORDING_NAME if config.viz.record else None
     name = f"slam run {config.dataset or Path(folder).name} ({config.filter.method})"
     recorder = RunRecorder(path, config.viz, map_config=config.map, name=name, viewer_url=url)

@@ -17,12 +17,16 @@ Rerun's servers bind every interface unless told otherwise: every command built 
 
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
 import socket
 import subprocess
+import sys
 import time
 import uuid
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,19 +82,46 @@ def open_stream(
 
 
 def check_recording_path(path: Path) -> Path:
-    """``path`` if a recording can be written there (a ``.rrd`` name in an existing folder)."""
+    """``path`` if a recording can be written there (a ``.rrd`` name, not a folder, in an
+    existing folder)."""
     path = Path(path)
     if path.suffix != ".rrd":
         raise UsageError(f"--record {path}: expected a file name ending in .rrd")
-    if not path.parent.is_dir():
+    if path.is_dir():
+        raise UsageError(f"--record {path}: expected a file name, found a folder")
+    if not path.parent.exists():
         raise UsageError(f"--record {path}: folder {path.parent} does not exist")
+    if not path.parent.is_dir():
+        raise UsageError(f"--record {path}: {path.parent} is a file, not a folder")
     return path
 
 
-def close_stream(rec: rr.RecordingStream) -> None:
-    """Flush everything logged and close the stream's file and connections."""
-    rec.flush()
-    rec.disconnect()
+def close_stream(rec: rr.RecordingStream, path: Path | None = None) -> None:
+    """Flush everything logged and close the stream's file and connections.
+
+    Rerun writes files on a thread of its own and reports a failed write (a full disk) only
+    here, as a ``RuntimeError``: it becomes an :class:`OSError` naming ``path`` (``ENOSPC`` when
+    its file system is full, else ``EIO``), which the CLI prints as one line.
+    """
+    try:
+        rec.flush()
+        rec.disconnect()
+    except RuntimeError as exc:
+        if path is None:
+            raise
+        raise _write_error(Path(path), exc) from None
+
+
+def _write_error(path: Path, exc: RuntimeError) -> OSError:
+    import errno
+
+    try:
+        full = os.statvfs(path.parent).f_bavail == 0
+    except OSError:
+        full = False
+    if full:
+        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    return OSError(errno.EIO, f"rerun could not write the recording ({exc})", str(path))
 
 
 def set_time(rec: rr.RecordingStream, scan: int, stamp: float | None = None) -> None:
@@ -132,11 +163,51 @@ def rerun_executable() -> list[str]:
 
 
 def viewer_env() -> dict[str, str]:
-    """The environment of viewer processes: ours, with usage analytics off."""
+    """The environment of viewer processes: ours, with usage analytics off (and without the
+    ``RUST_LOG=off`` the CLI sets for the SDK: the viewer keeps its own log)."""
     env = dict(os.environ)
     env.setdefault("RERUN_ANALYTICS", "0")
     env.setdefault("RERUN_TELEMETRY", "0")
+    if env.get("RUST_LOG") == "off":
+        del env["RUST_LOG"]
     return env
+
+
+PR_SET_PDEATHSIG = 1
+"""``prctl`` option: the signal a process gets when its parent dies (Linux)."""
+
+
+def die_with_parent(signum: int = signal.SIGTERM) -> Callable[[], None] | None:
+    """A ``preexec_fn`` that makes a child process receive ``signum`` when we die (Linux
+    ``prctl(PR_SET_PDEATHSIG)``, even when we are SIGKILLed); ``None`` elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return None
+    parent = os.getpid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        prctl = libc.prctl
+    except (OSError, AttributeError):
+        return None
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, signum, 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before prctl: follow it now
+            os.kill(os.getpid(), signum)
+
+    return preexec
+
+
+def check_port_free(port: int, option: str = "--port") -> None:
+    """:class:`~slam.errors.UsageError` unless a server can listen on 127.0.0.1:``port``."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as servers do: TIME_WAIT is fine
+        try:
+            s.bind((LOOPBACK, port))
+        except OSError as exc:
+            raise UsageError(
+                f"{option} {port}: {LOOPBACK}:{port} is not free ({exc.strerror}); choose "
+                f"another {option}"
+            ) from None
 
 
 def free_port() -> int:
@@ -169,7 +240,7 @@ def spawn_viewer(port: int | None = None, timeout_s: float = 20.0) -> tuple[subp
     """Start a native viewer listening on 127.0.0.1; return the process and the URL to stream to.
 
     Raises :class:`~slam.errors.UsageError` when the viewer does not come up (for example on a
-    machine without a display).
+    machine without a display). The viewer runs in its own session and outlives the run.
     """
     port = port or free_port()
     cmd = [*rerun_executable(), "--bind", LOOPBACK, "--port", str(port), "--expect-data-soon"]
@@ -185,8 +256,7 @@ def spawn_viewer(port: int | None = None, timeout_s: float = 20.0) -> tuple[subp
             process.terminate()
         raise UsageError(
             f"--viewer: the rerun viewer did not start listening on {LOOPBACK}:{port} "
-            f"(exit code {process.poll()}); is there a display? The run still writes "
-            "recording.rrd: open it later with 'slam view RUN_DIR --web'"
+            f"(exit code {process.poll()}); is there a display?"
         )
     return process, grpc_url(port)
 
