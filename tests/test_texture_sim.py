@@ -126,7 +126,8 @@ def test_slam_texture_recomputes_a_finished_run(small, small_run, tmp_path, caps
         np.testing.assert_array_equal(t["count"] > 0, count_mean > 0)  # the same cells
         assert (t["count"] <= count_mean).all() and t["count"].sum() < count_mean.sum()
         assert not np.array_equal(t["rgb"], rgb_mean)  # one frame's exposure instead of the mean
-    assert not list(run.glob(".*"))  # atomic writes leave no temporary files behind
+    # atomic writes leave no temporary files behind (.slam-run is the run folder's marker)
+    assert [p.name for p in run.glob(".*")] == [".slam-run"]
     # A folder that is not a finished run is refused with the missing files named.
     (run / "map.npz").unlink()
     assert main(["texture", str(run), "--dataset", str(small), "--quiet"]) == 2
