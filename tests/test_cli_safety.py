@@ -560,15 +560,15 @@ def test_environment_errors_are_one_line_but_bugs_keep_their_traceback(
 ):
     """The CLI's top level turns only environment errors into one line: an OSError of another
     kind (or without a path) and any other exception still raise."""
-    import slam.particle_filter as pf
+    from slam.online import Slam
 
     def bug(*args, **kwargs):
         raise OSError(errno.EINVAL, "Invalid argument")
 
-    monkeypatch.setattr(pf, "run_slam", bug)
+    monkeypatch.setattr(Slam, "finish", bug)
     with pytest.raises(OSError, match="Invalid argument"):
         main(["run", str(small), "--out", str(tmp_path / "o"), "--quiet"])
-    monkeypatch.setattr(pf, "run_slam", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(Slam, "finish", lambda *a, **k: 1 / 0)
     with pytest.raises(ZeroDivisionError):
         main(["run", str(small), "--out", str(tmp_path / "o"), "--quiet"])
     assert list(tmp_path.iterdir()) == []
