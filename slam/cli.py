@@ -41,6 +41,7 @@ COMMAND_ORDER: tuple[str, ...] = (
     "data",
     "sim",
     "eval",
+    "export",
     "texture",
     "view",
     "grid",

@@ -7,8 +7,11 @@ for bit), and writes the run folder atomically (it appears complete or not at al
 
 * ``config.toml``   — the exact configuration used (re-run with ``--config``);
 * ``trajectory.tum`` — one pose per processed scan (per encoder reading for ``odometry`` on
-  ECE276A logs);
+  ECE276A logs), sorted by time; ``trajectory_file_order.tum`` too when the log's clock runs
+  backwards (:mod:`slam.io.exports`);
 * ``map.npz``, ``map.png`` — log-odds grid (resolution, origin) and a picture with the trajectory;
+* ``map.pgm``, ``map.yaml``, ``map_clean.png`` — the map for ROS map_server / nav2 / evo
+  (:mod:`slam.io.mapserver`) and the picture without the trajectory;
 * ``texture.npz``, ``texture.png``, ``texture_overlay.png`` — the floor texture on the map's
   grid when the log has RGB-D frames (:mod:`slam.texture`, off with ``--no-texture``);
 * ``metrics.json``  — sizes, timings (wall, scans/s, real-time factor, peak memory), filter
@@ -27,7 +30,7 @@ import sys
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,10 +42,11 @@ from slam.config import Config, dumps, load_config
 from slam.errors import UsageError
 from slam.io import sources
 from slam.io.atomic import atomic_dir, check_output_dir, write_png, write_text
+from slam.io.exports import clock_warning, write_map_files, write_trajectories
 from slam.io.log import Log
 from slam.io.plausibility import check_plausibility
+from slam.io.rosbag import BagOptions
 from slam.io.sources import Source
-from slam.io.tum import format_tum
 from slam.mapping import OccupancyGrid
 from slam.observers import Observer
 
@@ -72,6 +76,8 @@ class RunRequest:
     """Show a progress bar."""
     viewer: bool = False
     """Stream the recording live to a spawned rerun viewer (:mod:`slam.viz`)."""
+    bag: BagOptions = field(default_factory=BagOptions)
+    """Topics and robot frame to read when ``name`` is a ROS bag or MCAP file."""
 
 
 def _needs(config: Config) -> tuple[str, ...]:
@@ -153,7 +159,7 @@ def execute(request: RunRequest) -> Result:
     with atomic_dir(out, overwrite=request.force, kind="run", inputs=inputs) as tmp:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            source = sources.load(ref, config, _needs(config), request.progress)
+            source = sources.load(ref, config, _needs(config), request.progress, request.bag)
             doubts = check_plausibility(source.log, config)  # time base, odometry jumps
             from slam.viz.recorder import start_recording
 
@@ -164,13 +170,17 @@ def execute(request: RunRequest) -> Result:
 
             result.metrics.update(run_stage(source.log, result, config, tmp, request.progress))
         messages = doubts + sorted({str(w.message) for w in caught})
+        clock = clock_warning(result.trajectory.times)
+        messages += [clock] if clock else []
         metrics = result.metrics
         metrics["warnings"] = messages + source.notes
         _evaluate(result, source)
         write_text(tmp / "config.toml", dumps(config))
-        write_text(tmp / "trajectory.tum", format_tum(result.trajectory))
+        write_trajectories(tmp, result.trajectory)  # sorted by time; file order if it differs
         if result.grid is not None:
             result.grid.save_npz(tmp / "map.npz")
+            grid = result.grid
+            write_map_files(tmp, grid.log_odds, grid.resolution, grid.origin)  # map_server, clean
             gt = None if source.ground_truth is None else source.ground_truth.poses
             write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
         if recorder is not None:  # last: the recording logs the texture when there is one

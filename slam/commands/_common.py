@@ -27,3 +27,33 @@ def data_dir_from(args: argparse.Namespace) -> Path:
 def show_progress(args: argparse.Namespace) -> bool:
     """Progress bars only on a terminal and without ``--quiet``."""
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
+
+
+def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--scan-topic``, ``--odom-topic`` and ``--base-frame`` (ROS bags and MCAP files)."""
+    group = parser.add_argument_group("ROS bags and MCAP files")
+    group.add_argument(
+        "--scan-topic", metavar="TOPIC", help="LaserScan topic (default: the only one)"
+    )
+    group.add_argument(
+        "--odom-topic",
+        metavar="TOPIC",
+        help="Odometry topic, or 'tf' for the odom → base transforms (default: the only "
+        "Odometry topic, else tf)",
+    )
+    group.add_argument(
+        "--base-frame",
+        metavar="FRAME",
+        help="robot frame (default: the Odometry child_frame_id, or the laser's moving ancestor in tf)",
+    )
+
+
+def bag_options_from(args: argparse.Namespace):  # -> slam.io.rosbag.BagOptions
+    """The :class:`~slam.io.rosbag.BagOptions` chosen by ``args``."""
+    from slam.io.rosbag import BagOptions
+
+    return BagOptions(
+        scan_topic=getattr(args, "scan_topic", None),
+        odom_topic=getattr(args, "odom_topic", None),
+        base_frame=getattr(args, "base_frame", None),
+    )

@@ -7,6 +7,9 @@
   duration, rates, gaps, invalid beams, non-monotonic scans). Exit code 2 when a present file is
   wrong or nothing of the dataset is there; a partial dataset whose present files are sound
   exits 0 and lists what is missing.
+* ``slam data inspect FILE [--json]``: what a ROS bag / MCAP file / ROS 2 bag folder, CARMEN log
+  or ECE276A folder holds (topics, message types, counts, rates, time span, tf frames, or the
+  loader's stream summary) and the ``slam run`` command that would use it.
 """
 
 from __future__ import annotations
@@ -18,7 +21,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from slam.commands._common import add_data_dir_argument, data_dir_from
+from slam.commands._common import (
+    add_bag_arguments,
+    add_data_dir_argument,
+    bag_options_from,
+    data_dir_from,
+)
 from slam.io.datadir import DATA_DIR_ENV
 
 
@@ -50,6 +58,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_data_dir_argument(verify)
     verify.add_argument("--json", action="store_true", help="print the report as JSON")
     verify.set_defaults(func=run_verify)
+
+    inspect = actions.add_parser(
+        "inspect",
+        help="show what a bag, MCAP file, CARMEN log or ECE276A folder holds",
+        description="Show what a log file or folder holds (format detected by content): topics, "
+        "message types, counts, rates, time span and tf frames of a bag; streams of other logs; "
+        "and the `slam run` command that would use it.",
+    )
+    inspect.add_argument("path", type=Path, metavar="FILE", help="log file or folder")
+    inspect.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_bag_arguments(inspect)
+    inspect.set_defaults(func=run_inspect)
 
 
 def _data_dir_origin(args: argparse.Namespace) -> str:
@@ -192,3 +212,12 @@ def _print_verify(report: dict[str, Any], data_dir: Path) -> None:
         )
     else:
         print("result: all files present and sound", file=out)
+
+
+def run_inspect(args: argparse.Namespace) -> int:
+    """``slam data inspect FILE``."""
+    from slam.io.inspect import format_inspection, inspect_path
+
+    report = inspect_path(args.path, bag_options_from(args))
+    print(json.dumps(report, indent=2) if args.json else format_inspection(report), end="")
+    return 0

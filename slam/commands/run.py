@@ -6,7 +6,13 @@ import argparse
 import json
 from pathlib import Path
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_bag_arguments,
+    add_data_dir_argument,
+    bag_options_from,
+    data_dir_from,
+    show_progress,
+)
 from slam.config import METHODS
 
 
@@ -18,8 +24,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Run SLAM on NAME: a dataset of the registry (slam data list), 'demo' (a simulated "
             "dataset20-scale log generated on first use, with ground truth), or a path to a "
-            "CARMEN log or an ECE276A dataset folder. Writes config.toml, trajectory.tum, "
-            "map.npz, map.png, metrics.json and, with RGB-D frames, texture.png/npz to the run "
+            "CARMEN log, an ECE276A dataset folder, a ROS 1 bag, a ROS 2 bag folder or an MCAP file "
+            "(format detected by content). Writes config.toml, trajectory.tum, map.pgm/map.yaml, "
+            "map.npz, map.png, map_clean.png, metrics.json and, with RGB-D frames, texture.png/npz to the run "
             "folder."
         ),
     )
@@ -53,6 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="replace an existing run folder of slam run (never any other folder)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_bag_arguments(parser)
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_command)
 
@@ -80,13 +88,19 @@ def overrides_from(args: argparse.Namespace) -> list[str]:
 
 def run_command(args: argparse.Namespace) -> int:
     """Resolve the configuration, run, and print where the results are."""
+    import dataclasses
+
     from slam.config import load_config
     from slam.io.sources import resolve
     from slam.pipeline import RunRequest, run
 
     data_dir = data_dir_from(args)
     ref = resolve(args.name, data_dir, where="slam run NAME")
-    config = load_config(ref.config_name, args.config, overrides_from(args))
+    config = load_config(
+        ref.config_name if ref.shipped_config else "", args.config, overrides_from(args)
+    )
+    if not ref.shipped_config:  # a bag: geometry from its messages, never configs/<name>.toml
+        config = dataclasses.replace(config, dataset=ref.config_name)
     out = run(
         RunRequest(
             name=args.name,
@@ -97,6 +111,7 @@ def run_command(args: argparse.Namespace) -> int:
             inputs=(args.config,) if args.config is not None else (),
             progress=show_progress(args),
             viewer=getattr(args, "viewer", False),
+            bag=bag_options_from(args),
         )
     )
     metrics = json.loads((out / "metrics.json").read_text())

@@ -5,9 +5,10 @@ order:
 
 1. ``demo``: the simulated demo, generated once into the cache (:mod:`slam.sim.demo`);
 2. a dataset of the registry (``data/datasets.toml``, ``slam data list``);
-3. an existing path (:func:`detect_path`): a folder holding the files of one ECE276A dataset
-   (``EncodersNN.npz``, ``ImuNN.npz``, ``HokuyoNN.npz``, ``KinectNN.npz``), or a file, read as a
-   CARMEN log.
+3. an existing path (:func:`detect_path`), its format read from its content
+   (:func:`slam.io.formats.detect_format`): a folder holding the files of one ECE276A dataset
+   (``EncodersNN.npz``, ``ImuNN.npz``, ``HokuyoNN.npz``, ``KinectNN.npz``), a ROS 1 bag, a ROS 2
+   bag folder, an MCAP file (:mod:`slam.io.rosbag`), or a CARMEN log (text or gzip).
 
 :func:`resolve` decides what a NAME is without reading any data (a folder listing at most) and
 returns a :class:`DatasetRef`: its :class:`Kind`, where it is, the name of its configuration
@@ -35,6 +36,7 @@ from slam.errors import DataError, UsageError
 if TYPE_CHECKING:
     from slam.config import Config
     from slam.io.log import Log
+    from slam.io.rosbag import BagOptions
     from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
@@ -57,6 +59,8 @@ class Kind(StrEnum):
     """A folder with the files of one ECE276A dataset."""
     CARMEN = "carmen"
     """A CARMEN log file (plain text or gzip)."""
+    BAG = "bag"
+    """A ROS 1 bag, a ROS 2 bag folder or an MCAP file."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +79,7 @@ class DatasetRef:
     display_name: str
     """The log's name (``metrics.json`` ``dataset``, progress bars)."""
     loader: str
-    """The file format: ``"ece276a"`` or ``"carmen"``."""
+    """The file format: ``"ece276a"``, ``"carmen"``, or for a bag ``"ros1"``, ``"rosbag2"``, ``"mcap"``."""
     data_dir: Path
     """The data directory the NAME was resolved against (registry datasets live under it)."""
     number: str | None = None
@@ -83,6 +87,9 @@ class DatasetRef:
     ``dataRGBD/RGBNN`` folders."""
     relations: Path | None = None
     """Ground-truth relations file (registry CARMEN logs), when the registry names one."""
+    shipped_config: bool = True
+    """Whether ``configs/<config_name>.toml`` applies. A bag carries its geometry (LaserScan
+    fields, tf_static): it never picks up a shipped configuration by its file name."""
 
     @property
     def reference(self) -> Path | None:
@@ -111,7 +118,8 @@ def names_hint() -> str:
     known = ", ".join(registry.load_registry())
     return (
         f"'demo', a registry dataset ({known}; see `slam data list`), the path of a CARMEN log "
-        "file or the path of an ECE276A dataset folder"
+        "file, a ROS bag, an MCAP file or a ROS 2 bag folder, or the path of an ECE276A dataset "
+        "folder"
     )
 
 
@@ -154,10 +162,21 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
 
 
 def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
-    """The :class:`DatasetRef` of an existing ``path``: a folder must hold the files of exactly
-    one ECE276A dataset, any other file is read as a CARMEN log. The configuration name is the
-    file or folder name up to its first dot (``intel.clf.gz`` → ``intel``)."""
+    """The :class:`DatasetRef` of an existing ``path``: a bag (by content), a folder holding the
+    files of exactly one ECE276A dataset, or a CARMEN log (text or gzip; other content is an
+    error). The configuration name is the file or folder name up to its first dot
+    (``intel.clf.gz`` → ``intel``); a bag is named by :func:`slam.io.rosbag.bag_stem`
+    (``intel.orig.bag`` → ``intel.orig``) and uses no shipped configuration."""
+    from slam.io.formats import BAG_FORMATS, ROSBAG2_METADATA, detect_format
+
     stem = path.name.split(".")[0]
+    if not path.is_dir() or (path / ROSBAG2_METADATA).is_file():
+        fmt = detect_format(path)
+        if fmt in BAG_FORMATS:
+            from slam.io.rosbag import bag_stem
+
+            bag = bag_stem(path)
+            return DatasetRef(name, Kind.BAG, path, bag, bag, fmt, data_dir, shipped_config=False)
     if path.is_dir():
         from slam.io.ece276a import dataset_numbers
 
@@ -184,7 +203,11 @@ def ensure(ref: DatasetRef, progress: bool = False) -> Path:
 
 
 def load(
-    ref: DatasetRef, config: Config, need: Collection[str] = (), progress: bool = False
+    ref: DatasetRef,
+    config: Config,
+    need: Collection[str] = (),
+    progress: bool = False,
+    bag: BagOptions | None = None,
 ) -> Source:
     """Read the dataset ``ref`` with the geometry of ``config``.
 
@@ -197,6 +220,10 @@ def load(
     from slam.io.tum import read_tum
 
     need = tuple(need)
+    if ref.kind is Kind.BAG:  # scans and odometry, or one error naming the topics there are
+        from slam.io.rosbag import load_bag
+
+        return Source(load_bag(ref.path, name=ref.display_name, lidar=config.lidar, options=bag))
     if ref.loader == "carmen":
         need = tuple(s for s in need if s not in CARMEN_ODOMETRY_STANDS_IN)
     if ref.kind is Kind.REGISTRY:

@@ -1,0 +1,202 @@
+"""The files of a run folder other tools read, and ``slam export`` of existing run folders.
+
+This module owns the interoperable outputs of a run:
+
+* ``trajectory.tum`` sorted by time (stable: equal times keep their order), as evo and the TUM
+  tools require; when the log's clock runs backwards (CARMEN intel: 631 scans),
+  ``trajectory_file_order.tum`` keeps the poses in file order and a warning says so;
+* ``map.pgm`` + ``map.yaml`` (ROS map_server, :mod:`slam.io.mapserver`) and ``map_clean.png``
+  (the occupancy picture without the trajectory drawn on it);
+* KITTI poses (``slam export --format kitti``): one row-major 3×4 matrix per line, planar poses
+  lifted to 3D (z = 0), with the times in a ``*_times.txt`` file beside it.
+
+:func:`export_run` writes one of them for an existing run folder, never over an existing file
+unless asked to, each file atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.errors import DataError, UsageError
+from slam.io.atomic import atomic_path, write_text
+from slam.io.log import count_non_monotonic
+from slam.io.tum import format_tum, read_tum
+from slam.trajectory import Trajectory
+
+F64 = NDArray[np.float64]
+
+EXPORT_FORMATS = ("pgm", "png", "npz", "tum", "kitti")
+"""Formats of ``slam export``."""
+EXPORT_DIR = "export"
+"""Folder inside the run folder that ``slam export`` writes to by default."""
+DEFAULT_NAMES = {
+    "pgm": "map.pgm",
+    "png": "map_clean.png",
+    "npz": "occupancy.npz",
+    "tum": "trajectory.tum",
+    "kitti": "trajectory.kitti",
+}
+
+
+def time_order(times: F64) -> NDArray[np.int64]:
+    """Indices that sort ``times`` (stable)."""
+    return np.argsort(np.asarray(times, dtype=np.float64), kind="stable")
+
+
+def clock_warning(times: F64) -> str | None:
+    """The warning of a trajectory whose timestamps go backwards, or ``None``."""
+    backwards = count_non_monotonic(np.asarray(times, dtype=np.float64))
+    if not backwards:
+        return None
+    return (
+        f"the log's clock runs backwards at {backwards} of {len(times)} poses: trajectory.tum is "
+        f"sorted by time, trajectory_file_order.tum keeps the file order"
+    )
+
+
+def write_trajectories(folder: Path, trajectory: Trajectory) -> bool:
+    """``trajectory.tum`` sorted by time and, when the order changed, ``trajectory_file_order.tum``;
+    returns whether the file-order variant was written."""
+    times, poses = trajectory.times, trajectory.poses
+    order = time_order(times)
+    write_text(Path(folder) / "trajectory.tum", _tum(times[order], poses[order]))
+    if clock_warning(times) is None:
+        return False
+    write_text(Path(folder) / "trajectory_file_order.tum", _tum(times, poses))
+    return True
+
+
+def _tum(times: F64, poses: F64) -> str:
+    return format_tum(Trajectory(times, poses))
+
+
+def write_map_files(folder: Path, log_odds: Any, resolution: float, origin: Any) -> None:
+    """``map.pgm`` + ``map.yaml`` and ``map_clean.png`` of a log-odds grid into ``folder``."""
+    from slam.io.mapserver import write_map
+
+    write_map(Path(folder) / "map.pgm", log_odds, resolution, origin)
+    write_png(Path(folder) / "map_clean.png", clean_image(log_odds))
+
+
+def clean_image(log_odds: Any) -> NDArray[np.uint8]:
+    """The occupancy picture (occupied black, free white, unknown grey, +y up), no trajectory:
+    the same grey levels as ``map.png`` (:meth:`slam.mapping.OccupancyGrid.to_image`)."""
+    p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(log_odds, dtype=np.float64)))
+    return np.ascontiguousarray((255.0 * (1.0 - p)).astype(np.uint8)[::-1])
+
+
+def write_png(path: Path, image: NDArray[np.uint8]) -> None:
+    """Encode ``image`` as PNG and write it atomically."""
+    import cv2
+
+    ok, data = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError(f"{path}: PNG encoding failed")
+    with atomic_path(Path(path)) as tmp:
+        tmp.write_bytes(data.tobytes())
+
+
+def format_kitti(poses: F64) -> str:
+    """KITTI text of ``(N, 3)`` planar poses: ``r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz``."""
+    poses = np.asarray(poses, dtype=np.float64)
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    zero, one = np.zeros_like(c), np.ones_like(c)
+    rows = np.column_stack(
+        [c, -s, zero, poses[:, 0], s, c, zero, poses[:, 1], zero, zero, one, zero]
+    )
+    return "".join(" ".join(f"{v:.9e}" for v in row) + "\n" for row in rows.tolist())
+
+
+# --- slam export --------------------------------------------------------------------------
+
+
+def read_run_map(run_dir: Path) -> tuple[NDArray[np.float32], float, F64]:
+    """``(log_odds, resolution, origin)`` of a run folder's ``map.npz``."""
+    path = Path(run_dir) / "map.npz"
+    if not path.is_file():
+        raise DataError(f"{path}: not found (the run has no map: was it an odometry-only run?)")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            log_odds = np.asarray(data["log_odds"], dtype=np.float32)
+            resolution = float(data["resolution"])
+            origin = np.asarray(data["origin"], dtype=np.float64)
+    except KeyError as exc:
+        raise DataError(
+            f"{path}: missing key {exc.args[0]!r} (expected log_odds, resolution, origin)"
+        ) from None
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{path}: not a readable map.npz ({exc})") from None
+    if log_odds.ndim != 2 or origin.shape != (2,) or not resolution > 0:
+        raise DataError(
+            f"{path}: expected a 2-D log_odds, a positive resolution and a 2-vector origin, found "
+            f"shapes {log_odds.shape}, {origin.shape} and resolution {resolution}"
+        )
+    return log_odds, resolution, origin
+
+
+def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = False) -> list[Path]:
+    """Write ``fmt`` (one of :data:`EXPORT_FORMATS`) of the run folder ``run_dir``; return the
+    files written.
+
+    ``out`` is the file to write (default ``run_dir/export/<standard name>``); ``pgm`` also
+    writes the ``.yaml`` beside it, ``kitti`` a ``<stem>_times.txt``. An existing file is an
+    error unless ``force``.
+    """
+    run_dir = Path(run_dir)
+    if fmt not in EXPORT_FORMATS:
+        raise UsageError(f"--format: expected one of {', '.join(EXPORT_FORMATS)}, found {fmt!r}")
+    if not run_dir.is_dir():
+        raise DataError(f"{run_dir}: run folder not found")
+    target = Path(out) if out is not None else run_dir / EXPORT_DIR / DEFAULT_NAMES[fmt]
+    if target.is_dir():
+        raise UsageError(f"--out {target}: expected a file path, found a folder")
+    companions = {
+        "pgm": [target.with_suffix(".yaml")],
+        "kitti": [target.with_name(target.stem + "_times.txt")],
+    }.get(fmt, [])
+    written = [target, *companions]
+    existing = [p for p in written if p.exists()]
+    if existing and not force:
+        raise FileExistsError(f"{existing[0]}: exists")
+    if fmt in ("pgm", "png", "npz"):
+        log_odds, resolution, origin = read_run_map(run_dir)
+        if fmt == "pgm":
+            from slam.io.mapserver import write_map
+
+            write_map(target, log_odds, resolution, origin)
+        elif fmt == "png":
+            write_png(target, clean_image(log_odds))
+        else:
+            _write_occupancy_npz(target, log_odds, resolution, origin)
+        return written
+    times, poses = read_tum(run_dir / "trajectory.tum")
+    order = time_order(times)
+    if fmt == "tum":
+        write_text(target, _tum(times[order], poses[order]))
+    else:
+        write_text(target, format_kitti(poses[order]))
+        write_text(companions[0], "".join(f"{t:.6f}\n" for t in times[order]))
+    return written
+
+
+def _write_occupancy_npz(path: Path, log_odds: Any, resolution: float, origin: F64) -> None:
+    """``occupancy`` (int8 100/0/−1 like ``nav_msgs/OccupancyGrid``, rows from the smallest y),
+    ``probability``, ``log_odds``, ``resolution``, ``origin`` ``[x, y, yaw]``."""
+    from slam.io.mapserver import trinary
+
+    with atomic_path(path) as tmp:
+        np.savez_compressed(
+            tmp,
+            occupancy=trinary(log_odds),
+            probability=(1.0 - 1.0 / (1.0 + np.exp(log_odds.astype(np.float64)))).astype(
+                np.float32
+            ),
+            log_odds=log_odds,
+            resolution=np.float64(resolution),
+            origin=np.array([origin[0], origin[1], 0.0]),
+        )

@@ -1,0 +1,1062 @@
+"""ROS bag loader: ROS 1 ``.bag``, ROS 2 bag folders (sqlite3 or MCAP storage) and bare ``.mcap``.
+
+This module owns reading ROS recordings into a :class:`~slam.io.log.Log` through the pure-Python
+``rosbags`` library (no ROS installation): which topics become which stream, where the laser is
+mounted, and the errors a bag that cannot be used produces. :func:`inspect_bag` describes a bag
+(``slam data inspect``) with the same topic and frame resolution :func:`load_bag` uses.
+
+Streams
+-------
+* ``sensor_msgs/LaserScan`` → :attr:`Log.scans`: any beam count, the geometry (``angle_min``,
+  ``angle_increment``, ``range_min``, ``range_max``) from every message; a log whose beam
+  count or geometry varies gets ``(N, B)`` NaN-padded angles. Scan time is ``header.stamp``
+  (the record time when a driver left it zero). Readings below ``range_min``, negative, NaN or
+  −inf are invalid beams (NaN, counted); +inf and readings at or beyond the message's
+  ``range_max`` mean "no return" (REP 117): they keep their value, or become ``no_return``.
+* ``nav_msgs/Odometry`` → :attr:`Log.odometry` (pose and twist); without an Odometry topic, the
+  ``odom → base`` transforms of ``/tf`` (velocities then by finite differences).
+* ``tf2_msgs/TFMessage`` on ``/tf_static`` (else ``/tf``) → the laser's mounting in the robot
+  frame, composed along the frame chain ``base → … → laser`` and projected to the plane (an
+  upside-down laser, rolled by π, has its beam angles mirrored; a tilted one is an error).
+* ``sensor_msgs/Imu`` (when there is exactly one such topic) → :attr:`Log.imu`.
+
+Topics are found by message type; when a type has several topics the error lists them and asks
+for ``--scan-topic`` / ``--odom-topic``. The robot frame is the Odometry messages'
+``child_frame_id`` (for tf odometry: the first frame above the laser with a moving parent) unless
+``--base-frame`` names it.
+
+Reading streams the messages once (no whole-bag load): arrays are preallocated from the bag's
+index counts and grow only when a count is unknown. LaserScan and Odometry messages are decoded
+by a small ROS 1 / CDR decoder (five times faster than the generic deserializer on intel), which
+is checked against ``rosbags``' deserializer on each topic's first message and falls back to it
+when the bag's message definition differs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import struct
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import LidarConfig
+from slam.errors import DataError, UsageError
+from slam.io.formats import BAG_FORMATS, detect_format
+from slam.io.log import ImuStream, Log, OdometryStream, ScanStream
+
+F64 = NDArray[np.float64]
+
+SCAN_TYPE = "sensor_msgs/msg/LaserScan"
+ODOM_TYPE = "nav_msgs/msg/Odometry"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+IMU_TYPE = "sensor_msgs/msg/Imu"
+TF_TOPIC = "tf"
+"""``--odom-topic`` value (also ``/tf``) that asks for odometry from the transforms."""
+
+MAX_BEAMS = 16384
+"""Most beams a LaserScan may have: four times the densest 2D scanners' 0.1° over 360°."""
+MAX_TILT_DEG = 5.0
+"""Largest angle between the laser's scan plane and the robot's floor plane."""
+STANDARD_GRAVITY = 9.80665
+"""m/s² per g (:class:`ImuStream` keeps accelerations in g)."""
+
+_FORMAT_NAMES = {"ros1": "ROS 1 bag", "mcap": "MCAP file", "rosbag2": "ROS 2 bag"}
+
+
+@dataclass(frozen=True)
+class BagOptions:
+    """What to read from a bag when it is ambiguous (``--scan-topic`` etc.)."""
+
+    scan_topic: str | None = None
+    """LaserScan topic; default: the only one."""
+    odom_topic: str | None = None
+    """Odometry topic, or ``tf`` for the transforms; default: the only Odometry topic, else tf."""
+    base_frame: str | None = None
+    """Robot frame; default: the Odometry ``child_frame_id`` (tf: the laser's moving ancestor)."""
+
+
+@dataclass(frozen=True)
+class _Scan:
+    stamp_ns: int
+    frame: str
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class _Odom:
+    stamp_ns: int
+    frame: str
+    child: str
+    x: float
+    y: float
+    yaw: float
+    speed: float
+    yaw_rate: float
+
+
+@dataclass(frozen=True)
+class _Edge:
+    """One transform ``parent → child``: translation and unit quaternion ``(x, y, z, w)``."""
+
+    parent: str
+    child: str
+    translation: tuple[float, float, float]
+    rotation: tuple[float, float, float, float]
+
+
+@dataclass
+class _Selection:
+    """The connections a load reads and what they mean."""
+
+    scan: list[Any]
+    odom: list[Any]
+    """Odometry connections; empty when odometry comes from tf."""
+    tf: list[Any]
+    tf_static: list[Any]
+    imu: list[Any]
+    scan_topic: str
+    odom_topic: str
+    """The Odometry topic or ``"tf"``."""
+    notes: list[str] = field(default_factory=list)
+
+
+class _Mismatch(Exception):
+    """The fast decoder does not fit this message (another definition): use rosbags'."""
+
+
+# --- opening ------------------------------------------------------------------------------
+
+
+def _reader_errors() -> tuple[type[BaseException], ...]:
+    from rosbags.highlevel import AnyReaderError
+    from rosbags.rosbag1 import ReaderError as Reader1Error
+    from rosbags.rosbag2 import ReaderError as Reader2Error
+    from rosbags.serde import SerdeError
+    from rosbags.typesys import TypesysError
+
+    return (
+        AnyReaderError,
+        Reader1Error,
+        Reader2Error,
+        SerdeError,
+        TypesysError,
+        struct.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        IndexError,
+        zlib.error,
+        AssertionError,
+    )
+
+
+@contextlib.contextmanager
+def open_bag(path: Path) -> Iterator[tuple[Any, str]]:
+    """The open ``rosbags`` reader of the bag at ``path`` and its format (``ros1``, ``mcap``,
+    ``rosbag2``); every reader error (truncated, corrupt, unindexed) becomes one
+    :class:`DataError` naming the file."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    fmt = detect_format(path)
+    if fmt not in BAG_FORMATS:
+        raise DataError(f"{path}: a {fmt} log, not a ROS bag or MCAP file")
+    if fmt == "rosbag2" and path.name == "metadata.yaml":
+        path = path.parent
+    expected = {"ros1": ".bag", "mcap": ".mcap"}.get(fmt)
+    if expected and path.suffix != expected:
+        raise DataError(
+            f"{path}: a {_FORMAT_NAMES[fmt]} by its content, but named {path.suffix or 'without a suffix'!r}; "
+            f"the reader needs the {expected} suffix: rename or link it"
+        )
+    store = Stores.ROS1_NOETIC if fmt == "ros1" else Stores.LATEST
+    errors = _reader_errors()
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(store))
+        reader.open()
+    except errors as exc:
+        raise _read_error(path, fmt, exc) from None
+    try:
+        yield reader, fmt
+    except errors as exc:
+        raise _read_error(path, fmt, exc) from None
+    finally:
+        with contextlib.suppress(Exception):
+            reader.close()
+
+
+def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
+    text = " ".join(str(a) for a in exc.args) or type(exc).__name__
+    if isinstance(exc, EOFError | struct.error) or "ndex" in text or "runcat" in text:
+        text += "; the file looks truncated or unindexed (copy it again, or `rosbag reindex` it)"
+    return DataError(f"{path}: cannot read the {_FORMAT_NAMES[fmt]}: {text}")
+
+
+def _topics(reader: Any) -> list[tuple[str, str, int]]:
+    """``(topic, type, count)`` of every topic, sorted by topic."""
+    seen: dict[str, tuple[str, int]] = {}
+    for c in reader.connections:
+        msgtype, count = seen.get(c.topic, (c.msgtype, 0))
+        seen[c.topic] = (msgtype, count + c.msgcount)
+    return sorted((t, m, n) for t, (m, n) in seen.items())
+
+
+def _describe(topics: Sequence[tuple[str, str, int]]) -> str:
+    return ", ".join(f"{t} ({m})" for t, m, _ in topics) or "none"
+
+
+def _norm(topic: str) -> str:
+    return topic if topic.startswith("/") else "/" + topic
+
+
+# --- choosing topics ----------------------------------------------------------------------
+
+
+def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
+    """The connections of the scan, odometry, tf and IMU topics :func:`load_bag` reads.
+
+    :class:`DataError` when a needed stream is missing (naming the topics that exist) or a named
+    topic is not there; :class:`UsageError` when a type has several topics and no option says
+    which (naming the option and the topics).
+    """
+    topics = _topics(reader)
+    by_type: dict[str, list[str]] = {}
+    for topic, msgtype, _ in topics:
+        by_type.setdefault(msgtype, []).append(topic)
+    conns = reader.connections
+
+    scan_topic = _pick(path, topics, by_type, SCAN_TYPE, options.scan_topic, "--scan-topic")
+    tf_topics = [t for t in by_type.get(TF_TYPE, []) if not t.endswith("tf_static")]
+    static_topics = [t for t in by_type.get(TF_TYPE, []) if t.endswith("tf_static")]
+    odom_choice = options.odom_topic
+    if odom_choice is not None and _norm(odom_choice) == "/" + TF_TOPIC:
+        odom_topic = TF_TOPIC
+    elif odom_choice is None and not by_type.get(ODOM_TYPE):
+        if not tf_topics:
+            raise DataError(
+                f"{path}: no odometry: no {ODOM_TYPE} topic and no /tf transforms; "
+                f"topics in the bag: {_describe(topics)}"
+            )
+        odom_topic = TF_TOPIC
+    else:
+        odom_topic = _pick(path, topics, by_type, ODOM_TYPE, odom_choice, "--odom-topic")
+    imu_topics = by_type.get(IMU_TYPE, [])
+    notes = []
+    if len(imu_topics) > 1:
+        notes.append(f"IMU not read: several {IMU_TYPE} topics ({', '.join(imu_topics)})")
+    return _Selection(
+        scan=[c for c in conns if c.topic == scan_topic],
+        odom=[c for c in conns if c.topic == odom_topic] if odom_topic != TF_TOPIC else [],
+        tf=[c for c in conns if c.topic in tf_topics],
+        tf_static=[c for c in conns if c.topic in static_topics],
+        imu=[c for c in conns if len(imu_topics) == 1 and c.topic == imu_topics[0]],
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        notes=notes,
+    )
+
+
+def _pick(
+    path: Path,
+    topics: Sequence[tuple[str, str, int]],
+    by_type: dict[str, list[str]],
+    msgtype: str,
+    chosen: str | None,
+    option: str,
+) -> str:
+    """The one topic of ``msgtype`` (or the ``chosen`` one, which must have that type)."""
+    candidates = by_type.get(msgtype, [])
+    if chosen is not None:
+        match = [t for t, _, _ in topics if t in (chosen, _norm(chosen))]
+        if not match:
+            raise DataError(
+                f"{path}: {option} {chosen}: no such topic; topics in the bag: {_describe(topics)}"
+            )
+        found = next(m for t, m, _ in topics if t == match[0])
+        if found != msgtype:
+            raise DataError(f"{path}: {option} {chosen}: expected a {msgtype} topic, found {found}")
+        return match[0]
+    if not candidates:
+        what = "laser scans" if msgtype == SCAN_TYPE else "odometry"
+        raise DataError(
+            f"{path}: no {what}: no {msgtype} topic; topics in the bag: {_describe(topics)}"
+        )
+    if len(candidates) > 1:
+        raise UsageError(
+            f"{path}: {len(candidates)} {msgtype} topics ({', '.join(candidates)}); "
+            f"choose one with {option} TOPIC"
+        )
+    return candidates[0]
+
+
+# --- decoding -----------------------------------------------------------------------------
+
+
+def _ros1_string(raw: bytes, pos: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", raw, pos)
+    end = pos + 4 + n
+    if end > len(raw):
+        raise _Mismatch
+    return raw[pos + 4 : end].decode("utf-8", "replace"), end
+
+
+def _cdr_string(raw: bytes, pos: int, e: str) -> tuple[str, int]:
+    pos = _align(pos, 4)
+    (n,) = struct.unpack_from(e + "I", raw, pos)
+    end = pos + 4 + n
+    if n < 1 or end > len(raw):
+        raise _Mismatch
+    return raw[pos + 4 : end - 1].decode("utf-8", "replace"), end
+
+
+def _align(pos: int, size: int) -> int:
+    """CDR alignment: offsets count from the end of the 4-byte encapsulation header."""
+    return 4 + (pos - 4 + size - 1) // size * size
+
+
+def _cdr_endian(raw: bytes) -> str:
+    if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
+        raise _Mismatch
+    return "<" if raw[1] == 1 else ">"
+
+
+def _end(raw: bytes, pos: int, padding: int) -> None:
+    if not 0 <= len(raw) - pos <= padding:
+        raise _Mismatch
+
+
+def _scan_ros1(raw: bytes) -> _Scan:
+    _, sec, nsec = struct.unpack_from("<III", raw, 0)
+    frame, pos = _ros1_string(raw, 12)
+    amin, _, inc, _, _, rmin, rmax, n = struct.unpack_from("<7fI", raw, pos)
+    pos += 32
+    if pos + 4 * n + 4 > len(raw):
+        raise _Mismatch
+    ranges = np.frombuffer(raw, "<f4", n, pos)
+    pos += 4 * n
+    (m,) = struct.unpack_from("<I", raw, pos)
+    _end(raw, pos + 4 + 4 * m, 0)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
+
+
+def _scan_cdr(raw: bytes) -> _Scan:
+    e = _cdr_endian(raw)
+    sec, nsec = struct.unpack_from(e + "iI", raw, 4)
+    frame, pos = _cdr_string(raw, 12, e)
+    pos = _align(pos, 4)
+    amin, _, inc, _, _, rmin, rmax, n = struct.unpack_from(e + "7fI", raw, pos)
+    pos += 32
+    if pos + 4 * n + 4 > len(raw):
+        raise _Mismatch
+    ranges = np.frombuffer(raw, e + "f4", n, pos)
+    pos += 4 * n
+    (m,) = struct.unpack_from(e + "I", raw, pos)
+    _end(raw, pos + 4 + 4 * m, 3)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
+
+
+def _yaw(qx: float, qy: float, qz: float, qw: float) -> float:
+    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def _odom_ros1(raw: bytes) -> _Odom:
+    _, sec, nsec = struct.unpack_from("<III", raw, 0)
+    frame, pos = _ros1_string(raw, 12)
+    child, pos = _ros1_string(raw, pos)
+    x, y, _, qx, qy, qz, qw = struct.unpack_from("<7d", raw, pos)
+    pos += 56 + 288
+    vx, _, _, _, _, wz = struct.unpack_from("<6d", raw, pos)
+    _end(raw, pos + 48 + 288, 0)
+    return _Odom(sec * 10**9 + nsec, frame, child, x, y, _yaw(qx, qy, qz, qw), vx, wz)
+
+
+def _odom_cdr(raw: bytes) -> _Odom:
+    e = _cdr_endian(raw)
+    sec, nsec = struct.unpack_from(e + "iI", raw, 4)
+    frame, pos = _cdr_string(raw, 12, e)
+    child, pos = _cdr_string(raw, pos, e)
+    pos = _align(pos, 8)
+    x, y, _, qx, qy, qz, qw = struct.unpack_from(e + "7d", raw, pos)
+    pos += 56 + 288
+    vx, _, _, _, _, wz = struct.unpack_from(e + "6d", raw, pos)
+    _end(raw, pos + 48 + 288, 7)
+    return _Odom(sec * 10**9 + nsec, frame, child, x, y, _yaw(qx, qy, qz, qw), vx, wz)
+
+
+def _stamp(header: Any) -> int:
+    return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
+
+
+def _scan_msg(msg: Any) -> _Scan:
+    return _Scan(
+        _stamp(msg.header),
+        msg.header.frame_id,
+        float(msg.angle_min),
+        float(msg.angle_increment),
+        float(msg.range_min),
+        float(msg.range_max),
+        np.asarray(msg.ranges, dtype=np.float32),
+    )
+
+
+def _odom_msg(msg: Any) -> _Odom:
+    p, q, t = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
+    return _Odom(
+        _stamp(msg.header),
+        msg.header.frame_id,
+        msg.child_frame_id,
+        float(p.x),
+        float(p.y),
+        _yaw(q.x, q.y, q.z, q.w),
+        float(t.linear.x),
+        float(t.angular.z),
+    )
+
+
+def _decoder(
+    reader: Any, fast: Callable[[bytes], Any], slow: Callable[[Any], Any], msgtype: str
+) -> Callable[[bytes], Any]:
+    """``fast`` once it agrees with rosbags' deserializer on the first message, else ``slow``."""
+    state: dict[str, Any] = {}
+
+    def generic(raw: bytes) -> Any:
+        return slow(reader.deserialize(raw, msgtype))
+
+    def decode(raw: bytes) -> Any:
+        chosen = state.get("fn")
+        if chosen is None:
+            reference = generic(raw)
+            try:
+                candidate = fast(raw)
+            except (_Mismatch, struct.error, ValueError):
+                candidate = None
+            same = candidate is not None and _same(candidate, reference)
+            state["fn"] = chosen = fast if same else generic
+            state["fast"] = same
+            return reference
+        try:
+            return chosen(raw)
+        except (_Mismatch, struct.error, ValueError):
+            return generic(raw)
+
+    decode.state = state  # type: ignore[attr-defined]
+    return decode
+
+
+def _same(a: Any, b: Any) -> bool:
+    for name in a.__dataclass_fields__:
+        x, y = getattr(a, name), getattr(b, name)
+        if isinstance(x, np.ndarray):
+            if x.shape != y.shape or not np.array_equal(x, y, equal_nan=True):
+                return False
+        elif x != y and not (isinstance(x, float) and math.isnan(x) and math.isnan(y)):
+            return False
+    return True
+
+
+# --- transforms ---------------------------------------------------------------------------
+
+
+def _edges(msg: Any) -> list[_Edge]:
+    out = []
+    for t in msg.transforms:
+        tr, q = t.transform.translation, t.transform.rotation
+        out.append(
+            _Edge(
+                t.header.frame_id.lstrip("/"),
+                t.child_frame_id.lstrip("/"),
+                (float(tr.x), float(tr.y), float(tr.z)),
+                (float(q.x), float(q.y), float(q.z), float(q.w)),
+            )
+        )
+    return out
+
+
+def _matrix(edge: _Edge) -> NDArray[np.float64]:
+    """4×4 homogeneous transform of ``edge`` (child frame → parent frame)."""
+    x, y, z, w = edge.rotation
+    norm = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    m = np.eye(4)
+    m[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    m[:3, 3] = edge.translation
+    return m
+
+
+def _chain(parents: dict[str, _Edge], base: str, frame: str) -> list[_Edge] | None:
+    """Edges from ``base`` down to ``frame`` (walking up from ``frame``), or ``None``."""
+    chain: list[_Edge] = []
+    current = frame
+    while current != base:
+        edge = parents.get(current)
+        if edge is None or len(chain) > 64:
+            return None
+        chain.append(edge)
+        current = edge.parent
+    return chain[::-1]
+
+
+def mounting(path: Path, edges: Sequence[_Edge]) -> tuple[F64, bool]:
+    """``((x, y, yaw), upside_down)`` of the transform along ``edges`` projected to the plane.
+
+    A laser rolled by π (mounted upside down) scans the plane mirrored: ``upside_down`` tells the
+    caller to negate its beam angles. :class:`DataError` when the scan plane tilts more than
+    :data:`MAX_TILT_DEG` from the robot's.
+    """
+    m = np.eye(4)
+    for edge in edges:
+        m = m @ _matrix(edge)
+    normal_z = float(m[2, 2])
+    if abs(normal_z) < math.cos(math.radians(MAX_TILT_DEG)):
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, abs(normal_z)))))
+        names = " → ".join([edges[0].parent, *(e.child for e in edges)])
+        raise DataError(
+            f"{path}: the laser's scan plane ({names}) is tilted {tilt:.1f}° from the robot's "
+            f"floor plane; expected at most {MAX_TILT_DEG:g}° (a 2D laser scanning the floor plane)"
+        )
+    yaw = math.atan2(m[1, 0], m[0, 0])
+    offset = np.array([m[0, 3], m[1, 3], yaw])
+    offset[np.abs(offset) < 1e-12] = 0.0
+    return offset, normal_z < 0
+
+
+# --- growing arrays -----------------------------------------------------------------------
+
+
+class _Rows:
+    """A ``(capacity, width)`` array filled row by row; doubles when full, widens on demand."""
+
+    def __init__(self, capacity: int, width: int, dtype: Any, fill: float = 0.0) -> None:
+        self.fill = fill
+        self.data = np.full((max(capacity, 16), width), fill, dtype=dtype)
+        self.n = 0
+
+    def append(self, values: Any, width: int | None = None) -> None:
+        if self.n == self.data.shape[0]:
+            grown = np.full((2 * self.n, self.data.shape[1]), self.fill, dtype=self.data.dtype)
+            grown[: self.n] = self.data
+            self.data = grown
+        if width is not None and width > self.data.shape[1]:
+            wider = np.full((self.data.shape[0], width), self.fill, dtype=self.data.dtype)
+            wider[:, : self.data.shape[1]] = self.data
+            self.data = wider
+        if width is None:
+            self.data[self.n] = values
+        else:
+            self.data[self.n, :width] = values
+        self.n += 1
+
+    def array(self) -> NDArray[Any]:
+        return self.data if self.n == self.data.shape[0] else self.data[: self.n].copy()
+
+
+# --- loading ------------------------------------------------------------------------------
+
+
+@dataclass
+class _ScanRows:
+    time: _Rows
+    geometry: _Rows
+    """``(angle_min, angle_increment, range_min, range_max, beams)`` per scan."""
+    ranges: _Rows
+    frames: set[str] = field(default_factory=set)
+    record_time_stamps: int = 0
+
+
+@dataclass
+class _Streams:
+    """What one pass over the bag collected."""
+
+    scans: _ScanRows
+    odom: _Rows | None
+    """``(time, x, y, yaw, speed, yaw_rate)`` per Odometry message."""
+    odom_children: set[str]
+    dynamic: dict[tuple[str, str], _Rows]
+    """``(time, x, y, yaw)`` per ``(parent, child)`` transform of /tf."""
+    first_edge: dict[tuple[str, str], _Edge]
+    imu: ImuStream | None
+    fast_decoder: dict[str, bool]
+
+
+def load_bag(
+    path: Path,
+    *,
+    name: str | None = None,
+    lidar: LidarConfig | None = None,
+    options: BagOptions | None = None,
+) -> Log:
+    """Read the ROS bag / ROS 2 bag folder / MCAP file at ``path`` into a :class:`Log`.
+
+    ``options`` choose topics and the robot frame (see :class:`BagOptions`). ``lidar`` may
+    override the range limits (``range_min``, ``range_max``, ``no_return``: default from the
+    messages) and, with ``use_log_laser_pose = false``, the mounting (``x``, ``y``, ``yaw``:
+    default from tf). ``log.meta`` records the topics, frames, where the mounting came from
+    and whether the fast decoder was used.
+
+    Raises :class:`DataError` naming the file when it cannot be read or lacks scans or
+    odometry, :class:`UsageError` when a topic choice is ambiguous.
+    """
+    path = Path(path)
+    lidar = lidar or LidarConfig()
+    options = options or BagOptions()
+    with open_bag(path) as (reader, fmt):
+        sel = select_topics(path, reader, options)
+        static = _read_tf(reader, sel.tf_static)
+        first_scan = _first(reader, sel.scan, SCAN_TYPE, _scan_msg)
+        if first_scan is None:
+            raise DataError(f"{path}: {sel.scan_topic} holds no messages")
+        laser_frame = first_scan.frame.lstrip("/")
+        base = options.base_frame
+        if base is None and sel.odom:
+            first_odom = _first(reader, sel.odom, ODOM_TYPE, _odom_msg)
+            base = (first_odom.child.lstrip("/") if first_odom else "") or "base_link"
+        parents = {e.child: e for e in static}
+        need_tf = not sel.odom or (
+            lidar.use_log_laser_pose
+            and base != laser_frame
+            and _chain(parents, base or "", laser_frame) is None
+        )
+        _drop_unread_indexes(reader, [*sel.scan, *sel.odom, *sel.imu, *(sel.tf if need_tf else [])])
+        streams = _stream(reader, sel, need_tf)
+
+    scans = streams.scans
+    if base is None:
+        base = _tf_base(path, parents, streams.dynamic, laser_frame)
+    odometry, odom_source = _odometry(path, sel, streams, base)
+    offset, upside_down, offset_source = _laser_offset(
+        path, lidar, parents, streams, base, laser_frame
+    )
+    stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
+    meta: dict[str, Any] = {
+        "format": fmt,
+        "scan_topic": sel.scan_topic,
+        "odom_source": odom_source,
+        "base_frame": base,
+        "laser_frame": laser_frame,
+        "laser_offset_source": offset_source,
+        "laser_offset_x": float(offset[0]),
+        "laser_offset_y": float(offset[1]),
+        "laser_offset_yaw": float(offset[2]),
+        "laser_upside_down": int(upside_down),
+        "scan_stamps_from_record_time": scans.record_time_stamps,
+        "fast_decoder": ", ".join(f"{k}={v}" for k, v in sorted(streams.fast_decoder.items())),
+    }
+    if sel.imu:
+        meta["imu_topic"] = sel.imu[0].topic
+    if sel.notes:
+        meta["notes"] = "; ".join(sel.notes)
+    return Log(
+        name=name or bag_stem(path),
+        kind="rosbag",
+        source=path,
+        scans=stream,
+        odometry=odometry,
+        imu=streams.imu,
+        meta=meta,
+    )
+
+
+def bag_stem(path: Path) -> str:
+    """The name of a bag: its file (or folder) name without ``.bag`` / ``.mcap`` / ``.db3``."""
+    path = Path(path)
+    if path.name == "metadata.yaml":
+        path = path.parent
+    name = path.name
+    for suffix in (".bag", ".mcap", ".db3"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def _drop_unread_indexes(reader: Any, keep: Sequence[Any]) -> None:
+    """Free the ROS 1 reader's per-message index entries of topics the pass does not read.
+
+    ``rosbags`` keeps one Python tuple per message of the bag (130 bytes each: 9 MB on intel, as
+    much as its scans); dropping the unread ones (intel: the /tf copy of /odom) keeps the load
+    within twice the loaded arrays. Relies on ``Reader.indexes`` (rosbags 0.11, pinned).
+    """
+    wanted = {c.id for c in keep}
+    for sub in getattr(reader, "readers", ()):
+        indexes = getattr(sub, "indexes", None)
+        if isinstance(indexes, dict):
+            for cid in indexes:
+                if cid not in wanted:
+                    indexes[cid] = []
+
+
+def _first(reader: Any, conns: list[Any], msgtype: str, convert: Callable[[Any], Any]) -> Any:
+    for _, _, raw in reader.messages(connections=conns):
+        return convert(reader.deserialize(raw, msgtype))
+    return None
+
+
+def _read_tf(reader: Any, conns: list[Any]) -> list[_Edge]:
+    edges: list[_Edge] = []
+    if conns:
+        for _, _, raw in reader.messages(connections=conns):
+            edges.extend(_edges(reader.deserialize(raw, TF_TYPE)))
+    return edges
+
+
+def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
+    """One pass over the selected topics, filling preallocated per-topic arrays."""
+    n_scan = sum(c.msgcount for c in sel.scan)
+    scans = _ScanRows(
+        _Rows(n_scan, 1, np.float64),
+        _Rows(n_scan, 5, np.float64),
+        _Rows(n_scan, 1, np.float32, np.nan),
+    )
+    out = _Streams(
+        scans=scans,
+        odom=_Rows(sum(c.msgcount for c in sel.odom), 6, np.float64) if sel.odom else None,
+        odom_children=set(),
+        dynamic={},
+        first_edge={},
+        imu=None,
+        fast_decoder={},
+    )
+    imu_rows = _Rows(sum(c.msgcount for c in sel.imu), 7, np.float64) if sel.imu else None
+    is2 = reader.is2
+    scan_decode = _decoder(reader, _scan_cdr if is2 else _scan_ros1, _scan_msg, SCAN_TYPE)
+    odom_decode = _decoder(reader, _odom_cdr if is2 else _odom_ros1, _odom_msg, ODOM_TYPE)
+    kinds = {id(c): "scan" for c in sel.scan}
+    kinds.update({id(c): "odom" for c in sel.odom})
+    kinds.update({id(c): "imu" for c in sel.imu})
+    if need_tf:
+        kinds.update({id(c): "tf" for c in sel.tf})
+    selected = [c for c in reader.connections if id(c) in kinds]
+    for conn, record_ns, raw in reader.messages(connections=selected):
+        kind = kinds[id(conn)]
+        if kind == "scan":
+            _add_scan(scans, scan_decode(raw), record_ns, conn.topic)
+        elif kind == "odom":
+            o = odom_decode(raw)
+            out.odom_children.add(o.child)
+            t = (o.stamp_ns or record_ns) * 1e-9
+            out.odom.append([t, o.x, o.y, o.yaw, o.speed, o.yaw_rate])  # type: ignore[union-attr]
+        elif kind == "tf":
+            for e in _edges(reader.deserialize(raw, TF_TYPE)):
+                key = (e.parent, e.child)
+                if key not in out.dynamic:
+                    out.dynamic[key] = _Rows(1024, 4, np.float64)
+                    out.first_edge[key] = e
+                x, y, z, w = e.rotation
+                out.dynamic[key].append(
+                    [record_ns * 1e-9, e.translation[0], e.translation[1], _yaw(x, y, z, w)]
+                )
+        else:
+            m = reader.deserialize(raw, IMU_TYPE)
+            av, la = m.angular_velocity, m.linear_acceleration
+            t = (_stamp(m.header) or record_ns) * 1e-9
+            imu_rows.append([t, av.x, av.y, av.z, la.x, la.y, la.z])  # type: ignore[union-attr]
+    out.fast_decoder["scan"] = scan_decode.state.get("fast", False)  # type: ignore[attr-defined]
+    if sel.odom:
+        out.fast_decoder["odom"] = odom_decode.state.get("fast", False)  # type: ignore[attr-defined]
+    if imu_rows is not None and imu_rows.n:
+        a = imu_rows.array()
+        out.imu = ImuStream(
+            time=a[:, 0].copy(),
+            angular_velocity=np.ascontiguousarray(a[:, 1:4].T),
+            linear_acceleration=np.ascontiguousarray(a[:, 4:7].T / STANDARD_GRAVITY),
+        )
+    return out
+
+
+def _add_scan(scans: _ScanRows, s: _Scan, record_ns: int, topic: str) -> None:
+    n = int(s.ranges.shape[0])
+    if n > MAX_BEAMS:
+        raise DataError(
+            f"{topic}: scan {scans.time.n + 1} has {n} beams; expected at most {MAX_BEAMS}"
+        )
+    if not (math.isfinite(s.angle_min) and math.isfinite(s.angle_increment)):
+        raise DataError(
+            f"{topic}: scan {scans.time.n + 1}: expected finite angle_min and angle_increment, "
+            f"found {s.angle_min} and {s.angle_increment}"
+        )
+    stamp = s.stamp_ns
+    if stamp == 0:
+        stamp = record_ns
+        scans.record_time_stamps += 1
+    scans.frames.add(s.frame.lstrip("/"))
+    scans.time.append(stamp * 1e-9)
+    scans.geometry.append([s.angle_min, s.angle_increment, s.range_min, s.range_max, n])
+    scans.ranges.append(s.ranges, width=n)
+
+
+def _tf_base(
+    path: Path, parents: dict[str, _Edge], dynamic: dict[tuple[str, str], _Rows], laser: str
+) -> str:
+    """The robot frame for tf odometry: the first frame above the laser with a moving parent."""
+    moving = {child for _, child in dynamic}
+    current: str | None = laser
+    seen = 0
+    while current is not None and seen < 64:
+        if current in moving:
+            return current
+        edge = parents.get(current)
+        current = edge.parent if edge else None
+        seen += 1
+    raise DataError(
+        f"{path}: no odometry: no {ODOM_TYPE} topic, and no moving /tf transform above the laser "
+        f"frame {laser!r} (moving transforms: {_edge_list(dynamic) or 'none'}); pass "
+        f"--base-frame or --odom-topic"
+    )
+
+
+def _edge_list(dynamic: dict[tuple[str, str], _Rows]) -> str:
+    return ", ".join(f"{p} → {c}" for p, c in sorted(dynamic))
+
+
+def _odometry(
+    path: Path, sel: _Selection, streams: _Streams, base: str
+) -> tuple[OdometryStream, str]:
+    dynamic = streams.dynamic
+    if streams.odom is not None:
+        a = streams.odom.array()
+        if a.shape[0] == 0:
+            raise DataError(f"{path}: {sel.odom_topic} holds no messages")
+        children = {c.lstrip("/") for c in streams.odom_children} - {""}
+        if children and base not in children:
+            raise DataError(
+                f"{path}: {sel.odom_topic} describes frame {', '.join(sorted(children))}, "
+                f"not the robot frame {base!r} (--base-frame)"
+            )
+        if np.any(np.diff(a[:, 0]) < 0):
+            a = a[np.argsort(a[:, 0], kind="stable")]
+        return (
+            OdometryStream(
+                time=a[:, 0].copy(), poses=a[:, 1:4].copy(), velocities=a[:, 4:6].copy()
+            ),
+            sel.odom_topic,
+        )
+    edges = [k for k in dynamic if k[1] == base]
+    if len(edges) != 1:
+        found = "none" if not edges else ", ".join(f"{p} → {c}" for p, c in edges)
+        raise DataError(
+            f"{path}: no odometry for the robot frame {base!r}: expected one moving /tf transform "
+            f"to it, found {found} (moving transforms: {_edge_list(dynamic) or 'none'})"
+        )
+    a = dynamic[edges[0]].array()
+    order = np.argsort(a[:, 0], kind="stable")
+    a = a[order]
+    return OdometryStream(time=a[:, 0].copy(), poses=a[:, 1:4].copy(), velocities=_velocities(a)), (
+        f"tf:{edges[0][0]}->{base}"
+    )
+
+
+def _velocities(a: F64) -> F64:
+    """Forward speed and yaw rate of tf odometry by finite differences (0 where dt is 0)."""
+    out = np.zeros((a.shape[0], 2))
+    if a.shape[0] < 2:
+        return out
+    dt = np.diff(a[:, 0])
+    dx, dy = np.diff(a[:, 1]), np.diff(a[:, 2])
+    dth = np.angle(np.exp(1j * np.diff(a[:, 3])))
+    forward = np.cos(a[:-1, 3]) * dx + np.sin(a[:-1, 3]) * dy
+    ok = dt > 0
+    out[1:, 0][ok] = forward[ok] / dt[ok]
+    out[1:, 1][ok] = dth[ok] / dt[ok]
+    return out
+
+
+def _laser_offset(
+    path: Path,
+    lidar: LidarConfig,
+    parents: dict[str, _Edge],
+    streams: _Streams,
+    base: str,
+    laser: str,
+) -> tuple[F64, bool, str]:
+    if not lidar.use_log_laser_pose:
+        return np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64), False, "config"
+    if base == laser:
+        return np.zeros(3), False, "same frame"
+    chain = _chain(parents, base, laser)
+    source = "tf_static"
+    if chain is None:
+        moving = {child: edge for (_, child), edge in streams.first_edge.items()}
+        chain = _chain({**moving, **parents}, base, laser)
+        source = "tf"
+    if chain is None:
+        static = ", ".join(f"{e.parent} → {e.child}" for e in parents.values()) or "none"
+        raise DataError(
+            f"{path}: no transform from the robot frame {base!r} to the laser frame {laser!r} "
+            f"(tf_static: {static}; tf: {_edge_list(streams.dynamic) or 'none'}); pass --base-frame, or "
+            f"set lidar.use_log_laser_pose = false and lidar.x/y/yaw (--set)"
+        )
+    offset, upside_down = mounting(path, chain)
+    return offset, upside_down, source
+
+
+def _scan_stream(
+    path: Path,
+    topic: str,
+    scans: _ScanRows,
+    lidar: LidarConfig,
+    offset: F64,
+    upside_down: bool,
+) -> ScanStream:
+    """Arrays of the scans with invalid beams marked and the shared or per-scan angles."""
+    if len(scans.frames) > 1:
+        raise DataError(
+            f"{path}: {topic} mixes laser frames ({', '.join(sorted(scans.frames))}); "
+            f"expected one laser per topic"
+        )
+    geometry = scans.geometry.array()
+    time = scans.time.array()[:, 0].copy()
+    ranges = scans.ranges.array()
+    if ranges.shape[1] == 0 or not np.any(geometry[:, 4] > 0):
+        raise DataError(f"{path}: {topic}: every scan has 0 beams")
+    amin, inc, rmin, rmax, beams = geometry.T
+    beams = beams.astype(np.int64)
+    width = ranges.shape[1]
+    range_min = float(np.min(rmin)) if lidar.range_min is None else lidar.range_min
+    no_return = float(np.max(rmax)) if lidar.no_return is None else lidar.no_return
+    range_max = no_return if lidar.range_max is None else lidar.range_max
+    invalid = 0
+    for start in range(0, ranges.shape[0], _BLOCK):  # blocks bound the temporaries' memory
+        rows = slice(start, start + _BLOCK)
+        invalid += _mark_beams(
+            ranges[rows], beams[rows], rmin[rows], rmax[rows], range_min, no_return
+        )
+    sign = -1.0 if upside_down else 1.0
+    same = np.all(amin == amin[0]) and np.all(inc == inc[0]) and np.all(beams == beams[0])
+    if same:
+        angles = sign * (amin[0] + inc[0] * np.arange(width))
+    else:
+        angles = sign * (amin[:, None] + inc[:, None] * np.arange(width)[None, :])
+        angles[np.arange(width)[None, :] >= beams[:, None]] = np.nan
+    return ScanStream(
+        time=time,
+        ranges=ranges,
+        angles=angles,
+        range_min=range_min,
+        range_max=float(range_max),
+        no_return=float(no_return),
+        laser_offset=offset,
+        invalid_beams=invalid,
+    )
+
+
+_BLOCK = 2048
+"""Scans whose beams :func:`_mark_beams` classifies at a time."""
+
+
+def _mark_beams(
+    ranges: NDArray[np.float32],
+    beams: NDArray[np.int64],
+    rmin: F64,
+    rmax: F64,
+    range_min: float,
+    no_return: float,
+) -> int:
+    """In place: readings at or beyond their message's ``range_max`` (and +inf) become "no
+    return" (at least ``no_return``), invalid ones NaN; padding beams stay NaN. Returns how many
+    readings were invalid."""
+    padded = np.arange(ranges.shape[1])[None, :] >= beams[:, None]
+    with np.errstate(invalid="ignore"):
+        beyond = ranges >= rmax[:, None].astype(np.float32)
+        beyond &= ~padded
+        ranges[beyond] = np.maximum(ranges[beyond], np.float32(no_return))
+        row_min = np.maximum(rmin, range_min)[:, None].astype(np.float32)
+        invalid = ~np.isfinite(ranges) | (ranges < row_min) | (ranges < 0)
+    invalid &= ~padded
+    invalid &= ~beyond
+    ranges[invalid] = np.nan
+    return int(np.count_nonzero(invalid))
+
+
+# --- inspection ---------------------------------------------------------------------------
+
+
+def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]:
+    """What the bag at ``path`` holds (``slam data inspect``): per topic its type, message count,
+    rate and time span; the frames of ``/tf`` and ``/tf_static``; and what ``slam run`` would
+    read from it (or the error it would stop with). Reads every message's record time and
+    deserializes only the tf messages."""
+    path = Path(path)
+    options = options or BagOptions()
+    with open_bag(path) as (reader, fmt):
+        topics = _topics(reader)
+        spans: dict[str, list[float]] = {}
+        counts: dict[str, int] = {}
+        tf_edges: dict[tuple[str, str, bool], int] = {}
+        for conn, record_ns, raw in reader.messages():
+            span = spans.setdefault(conn.topic, [math.inf, -math.inf])
+            t = record_ns * 1e-9
+            span[0], span[1] = min(span[0], t), max(span[1], t)
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+            if conn.msgtype == TF_TYPE:
+                static = conn.topic.endswith("tf_static")
+                for e in _edges(reader.deserialize(raw, TF_TYPE)):
+                    key = (e.parent, e.child, static)
+                    tf_edges[key] = tf_edges.get(key, 0) + 1
+        start, end = reader.start_time * 1e-9, reader.end_time * 1e-9
+        try:
+            sel = select_topics(path, reader, options)
+            plan: dict[str, Any] = {"scan_topic": sel.scan_topic, "odom_source": sel.odom_topic}
+            if sel.imu:
+                plan["imu_topic"] = sel.imu[0].topic
+            plan["command"] = _command(path, options)
+        except (DataError, UsageError) as exc:
+            plan = {"error": str(exc), "command": None}
+    rows = []
+    for topic, msgtype, _ in topics:
+        first, last = spans.get(topic, [math.nan, math.nan])
+        n = counts.get(topic, 0)
+        duration = last - first if n else 0.0
+        rows.append(
+            {
+                "topic": topic,
+                "type": msgtype,
+                "count": n,
+                "rate_hz": round((n - 1) / duration, 3) if n > 1 and duration > 0 else 0.0,
+                "first_s": first if n else None,
+                "last_s": last if n else None,
+            }
+        )
+    return {
+        "path": str(path),
+        "format": fmt,
+        "start_s": start,
+        "end_s": end,
+        "duration_s": round(end - start, 6),
+        "messages": sum(counts.values()),
+        "topics": rows,
+        "tf": [
+            {"parent": p, "child": c, "static": s, "count": n}
+            for (p, c, s), n in sorted(tf_edges.items())
+        ],
+        "run": plan,
+    }
+
+
+def _command(path: Path, options: BagOptions) -> str:
+    import shlex
+
+    parts = ["slam", "run", shlex.quote(str(path))]
+    for flag, value in (
+        ("--scan-topic", options.scan_topic),
+        ("--odom-topic", options.odom_topic),
+        ("--base-frame", options.base_frame),
+    ):
+        if value is not None:
+            parts += [flag, shlex.quote(value)]
+    return " ".join(parts)

@@ -1,0 +1,318 @@
+"""The ROS bag / MCAP loader, format detection and ``slam data inspect`` on synthetic bags."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+
+import numpy as np
+import pytest
+from bagfixtures import (
+    BagContent,
+    Odom,
+    Scan,
+    Tf,
+    straight_run,
+    write_bare_mcap,
+    write_ros1_bag,
+    yaw_quaternion,
+)
+
+from slam.cli import main
+from slam.errors import DataError, UsageError
+from slam.io.formats import detect_format, run_config_name
+from slam.io.rosbag import BagOptions, load_bag
+
+
+def _run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+# --- format detection ---------------------------------------------------------------------
+
+
+def test_detect_format_by_content_not_name(tmp_path):
+    bag = write_ros1_bag(tmp_path / "a.bag", straight_run(3))
+    assert detect_format(bag) == "ros1"
+    assert detect_format(write_bare_mcap(tmp_path / "a.mcap", straight_run(3))) == "mcap"
+    text = tmp_path / "log.bag"  # a CARMEN log named like a bag is still CARMEN
+    text.write_text("# comment\nODOM 0 0 0 0 0 0 1.0 host 1.0\n")
+    assert detect_format(text) == "carmen"
+    gz = tmp_path / "log.dat"
+    gz.write_bytes(gzip.compress(b"ODOM 0 0 0 0 0 0 1.0 host 1.0\n"))
+    assert detect_format(gz) == "carmen"
+    folder = tmp_path / "r2"
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    assert detect_format(folder) == "rosbag2"
+    assert detect_format(folder / "metadata.yaml") == "rosbag2"
+    ece = tmp_path / "ece"
+    ece.mkdir()
+    (ece / "Encoders20.npz").write_bytes(b"PK\x03\x04")
+    assert detect_format(ece) == "ece276a"
+
+
+def test_detect_format_rejects_what_it_cannot_read(tmp_path):
+    binary = tmp_path / "x.clf"
+    binary.write_bytes(b"\x00\x01\x02binary")
+    with pytest.raises(DataError, match=r"x\.clf: unknown format: found binary data"):
+        detect_format(binary)
+    db = tmp_path / "bag_0.db3"
+    db.write_bytes(b"SQLite format 3\x00" + bytes(100))
+    with pytest.raises(DataError, match="SQLite database"):
+        detect_format(db)
+    gz = tmp_path / "y.gz"
+    gz.write_bytes(gzip.compress(bytes(range(256))))
+    with pytest.raises(DataError, match="gzip file whose content is not text"):
+        detect_format(gz)
+    with pytest.raises(DataError, match="not found"):
+        detect_format(tmp_path / "missing.bag")
+
+
+def test_a_bag_never_picks_a_shipped_config_by_its_name(tmp_path):
+    bag = write_ros1_bag(tmp_path / "intel.bag", straight_run(3))
+    assert run_config_name(str(bag)) == ("intel", False)
+    clf = tmp_path / "intel.clf"
+    clf.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\n")
+    assert run_config_name(str(clf)) == ("intel", True)  # FLASER needs configs/intel.toml
+    assert run_config_name("aces") == ("aces", True)
+
+
+# --- loading ------------------------------------------------------------------------------
+
+
+def test_load_ros1_bag_geometry_odometry_and_mounting(tmp_path):
+    log = load_bag(write_ros1_bag(tmp_path / "run.bag", straight_run(20, beams=90)))
+    s = log.scans
+    assert log.kind == "rosbag" and log.name == "run" and len(s) == 20
+    assert s.angles.shape == (90,)
+    assert s.angles[0] == pytest.approx(-math.pi / 2, abs=1e-7)
+    assert s.angles[-1] == pytest.approx(math.pi / 2, abs=1e-6)
+    assert s.range_min == pytest.approx(0.1) and s.no_return == pytest.approx(30.0)
+    np.testing.assert_allclose(s.laser_offset, [0.2, 0.0, 0.0], atol=1e-12)
+    assert log.meta["laser_offset_source"] == "tf_static"
+    assert log.meta["odom_source"] == "/odom" and log.meta["base_frame"] == "base_link"
+    assert log.meta["fast_decoder"] == "odom=True, scan=True"
+    # beams beyond range_max (the side beams: 40 m written, range_max 30) are "no return"
+    assert np.count_nonzero(s.ranges[0] >= s.no_return) == np.count_nonzero(
+        np.cos(s.angles) <= 0.2
+    ) + np.count_nonzero((np.cos(s.angles) > 0.2) & (5.0 / np.cos(s.angles) >= 30.0))
+    np.testing.assert_allclose(s.time[:2], [100.01, 100.21], atol=1e-9)
+    np.testing.assert_allclose(log.odometry.poses[:3, 0], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(log.odometry.velocities[:, 0], 0.5)
+
+
+def test_varying_beam_counts_pad_angles_and_ranges(tmp_path):
+    content = straight_run(3, beams=90)
+    content.scans[1] = Scan(t=100.21, ranges=[1.0] * 181, angle_min=-math.pi / 2)
+    content.scans[2] = Scan(t=100.41, ranges=[2.0, -1.0, 0.05, math.nan, 3.0])
+    log = load_bag(write_ros1_bag(tmp_path / "mixed.bag", content))
+    s = log.scans
+    assert s.ranges.shape == (3, 181) and s.angles.shape == (3, 181)
+    assert s.num_beams == 181
+    assert np.isnan(s.angles[0, 90:]).all() and np.isfinite(s.angles[0, :90]).all()
+    np.testing.assert_allclose(s.scan_angles(1)[[0, 180]], [-math.pi / 2, math.pi / 2], atol=1e-6)
+    assert np.isnan(s.ranges[2, 5:]).all()
+    # -1 (negative), 0.05 (< range_min 0.1) and NaN are invalid; padding is not counted
+    assert s.invalid_beams == 3
+    np.testing.assert_array_equal(np.isnan(s.ranges[2, :5]), [False, True, True, True, False])
+
+
+def test_missing_odometry_names_the_topics(tmp_path, capsys):
+    content = straight_run(3)
+    content.odom.clear()
+    content.tf.clear()
+    bag = write_ros1_bag(tmp_path / "noodom.bag", content)
+    with pytest.raises(DataError, match="no odometry") as info:
+        load_bag(bag)
+    assert "/scan (sensor_msgs/msg/LaserScan)" in str(info.value)
+    out_dir = tmp_path / "out"
+    code, out, err = _run(capsys, "run", str(bag), "--out", str(out_dir), "--quiet")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "no odometry" in err
+    assert not out_dir.exists()
+
+
+def test_two_scan_topics_ask_for_scan_topic(tmp_path, capsys):
+    content = straight_run(6)
+    content.scans += [Scan(t=s.t + 0.05, ranges=s.ranges[:45], topic="/scan_rear")
+                      for s in content.scans]  # fmt: skip
+    bag = write_ros1_bag(tmp_path / "two.bag", content)
+    with pytest.raises(UsageError, match=r"--scan-topic") as info:
+        load_bag(bag)
+    assert "/scan, /scan_rear" in str(info.value)
+    rear = load_bag(bag, options=BagOptions(scan_topic="/scan_rear"))
+    assert rear.scans.num_beams == 45 and rear.meta["scan_topic"] == "/scan_rear"
+    assert load_bag(bag, options=BagOptions(scan_topic="scan")).scans.num_beams == 90
+    with pytest.raises(DataError, match="--scan-topic /nope: no such topic"):
+        load_bag(bag, options=BagOptions(scan_topic="/nope"))
+    with pytest.raises(DataError, match="expected a sensor_msgs/msg/LaserScan topic"):
+        load_bag(bag, options=BagOptions(scan_topic="/odom"))
+    code, _, err = _run(capsys, "run", str(bag), "--out", str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "choose one with --scan-topic TOPIC" in err
+
+
+def test_truncated_bag_one_line_exit_2_nothing_written(tmp_path, capsys):
+    whole = write_ros1_bag(tmp_path / "whole.bag", straight_run(40))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DataError, match=r"cut\.bag: cannot read the ROS 1 bag"):
+        load_bag(cut)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, out, err = _run(capsys, "run", str(cut), "--out", str(tmp_path / "run"), "--quiet")
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and "cut.bag" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_odometry_only_through_tf(tmp_path):
+    content = straight_run(10)
+    content.odom.clear()
+    content.tf = [
+        Tf(t=100.0, parent="base_link", child="laser", x=0.3, y=-0.1,
+           quaternion=yaw_quaternion(0.1), static=True),
+    ] + [Tf(t=100.0 + 0.2 * k, parent="odom", child="base_link", x=0.1 * k,
+            quaternion=yaw_quaternion(0.01 * k)) for k in range(12)]  # fmt: skip
+    log = load_bag(write_ros1_bag(tmp_path / "tf.bag", content))
+    assert log.meta["odom_source"] == "tf:odom->base_link"
+    assert log.meta["base_frame"] == "base_link"
+    np.testing.assert_allclose(log.scans.laser_offset, [0.3, -0.1, 0.1], atol=1e-12)
+    np.testing.assert_allclose(log.odometry.poses[:, 0], 0.1 * np.arange(12), atol=1e-12)
+    np.testing.assert_allclose(log.odometry.poses[:, 2], 0.01 * np.arange(12), atol=1e-12)
+    speed = 0.5 * np.cos(0.01 * np.arange(11))  # forward: along the heading at the step's start
+    np.testing.assert_allclose(log.odometry.velocities[1:, 0], speed, rtol=1e-9)
+    np.testing.assert_allclose(log.odometry.velocities[1:, 1], 0.05, rtol=1e-9)
+
+
+def test_upside_down_laser_mirrors_angles_and_a_tilted_one_is_an_error(tmp_path):
+    content = straight_run(3)
+    content.tf[0] = Tf(t=100.0, parent="base_link", child="laser", x=0.2,
+                       quaternion=(1.0, 0.0, 0.0, 0.0), static=True)  # fmt: skip  # roll = π
+    log = load_bag(write_ros1_bag(tmp_path / "flip.bag", content))
+    assert log.meta["laser_upside_down"] == 1
+    assert log.scans.angles[0] == pytest.approx(math.pi / 2, abs=1e-7)
+    half = math.radians(10.0) / 2  # pitched 10°
+    content.tf[0] = Tf(t=100.0, parent="base_link", child="laser",
+                       quaternion=(0.0, math.sin(half), 0.0, math.cos(half)), static=True)  # fmt: skip
+    with pytest.raises(DataError, match=r"tilted 10\.0°"):
+        load_bag(write_ros1_bag(tmp_path / "tilt.bag", content))
+
+
+def test_missing_mounting_names_the_frames(tmp_path):
+    content = straight_run(3)
+    content.tf.clear()
+    with pytest.raises(
+        DataError, match="no transform from the robot frame 'base_link' to the laser"
+    ):
+        load_bag(write_ros1_bag(tmp_path / "nomount.bag", content))
+
+
+def test_bare_mcap_loads_like_the_ros1_bag(tmp_path):
+    content = straight_run(15, beams=90)
+    ros1 = load_bag(write_ros1_bag(tmp_path / "a.bag", content))
+    mcap = load_bag(write_bare_mcap(tmp_path / "a.mcap", content))
+    assert mcap.meta["format"] == "mcap" and mcap.meta["fast_decoder"] == "odom=True, scan=True"
+    assert_same_log(ros1, mcap)
+
+
+def assert_same_log(a, b) -> None:
+    """Every array and field of two logs' streams are equal (meta may name another format)."""
+    assert a.streams().keys() == b.streams().keys()
+    for name, stream in a.streams().items():
+        other = b.streams()[name]
+        for key, value in vars(stream).items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, vars(other)[key], err_msg=f"{name}.{key}")
+            else:
+                assert value == vars(other)[key], f"{name}.{key}"
+    skip = {"format"}
+    assert {k: v for k, v in a.meta.items() if k not in skip} == {
+        k: v for k, v in b.meta.items() if k not in skip
+    }
+
+
+# --- inspect ------------------------------------------------------------------------------
+
+
+def test_data_inspect_shows_topics_rates_frames_and_the_command(tmp_path, capsys):
+    content = straight_run(20)
+    content.extra["/chatter"] = "std_msgs/msg/String"
+    bag = write_ros1_bag(tmp_path / "walk.bag", content)
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0
+    assert "ROS 1 bag" in out
+    lines = {line.split()[0]: line for line in out.splitlines() if line.startswith("  /")}
+    assert "sensor_msgs/msg/LaserScan" in lines["/scan"] and " 20 msgs" in lines["/scan"]
+    assert "5.00 Hz" in lines["/scan"] and "5.00 Hz" in lines["/odom"]
+    assert "base_link -> laser  (tf_static, 1 transforms)" in out
+    assert "slam run reads: scans /scan, odometry /odom" in out
+    assert f"run it: slam run {bag}" in out
+    code, out, _ = _run(capsys, "data", "inspect", str(bag), "--json")
+    report = json.loads(out)
+    scan = next(t for t in report["topics"] if t["topic"] == "/scan")
+    assert scan["count"] == 20 and scan["rate_hz"] == pytest.approx(5.0)
+    assert report["duration_s"] == pytest.approx(4.0, abs=0.02)
+
+
+def test_data_inspect_reports_why_a_bag_cannot_run(tmp_path, capsys):
+    content = straight_run(4)
+    content.scans += [Scan(t=s.t, ranges=s.ranges, topic="/scan2") for s in content.scans]
+    bag = write_ros1_bag(tmp_path / "two.bag", content)
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0 and "slam run cannot use it as it is" in out and "--scan-topic" in out
+    code, out, _ = _run(capsys, "data", "inspect", str(bag), "--scan-topic", "/scan2")
+    assert f"run it: slam run {bag} --scan-topic /scan2" in out
+
+
+def test_data_inspect_carmen_log(tmp_path, capsys):
+    clf = tmp_path / "tiny.clf"
+    clf.write_text(
+        "ODOM 0 0 0 0 0 0 1.0 host 1.0\n"
+        "FLASER 3 1.0 2.0 3.0 0 0 0 0 0 0 1.1 host 1.1\n"
+        "FLASER 3 1.0 2.0 3.0 0 0 0 0 0 0 1.3 host 1.3\n"
+    )
+    code, out, _ = _run(capsys, "data", "inspect", str(clf))
+    assert code == 0 and "CARMEN log" in out and "scans" in out and "3 beams" in out
+    assert f"run it: slam run {clf}" in out
+
+
+def test_odometry_topic_for_another_frame_is_an_error(tmp_path):
+    content = straight_run(3)
+    for o in content.odom:
+        o.child = "base_footprint"
+    with pytest.raises(DataError, match="no transform from the robot frame 'base_footprint'"):
+        load_bag(write_ros1_bag(tmp_path / "fp.bag", content))
+    content.tf.append(Tf(t=100.0, parent="base_footprint", child="base_link", static=True))
+    log = load_bag(write_ros1_bag(tmp_path / "fp2.bag", content))
+    np.testing.assert_allclose(log.scans.laser_offset, [0.2, 0.0, 0.0])
+    with pytest.raises(DataError, match="describes frame base_footprint, not the robot frame"):
+        load_bag(tmp_path / "fp2.bag", options=BagOptions(base_frame="base_link"))
+
+
+def test_odom_topic_tf_can_be_forced(tmp_path):
+    content = straight_run(5)
+    content.tf += [Tf(t=100.0 + 0.2 * k, parent="odom", child="base_link", x=1.0 + k)
+                   for k in range(7)]  # fmt: skip
+    log = load_bag(
+        write_ros1_bag(tmp_path / "both.bag", content), options=BagOptions(odom_topic="tf")
+    )
+    assert log.meta["odom_source"] == "tf:odom->base_link"
+    assert log.odometry.poses[0, 0] == pytest.approx(1.0)
+
+
+def test_odom_messages_order_is_by_stamp(tmp_path):
+    content = straight_run(4)
+    content.odom = [Odom(t=100.0 + 0.2 * k, x=float(k), y=0.0, yaw=0.0) for k in range(6)]
+    content.odom[2].t, content.odom[3].t = content.odom[3].t, content.odom[2].t
+    # written in record order = stamp order; the loader's odometry is sorted by stamp
+    log = load_bag(write_ros1_bag(tmp_path / "o.bag", content))
+    assert np.all(np.diff(log.odometry.time) > 0)
+
+
+def test_scan_without_content_types(tmp_path):
+    bag = write_ros1_bag(tmp_path / "empty.bag", BagContent(odom=[Odom(0.0, 0, 0, 0)]))
+    with pytest.raises(DataError, match="no laser scans: no sensor_msgs/msg/LaserScan topic"):
+        load_bag(bag)
