@@ -6,7 +6,9 @@ with neither, the ground truth of the run's dataset is used (the 'dataset' of it
 --dataset NAME_OR_PATH): the registry's relations file of a CARMEN benchmark log, the
 groundtruth.tum of the demo or of a simulated dataset folder. The command reads
 ``RUN_DIR/trajectory.tum``, prints a table (or the JSON with ``--json``) and writes the same JSON
-to ``RUN_DIR/eval.json`` atomically (replacing an earlier one).
+to ``RUN_DIR/eval.json`` atomically (replacing an earlier one). With ``RUN_DIR/map.yaml`` (runs
+since map_server output) the report also gives the map's size and occupied / free / unknown cell
+counts under ``map`` (read with :func:`slam.io.mapserver.read_map_yaml`).
 """
 
 from __future__ import annotations
@@ -113,6 +115,10 @@ def run_eval(args: argparse.Namespace) -> int:
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(trajectory, reference, args))
+    if (run_dir / "map.yaml").is_file():  # runs before map.yaml existed have only map.npz
+        from slam.io.mapserver import read_map_yaml
+
+        result["map"] = read_map_yaml(run_dir / "map.yaml").summary()
 
     try:
         write_eval_json(run_dir, result)

@@ -396,6 +396,12 @@ def _odom_cdr(raw: bytes) -> _Odom:
     return _Odom(sec * 10**9 + nsec, frame, child, x, y, _yaw(qx, qy, qz, qw), vx, wz)
 
 
+def _seconds(ns: int) -> float:
+    """Nanoseconds as seconds, rounded once (``ns * 1e-9`` is off by an ulp on Unix times)."""
+    sec, nsec = divmod(int(ns), 1_000_000_000)
+    return sec + nsec / 1e9
+
+
 def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
 
@@ -749,7 +755,7 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
         elif kind == "odom":
             o = odom_decode(raw)
             out.odom_children.add(o.child)
-            t = (o.stamp_ns or record_ns) * 1e-9
+            t = _seconds(o.stamp_ns or record_ns)
             out.odom.append([t, o.x, o.y, o.yaw, o.speed, o.yaw_rate])  # type: ignore[union-attr]
         elif kind == "tf":
             for e in _edges(reader.deserialize(raw, TF_TYPE)):
@@ -759,12 +765,12 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
                     out.first_edge[key] = e
                 x, y, z, w = e.rotation
                 out.dynamic[key].append(
-                    [record_ns * 1e-9, e.translation[0], e.translation[1], _yaw(x, y, z, w)]
+                    [_seconds(record_ns), e.translation[0], e.translation[1], _yaw(x, y, z, w)]
                 )
         else:
             m = reader.deserialize(raw, IMU_TYPE)
             av, la = m.angular_velocity, m.linear_acceleration
-            t = (_stamp(m.header) or record_ns) * 1e-9
+            t = _seconds(_stamp(m.header) or record_ns)
             imu_rows.append([t, av.x, av.y, av.z, la.x, la.y, la.z])  # type: ignore[union-attr]
     out.fast_decoder["scan"] = scan_decode.state.get("fast", False)  # type: ignore[attr-defined]
     if sel.odom:
@@ -795,7 +801,7 @@ def _add_scan(scans: _ScanRows, s: _Scan, record_ns: int, topic: str) -> None:
         stamp = record_ns
         scans.record_time_stamps += 1
     scans.frames.add(s.frame.lstrip("/"))
-    scans.time.append(stamp * 1e-9)
+    scans.time.append(_seconds(stamp))
     scans.geometry.append([s.angle_min, s.angle_increment, s.range_min, s.range_max, n])
     scans.ranges.append(s.ranges, width=n)
 
@@ -1000,7 +1006,7 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
         tf_edges: dict[tuple[str, str, bool], int] = {}
         for conn, record_ns, raw in reader.messages():
             span = spans.setdefault(conn.topic, [math.inf, -math.inf])
-            t = record_ns * 1e-9
+            t = _seconds(record_ns)
             span[0], span[1] = min(span[0], t), max(span[1], t)
             counts[conn.topic] = counts.get(conn.topic, 0) + 1
             if conn.msgtype == TF_TYPE:
@@ -1008,7 +1014,7 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
                 for e in _edges(reader.deserialize(raw, TF_TYPE)):
                     key = (e.parent, e.child, static)
                     tf_edges[key] = tf_edges.get(key, 0) + 1
-        start, end = reader.start_time * 1e-9, reader.end_time * 1e-9
+        start, end = _seconds(reader.start_time), _seconds(reader.end_time)
         try:
             sel = select_topics(path, reader, options)
             plan: dict[str, Any] = {"scan_topic": sel.scan_topic, "odom_source": sel.odom_topic}
