@@ -19,7 +19,7 @@ from slam.cli import main
 from slam.config import load_config
 from slam.io.carmen import load_carmen
 from slam.io.mapserver import read_map_yaml, trinary
-from slam.io.rosbag import load_bag
+from slam.io.rosbag import BagOptions, load_bag
 from slam.io.tum import read_tum
 
 LOGS = ("intel", "aces")
@@ -111,7 +111,9 @@ def test_eval_reports_the_map_yaml(bag_run, carmen_dir, capsys):
     relations = carmen_dir / "relations" / "intel.relations"
     assert main(["eval", str(bag_run), "--relations", str(relations), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["map"]["occupied_cells"] == int(read_map_yaml(bag_run / "map.yaml").occupied().sum())
+    assert report["map"]["occupied_cells"] == int(
+        read_map_yaml(bag_run / "map.yaml").occupied().sum()
+    )
     assert report["relations"]["count"] == 4  # the relations within the first 300 scans
 
 
@@ -138,3 +140,14 @@ def test_evo_reads_the_run_folder(bag_run, tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "300 poses" in done.stdout
     assert any(p.name.startswith("traj") and p.suffix == ".png" for p in tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(("name", "differ"), [("intel", 561), ("aces", 154)])
+def test_odom_sync_latest_reproduces_the_carmen_scan_odometry(carmen_dir, name, differ):
+    """CARMEN's FLASER lines carry the last ODOM pose before the scan: --odom-sync latest gives
+    the same pose except at the scans whose stamps jump (intel's clock) or tie an ODOM stamp."""
+    bag = load_bag(_bag(carmen_dir, name), options=BagOptions(odom_sync="latest"))
+    clf = load_carmen(carmen_dir / f"{name}.clf.gz", name=name, lidar=load_config(name).lidar)
+    order = np.argsort(clf.scans.time, kind="stable")
+    gap = np.hypot(*(bag.scans.odometry[:, :2] - clf.scans.odometry[order, :2]).T)
+    assert np.count_nonzero(gap > 1e-6) == differ

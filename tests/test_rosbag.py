@@ -316,3 +316,15 @@ def test_scan_without_content_types(tmp_path):
     bag = write_ros1_bag(tmp_path / "empty.bag", BagContent(odom=[Odom(0.0, 0, 0, 0)]))
     with pytest.raises(DataError, match="no laser scans: no sensor_msgs/msg/LaserScan topic"):
         load_bag(bag)
+
+
+def test_odom_sync_latest_takes_the_last_odometry_before_each_scan(tmp_path):
+    bag = write_ros1_bag(tmp_path / "s.bag", straight_run(10))
+    interpolated = load_bag(bag)
+    latest = load_bag(bag, options=BagOptions(odom_sync="latest"))
+    assert interpolated.scans.odometry is None  # odometry.py interpolates at the stamps
+    # scans are stamped 0.01 s after the odometry message k (x = 0.1 k)
+    np.testing.assert_allclose(latest.scans.odometry[:, 0], 0.1 * np.arange(10), atol=1e-12)
+    assert latest.meta["odom_sync"] == "latest"
+    with pytest.raises(UsageError, match="--odom-sync: expected one of interpolate, latest"):
+        BagOptions(odom_sync="nearest")

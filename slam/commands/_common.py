@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from slam.io.datadir import resolve_data_dir
+
+if TYPE_CHECKING:
+    from slam.io.rosbag import BagOptions
 
 
 def add_data_dir_argument(parser: argparse.ArgumentParser) -> None:
@@ -42,13 +46,20 @@ def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
         "Odometry topic, else tf)",
     )
     group.add_argument(
+        "--odom-sync",
+        choices=("interpolate", "latest"),
+        default="interpolate",
+        help="odometry pose at a scan: interpolated at its stamp (default, as tf does) or the "
+        "latest one at or before it (as CARMEN logs record it)",
+    )
+    group.add_argument(
         "--base-frame",
         metavar="FRAME",
         help="robot frame (default: the Odometry child_frame_id, or the laser's moving ancestor in tf)",
     )
 
 
-def bag_options_from(args: argparse.Namespace):  # -> slam.io.rosbag.BagOptions
+def bag_options_from(args: argparse.Namespace) -> BagOptions:
     """The :class:`~slam.io.rosbag.BagOptions` chosen by ``args``."""
     from slam.io.rosbag import BagOptions
 
@@ -56,4 +67,5 @@ def bag_options_from(args: argparse.Namespace):  # -> slam.io.rosbag.BagOptions
         scan_topic=getattr(args, "scan_topic", None),
         odom_topic=getattr(args, "odom_topic", None),
         base_frame=getattr(args, "base_frame", None),
+        odom_sync=getattr(args, "odom_sync", None) or "interpolate",
     )

@@ -35,6 +35,7 @@ when the bag's message definition differs.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import struct
 import zlib
@@ -60,6 +61,8 @@ IMU_TYPE = "sensor_msgs/msg/Imu"
 TF_TOPIC = "tf"
 """``--odom-topic`` value (also ``/tf``) that asks for odometry from the transforms."""
 
+ODOM_SYNC = ("interpolate", "latest")
+"""Values of :attr:`BagOptions.odom_sync`."""
 MAX_BEAMS = 16384
 """Most beams a LaserScan may have: four times the densest 2D scanners' 0.1° over 360°."""
 MAX_TILT_DEG = 5.0
@@ -80,6 +83,15 @@ class BagOptions:
     """Odometry topic, or ``tf`` for the transforms; default: the only Odometry topic, else tf."""
     base_frame: str | None = None
     """Robot frame; default: the Odometry ``child_frame_id`` (tf: the laser's moving ancestor)."""
+    odom_sync: str = "interpolate"
+    """Odometry pose at a scan: ``"interpolate"`` at the scan's stamp (what tf does) or
+    ``"latest"``, the last odometry pose at or before it (what CARMEN logs record per scan)."""
+
+    def __post_init__(self) -> None:
+        if self.odom_sync not in ODOM_SYNC:
+            raise UsageError(
+                f"--odom-sync: expected one of {', '.join(ODOM_SYNC)}, found {self.odom_sync!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -650,10 +662,15 @@ def load_bag(
         path, lidar, parents, streams, base, laser_frame
     )
     stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
+    if options.odom_sync == "latest":  # per-scan odometry, as CARMEN FLASER lines carry it
+        last = np.searchsorted(odometry.time, stream.time, side="right") - 1
+        last = np.clip(last, 0, len(odometry.time) - 1)
+        stream = dataclasses.replace(stream, odometry=odometry.poses[last].copy())
     meta: dict[str, Any] = {
         "format": fmt,
         "scan_topic": sel.scan_topic,
         "odom_source": odom_source,
+        "odom_sync": options.odom_sync,
         "base_frame": base,
         "laser_frame": laser_frame,
         "laser_offset_source": offset_source,
@@ -1062,6 +1079,7 @@ def _command(path: Path, options: BagOptions) -> str:
         ("--scan-topic", options.scan_topic),
         ("--odom-topic", options.odom_topic),
         ("--base-frame", options.base_frame),
+        ("--odom-sync", None if options.odom_sync == "interpolate" else options.odom_sync),
     ):
         if value is not None:
             parts += [flag, shlex.quote(value)]
