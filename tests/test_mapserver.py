@@ -22,6 +22,7 @@ from slam.io.mapserver import (
     write_map,
 )
 from slam.io.tum import format_tum, read_tum
+from slam.trajectory import Trajectory
 
 RES = 0.05
 ORIGIN = np.array([-1.5, 0.5])
@@ -132,14 +133,14 @@ def test_truncated_pgm_is_an_error(tmp_path):
 def test_trajectory_sorted_by_time_keeps_file_order_variant(tmp_path):
     times = np.array([1.0, 2.0, 1.5, 3.0, 3.0])
     poses = np.column_stack([times * 10, np.arange(5.0), np.zeros(5)])
-    assert write_trajectories(tmp_path, times, poses) is True
+    assert write_trajectories(tmp_path, Trajectory(times, poses)) is True
     t, p = read_tum(tmp_path / "trajectory.tum")
     np.testing.assert_array_equal(t, [1.0, 1.5, 2.0, 3.0, 3.0])
     np.testing.assert_array_equal(p[:, 1], [0, 2, 1, 3, 4])  # stable for equal times
     t, p = read_tum(tmp_path / "trajectory_file_order.tum")
     np.testing.assert_array_equal(t, times)
     ordered = tmp_path / "ordered"
-    assert write_trajectories(ordered, np.sort(times), poses) is False
+    assert write_trajectories(ordered, Trajectory(np.sort(times), poses)) is False
     assert not (ordered / "trajectory_file_order.tum").exists()
 
 
@@ -158,7 +159,7 @@ def _run_folder(tmp_path):
                         origin=ORIGIN)  # fmt: skip
     times = np.array([10.0, 10.2, 10.1, 10.3])
     poses = np.column_stack([np.arange(4.0), np.zeros(4), np.full(4, 0.5)])
-    (run / "trajectory.tum").write_text(format_tum(times, poses))
+    (run / "trajectory.tum").write_text(format_tum(Trajectory(times, poses)))
     return run
 
 

@@ -162,7 +162,7 @@ def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = F
     written = [target, *companions]
     existing = [p for p in written if p.exists()]
     if existing and not force:
-        raise FileExistsError(f"{existing[0]}: exists")
+        raise UsageError(f"{existing[0]}: exists; use --force to replace it")
     if fmt in ("pgm", "png", "npz"):
         log_odds, resolution, origin = read_run_map(run_dir)
         if fmt == "pgm":

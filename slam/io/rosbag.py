@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from slam.config import LidarConfig
 from slam.errors import DataError, UsageError
+from slam.io.carmen import MAX_BEAMS as CARMEN_MAX_BEAMS
 from slam.io.formats import BAG_FORMATS, detect_format
 from slam.io.log import ImuStream, Log, OdometryStream, ScanStream
 
@@ -63,8 +64,8 @@ TF_TOPIC = "tf"
 
 ODOM_SYNC = ("interpolate", "latest")
 """Values of :attr:`BagOptions.odom_sync`."""
-MAX_BEAMS = 16384
-"""Most beams a LaserScan may have: four times the densest 2D scanners' 0.1° over 360°."""
+MAX_BEAMS = CARMEN_MAX_BEAMS
+"""Most beams a LaserScan may have: the bound of every loader (:data:`slam.io.carmen.MAX_BEAMS`)."""
 MAX_TILT_DEG = 5.0
 """Largest angle between the laser's scan plane and the robot's floor plane."""
 STANDARD_GRAVITY = 9.80665
