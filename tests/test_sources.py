@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import gzip
 import json
 from pathlib import Path
 
@@ -82,7 +83,7 @@ def test_demo_resolves_to_the_cache_folder_without_generating_it(tmp_path, cache
 def test_carmen_file_path_is_named_up_to_its_first_dot(tmp_path):
     path = carmen_log(tmp_path / "corridor.clf")
     gz = tmp_path / "intel.clf.gz"
-    gz.write_bytes(b"")
+    gz.write_bytes(gzip.compress(path.read_bytes()))
     ref = sources.resolve(str(path), tmp_path)
     assert described(ref) == (Kind.CARMEN, "carmen", "corridor", "corridor", None)
     assert ref.path == path and ref.relations is None and ref.reference is None

@@ -110,6 +110,27 @@ def write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+def write_files(files: dict[Path, bytes]) -> None:
+    """Write several files so that they appear only once all of them are complete (each to a
+    temporary sibling, mode ``0o666 & ~umask``, then all renamed)."""
+    temps: list[tuple[Path, Path]] = []
+    try:
+        for path, data in files.items():
+            path = check_output_file(Path(path))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = _temp_file(path.parent, f".{path.name}.", ".tmp")
+            temps.append((tmp, path))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+        for tmp, path in temps:
+            os.replace(tmp, path)
+    except BaseException:
+        for tmp, _ in temps:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+
+
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     write_bytes(path, text.encode("utf-8"))

@@ -22,10 +22,7 @@ PyYAML is not a dependency: :func:`parse_map_yaml` is a small, strict reader of 
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import DataError
+from slam.io.atomic import write_files
 from slam.io.text import decode_utf8
 
 F64 = NDArray[np.float64]
@@ -115,32 +113,13 @@ def write_map(
     yaml_path = pgm_path.with_suffix(".yaml")
     ox, oy = (float(v) for v in np.asarray(origin, dtype=np.float64)[:2])
     image = pgm_image(trinary(log_odds))
-    write_together(
+    write_files(
         {
             pgm_path: pgm_bytes(image, resolution),
             yaml_path: map_yaml_text(pgm_path.name, resolution, (ox, oy, 0.0)).encode("utf-8"),
         }
     )
     return yaml_path
-
-
-def write_together(files: dict[Path, bytes]) -> None:
-    """Write several files so that they appear only once all of them are complete."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for path, data in files.items():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-            temps.append((tmp, path))
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-        for tmp, path in temps:
-            os.replace(tmp, path)
-    except BaseException:
-        for tmp, _ in temps:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-        raise
 
 
 # --- reading ------------------------------------------------------------------------------
