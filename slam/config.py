@@ -443,6 +443,147 @@ class ChecksConfig(Validated):
 
 
 @dataclass(frozen=True)
+class LocalizeConfig:
+    """``slam localize``: Monte Carlo localization on a saved map, global localization by an exact
+    histogram filter, recovery from a lost robot (docs/localize.md). The motion model is the
+    filter's (``filter.motion_alphas``, ``filter.motion_floor``)."""
+
+    update_distance: float = 0.2
+    """Run a particle update after this much travel since the last one (m) ..."""
+    update_angle: float = 0.1
+    """... or this much rotation (rad); scans in between move the estimate by odometry only."""
+    beams: int = 60
+    """At most this many returns (evenly spread) weight the particles."""
+    sigma_hit: float = 0.1
+    """Standard deviation of the likelihood field's Gaussian term (m)."""
+    z_hit: float = 0.9
+    """Mixture weight of the Gaussian (hit) term of the beam model."""
+    z_rand: float = 0.05
+    """Mixture weight of the uniform term over ``[0, range_max]`` (unexplained readings)."""
+    z_max: float = 0.05
+    """Mixture weight of the point mass at ``range_max`` (no return); ``z_hit + z_rand + z_max``
+    must be 1."""
+    temperature: float = 4.0
+    """Scan log-likelihoods are divided by this before weighting (beams are not independent)."""
+    field_max: float = 2.0
+    """Distances to the nearest wall are looked up up to this far (m); beyond, the Gaussian term
+    is 0 anyway."""
+    refine_iterations: int = 10
+    """The reported pose is the particles' mean refined by this many Gauss-Newton steps on the
+    likelihood field (the most likely pose near the mean; 0: the mean itself)."""
+    refine_beams: int = 180
+    """At most this many returns (evenly spread) refine the pose."""
+    inject_share: float = 0.05
+    """At each update this share of the predicted particles is drawn around the scan-matched
+    pose instead (sensor resetting; 0: off)."""
+    min_particles: int = 200
+    """KLD-sampling never draws fewer particles than this."""
+    max_particles: int = 10000
+    """... nor more than this."""
+    kld_epsilon: float = 0.05
+    """KLD-sampling: largest Kullback-Leibler distance between the sample and the posterior."""
+    kld_delta: float = 0.01
+    """KLD-sampling: the bound holds with probability ``1 − kld_delta``."""
+    kld_bin_xy: float = 0.2
+    """KLD-sampling histogram bin size in x and y (m)."""
+    kld_bin_theta: float = 0.1745
+    """KLD-sampling histogram bin size in heading (rad, 10°)."""
+    initial_sigma_xy: float = 1.0
+    """Standard deviation of the initial particle cloud in x and y (m), when ``--initial`` gives
+    no sigma."""
+    initial_sigma_theta: float = 0.35
+    """Standard deviation of the initial particle cloud in heading (rad, 20°)."""
+    localized_std_xy: float = 0.15
+    """The robot counts as localized when the particles' standard deviation in x and y is at
+    most this (m) ..."""
+    localized_std_theta: float = 0.05
+    """... and in heading at most this (rad), and the filter is not lost."""
+    global_resolution: float = 0.25
+    """Cell size of the global histogram filter (m); a multiple of the map's cell size."""
+    global_headings: int = 36
+    """Heading bins of the global histogram filter."""
+    global_beams: int = 30
+    """At most this many returns weight the histogram filter's states."""
+    global_temperature: float = 4.0
+    """The histogram filter's log-likelihoods are divided by this."""
+    global_update_distance: float = 0.3
+    """The histogram filter steps after this much travel (m) ..."""
+    global_update_angle: float = 0.2
+    """... or this much rotation (rad)."""
+    global_min_free: float = 0.5
+    """A histogram cell is a state when at least this share of its map cells is known free."""
+    global_mode_share: float = 0.9
+    """Global localization ends when one mode holds this share of the probability ..."""
+    global_mode_radius: float = 0.5
+    """... a mode being the states within this distance (m) ..."""
+    global_mode_angle: float = 0.35
+    """... and this heading difference (rad) of the most probable state."""
+    global_particles: int = 5000
+    """Particles drawn from the mode's states when MCL takes over."""
+    recovery: bool = True
+    """Watch the match quality and re-localize globally when the robot is lost."""
+    alpha_slow: float = 0.01
+    """Augmented MCL: rate of the long-term average of the match quality."""
+    alpha_fast: float = 0.2
+    """Augmented MCL: rate of the short-term average."""
+    lost_ratio: float = 0.5
+    """The robot is lost when the short-term average falls below this fraction of the long-term
+    one."""
+    monitor_warmup: int = 10
+    """Updates after (re)localization before the lost test applies."""
+
+    def __post_init__(self) -> None:
+        positive = ("update_distance", "update_angle", "sigma_hit", "temperature", "field_max",
+                    "kld_epsilon", "kld_bin_xy", "kld_bin_theta", "initial_sigma_xy",
+                    "initial_sigma_theta", "localized_std_xy", "localized_std_theta",
+                    "global_resolution", "global_temperature", "global_update_distance",
+                    "global_update_angle", "global_mode_radius", "global_mode_angle",
+                    "alpha_slow", "alpha_fast")  # fmt: skip
+        for name in positive:
+            value = getattr(self, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise ConfigError(f"localize.{name}: expected a finite number > 0, found {value}")
+        for name in ("beams", "refine_beams", "min_particles", "global_beams",
+                     "global_particles"):  # fmt: skip
+            if getattr(self, name) < 1:
+                raise ConfigError(
+                    f"localize.{name}: expected an integer ≥ 1, found {getattr(self, name)}"
+                )
+        if self.max_particles < self.min_particles:
+            raise ConfigError(
+                f"localize.max_particles: expected ≥ min_particles ({self.min_particles}), "
+                f"found {self.max_particles}"
+            )
+        if self.global_headings < 4:
+            raise ConfigError(
+                f"localize.global_headings: expected at least 4, found {self.global_headings}"
+            )
+        for name in ("z_hit", "z_rand", "z_max", "kld_delta", "inject_share", "global_min_free",
+                     "global_mode_share", "lost_ratio", "alpha_slow", "alpha_fast"):  # fmt: skip
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(
+                    f"localize.{name}: expected a fraction in [0, 1], found {getattr(self, name)}"
+                )
+        if not 0.0 < self.kld_delta < 1.0:
+            raise ConfigError(f"localize.kld_delta: expected 0 < delta < 1, found {self.kld_delta}")
+        if self.z_hit <= 0:
+            raise ConfigError(f"localize.z_hit: expected > 0, found {self.z_hit}")
+        total = self.z_hit + self.z_rand + self.z_max
+        if abs(total - 1.0) > 1e-9:
+            raise ConfigError(
+                f"localize.z_hit + z_rand + z_max: expected 1 (a mixture), found {total:g}"
+            )
+        if self.refine_iterations < 0:
+            raise ConfigError(
+                f"localize.refine_iterations: expected 0 or more, found {self.refine_iterations}"
+            )
+        if self.monitor_warmup < 0:
+            raise ConfigError(
+                f"localize.monitor_warmup: expected 0 or more, found {self.monitor_warmup}"
+            )
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole configuration of a run."""
 
@@ -458,6 +599,7 @@ class Config:
     texture: TextureConfig = field(default_factory=TextureConfig)
     viz: VizConfig = field(default_factory=VizConfig)
     checks: ChecksConfig = field(default_factory=ChecksConfig)
+    localize: LocalizeConfig = field(default_factory=LocalizeConfig)
 
 
 def section_types() -> dict[str, type]:

@@ -1,0 +1,254 @@
+"""Global localization: the exact histogram filter over (x, y, θ) cells of a saved map.
+
+This is the grid world's Bayes filter (:mod:`slam.discrete`), for real: the states are the cells
+of the map at a coarse resolution (``localize.global_resolution``, a multiple of the map's cell)
+times ``localize.global_headings`` heading bins, but only the cells the robot can be in — at
+least ``global_min_free`` of their map cells observed free. Every state's probability is computed,
+none is sampled, so a symmetric building keeps its symmetric modes until a scan tells them apart.
+
+* **predict** with the odometry increment ``u = (dx, dy, dθ)`` since the last step: the heading
+  bins shift by ``dθ``, then every heading layer shifts by its own displacement
+  ``R(θ_h − dθ/2)·(dx, dy)``. The noise of the odometry model (``filter.motion_alphas``) plus the
+  extent of a state (a uniform spread over one cell and one bin: variance ``cell²/12``,
+  ``bin²/12``, and ``(d·bin)²/12`` of lateral travel) become weights over integer shifts, each the
+  Gaussian's mass over one cell (:func:`cell_weights`). Mass that lands outside the states is
+  the robot driving into a wall: it is dropped, and the belief renormalised.
+* **update** with the scan's returns: ``bel(x) ∝ p(z | x)^{1/T} · bel⁻(x)``, ``p`` the beam model
+  of :mod:`slam.localize.sensor` with its Gaussian widened for the state's extent.
+* **mode**: the states within ``global_mode_radius`` and ``global_mode_angle`` of the most
+  probable one; global localization ends when they hold ``global_mode_share`` of the mass.
+
+The kernels (:mod:`slam.localize.kernels`) loop over free cells only; the belief is stored dense
+(``(H, R, C)``, zero outside the states) so the prediction can gather from neighbours.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import LocalizeConfig
+from slam.discrete.filter import normalize
+from slam.errors import ConfigError, DataError
+from slam.localize.kernels import heading_mix, state_loglik, systematic_draws, translate_blur
+from slam.localize.maps import LikelihoodMap
+from slam.localize.mcl import MotionModel
+from slam.localize.sensor import BeamModel
+
+F64 = NDArray[np.float64]
+
+_ERF = np.frompyfunc(math.erf, 1, 1)
+
+
+def _phi(x: F64) -> F64:
+    """Standard normal cumulative distribution."""
+    return 0.5 * (1.0 + _ERF(np.asarray(x) / math.sqrt(2.0)).astype(np.float64))
+
+
+def cell_weights(mean: F64, sigma: F64) -> tuple[NDArray[np.int64], F64]:
+    """Mass of ``N(mean_h, sigma_h²)`` over the unit cells ``[o − ½, o + ½)``, for every row ``h``.
+
+    Returns the first integer offset of each row and the weights ``(H, K)`` (rows sum to 1; rows
+    shorter than ``K`` padded with zeros).
+    """
+    mean = np.asarray(mean, dtype=np.float64).reshape(-1)
+    sigma = np.maximum(np.asarray(sigma, dtype=np.float64).reshape(-1), 1e-6)
+    first = np.floor(mean - 4.0 * sigma + 0.5).astype(np.int64)
+    last = np.ceil(mean + 4.0 * sigma - 0.5).astype(np.int64)
+    width = int((last - first).max()) + 1
+    offsets = first[:, None] + np.arange(width)[None, :]
+    upper = _phi((offsets + 0.5 - mean[:, None]) / sigma[:, None])
+    lower = _phi((offsets - 0.5 - mean[:, None]) / sigma[:, None])
+    weights = np.where(offsets <= last[:, None], upper - lower, 0.0)
+    weights /= weights.sum(axis=1, keepdims=True)
+    return first, np.ascontiguousarray(weights)
+
+
+@dataclass(frozen=True)
+class Mode:
+    """The most probable state and the mass around it."""
+
+    share: float
+    """Probability held by the states within the mode's radius and angle."""
+    pose: F64
+    """``(3,)`` centre of the most probable state."""
+    heading: int
+    row: int
+    col: int
+
+
+class PoseHistogram:
+    """The belief over ``(heading, row, column)`` states of a coarse grid of the map."""
+
+    def __init__(self, lmap: LikelihoodMap, config: LocalizeConfig, motion: MotionModel) -> None:
+        factor = config.global_resolution / lmap.resolution
+        self.factor = int(round(factor))
+        if self.factor < 1 or abs(factor - self.factor) > 1e-6:
+            raise ConfigError(
+                f"localize.global_resolution: expected a multiple of the map's cell size "
+                f"({lmap.resolution:g} m), found {config.global_resolution:g}"
+            )
+        self.map = lmap
+        self.config = config
+        self.motion = motion
+        self.resolution = self.factor * lmap.resolution
+        self.headings = int(config.global_headings)
+        self.bin = 2.0 * math.pi / self.headings
+        self.theta = -math.pi + self.bin * np.arange(self.headings)
+        h, w = lmap.shape
+        rows, cols = -(-h // self.factor), -(-w // self.factor)
+        padded = np.zeros((rows * self.factor, cols * self.factor), dtype=np.float64)
+        padded[:h, :w] = lmap.free
+        share = padded.reshape(rows, self.factor, cols, self.factor).mean(axis=(1, 3))
+        self.states = share >= config.global_min_free
+        if not self.states.any():
+            raise DataError("map: no free cell at the global filter's resolution")
+        free_r, free_c = np.nonzero(self.states)
+        self.free_r = free_r.astype(np.int64)
+        self.free_c = free_c.astype(np.int64)
+        self.cell_x = lmap.origin[0] + (self.free_c + 0.5) * self.resolution
+        self.cell_y = lmap.origin[1] + (self.free_r + 0.5) * self.resolution
+        self.belief = np.zeros((self.headings, rows, cols))
+        self._spare = np.zeros_like(self.belief)
+        self.steps = 0
+        self.reset()
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(headings, rows, columns)`` of the belief."""
+        return self.belief.shape  # type: ignore[return-value]
+
+    @property
+    def state_count(self) -> int:
+        """Number of states (free cells × headings)."""
+        return int(self.free_r.shape[0]) * self.headings
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the belief, its spare buffer and the state lists."""
+        return int(
+            self.belief.nbytes + self._spare.nbytes + self.states.nbytes
+            + 2 * self.free_r.nbytes + 2 * self.cell_x.nbytes
+        )  # fmt: skip
+
+    def reset(self) -> None:
+        """Uniform belief over every state."""
+        self.belief[:] = 0.0
+        self.belief[:, self.free_r, self.free_c] = 1.0 / self.state_count
+        self.steps = 0
+
+    # -- predict
+    def predict(self, increment: F64) -> None:
+        """Move the belief by the odometry ``increment`` (robot frame) with the motion noise."""
+        dx, dy, dth = (float(v) for v in increment)
+        d = math.hypot(dx, dy)
+        a = abs(dth)
+        alphas, floor = self.motion.alphas, self.motion.floor
+        sx = alphas[0] * d + alphas[1] * a + floor[0]
+        sy = alphas[2] * d + alphas[1] * a + floor[1]
+        st = alphas[3] * a + alphas[4] * d + floor[2]
+        # heading: the rotation in bins, its noise and a bin's own extent
+        sigma_bins = math.sqrt(st**2 + self.bin**2 / 12.0) / self.bin
+        first, weights = cell_weights(np.array([dth / self.bin]), np.array([sigma_bins]))
+        heading_mix(self.belief, self.free_r, self.free_c, int(first[0]), weights[0], self._spare)
+        # translation: each destination heading's displacement, from the mid-turn heading
+        mid = self.theta - dth / 2.0
+        wx = np.cos(mid) * dx - np.sin(mid) * dy
+        wy = np.sin(mid) * dx + np.cos(mid) * dy
+        res = self.resolution
+        sigma = math.sqrt(max(sx, sy) ** 2 + (d * self.bin) ** 2 / 12.0 + res**2 / 12.0) / res
+        spread = np.full(self.headings, sigma)
+        row_first, row_w = cell_weights(wy / res, spread)
+        col_first, col_w = cell_weights(wx / res, spread)
+        translate_blur(
+            self._spare, self.free_r, self.free_c, row_first, row_w, col_first, col_w, self.belief
+        )
+        normalize(self.belief, float(self.belief[:, self.free_r, self.free_c].sum()))
+
+    # -- update
+    def loglik(self, ex: F64, ey: F64, model: BeamModel) -> F64:
+        """``(H, F)`` log-likelihood of the returns at every state (free cell ``f``)."""
+        ranges = np.hypot(ex, ey)
+        tables, step_inv = model.widened_tables(ranges, self.resolution, self.bin)
+        c, s = np.cos(self.theta)[:, None], np.sin(self.theta)[:, None]
+        rx = np.ascontiguousarray(c * ex[None, :] - s * ey[None, :])
+        ry = np.ascontiguousarray(s * ex[None, :] + c * ey[None, :])
+        out = np.empty((self.headings, self.free_r.shape[0]))
+        lmap = self.map
+        state_loglik(
+            lmap.distance, float(lmap.origin[0]), float(lmap.origin[1]), 1.0 / lmap.resolution,
+            self.cell_x, self.cell_y, rx, ry, tables, step_inv, out,
+        )  # fmt: skip
+        return out
+
+    def update(self, ex: F64, ey: F64, model: BeamModel) -> None:
+        """Multiply the belief by the scan's tempered likelihood and renormalise."""
+        prior = self.belief[:, self.free_r, self.free_c]
+        logw = self.loglik(ex, ey, model) / self.config.global_temperature
+        logw -= logw[prior > 0].max() if (prior > 0).any() else logw.max()
+        posterior = prior * np.exp(logw)
+        total = float(posterior.sum())
+        self.belief[:, self.free_r, self.free_c] = posterior
+        normalize(self.belief, total)
+        self.steps += 1
+
+    # -- the result
+    def posterior(self) -> F64:
+        """``(R, C)`` probability of each cell (summed over headings)."""
+        return self.belief.sum(axis=0)
+
+    def _window(self, heading: int, row: int, col: int) -> tuple[NDArray, slice, slice, NDArray]:
+        radius = self.config.global_mode_radius / self.resolution
+        reach = int(math.floor(radius))
+        rows, cols = self.states.shape
+        r0, r1 = max(row - reach, 0), min(row + reach + 1, rows)
+        c0, c1 = max(col - reach, 0), min(col + reach + 1, cols)
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        disk = (rr - row) ** 2 + (cc - col) ** 2 <= radius**2 + 1e-9
+        spread = int(math.floor(self.config.global_mode_angle / self.bin + 1e-9))
+        heads = np.unique((heading + np.arange(-spread, spread + 1)) % self.headings)
+        return heads, slice(r0, r1), slice(c0, c1), disk
+
+    def mode(self) -> Mode:
+        """The most probable state and the share of the mass around it."""
+        best = int(np.argmax(self.belief))
+        h, r, c = (int(v) for v in np.unravel_index(best, self.belief.shape))
+        heads, rows, cols, disk = self._window(h, r, c)
+        share = float(self.belief[heads][:, rows, cols][:, disk].sum())
+        pose = np.array([
+            self.map.origin[0] + (c + 0.5) * self.resolution,
+            self.map.origin[1] + (r + 0.5) * self.resolution,
+            self.theta[h],
+        ])  # fmt: skip
+        return Mode(share, pose, h, r, c)
+
+    def contains(self, mode: Mode, pose: F64) -> bool:
+        """Whether ``pose`` lies within the mode's radius and angle."""
+        dist = math.hypot(pose[0] - mode.pose[0], pose[1] - mode.pose[1])
+        turn = abs(math.remainder(float(pose[2]) - float(mode.pose[2]), 2 * math.pi))
+        cfg = self.config
+        return dist <= cfg.global_mode_radius + self.resolution and turn <= (
+            cfg.global_mode_angle + self.bin
+        )
+
+    def sample(self, mode: Mode, count: int, rng: np.random.Generator) -> F64:
+        """``count`` poses drawn from the mode's states (by their probability), each uniform
+        within its cell and heading bin."""
+        heads, rows, cols, disk = self._window(mode.heading, mode.row, mode.col)
+        hh, rr, cc = np.meshgrid(
+            heads, np.arange(rows.start, rows.stop), np.arange(cols.start, cols.stop), indexing="ij"
+        )
+        inside = np.broadcast_to(disk, hh.shape)
+        hh, rr, cc = hh[inside], rr[inside], cc[inside]
+        p = self.belief[hh, rr, cc]
+        p = p / p.sum()
+        pick = systematic_draws(p, count, float(rng.random()))
+        jitter = rng.random((count, 3)) - 0.5
+        res = self.resolution
+        return np.stack([
+            self.map.origin[0] + (cc[pick] + 0.5 + jitter[:, 0]) * res,
+            self.map.origin[1] + (rr[pick] + 0.5 + jitter[:, 1]) * res,
+            self.theta[hh[pick]] + jitter[:, 2] * self.bin,
+        ], axis=1)  # fmt: skip
