@@ -33,12 +33,27 @@ from numpy.typing import NDArray
 from slam.config import LocalizeConfig
 from slam.discrete.filter import normalize
 from slam.errors import ConfigError, DataError
-from slam.localize.kernels import heading_mix, state_loglik, systematic_draws, translate_blur
+from slam.localize.kernels import (
+    apply_likelihood,
+    heading_mix,
+    shift_columns,
+    shift_rows,
+    state_loglik,
+    systematic_draws,
+)
 from slam.localize.maps import LikelihoodMap
 from slam.localize.mcl import MotionModel
 from slam.localize.sensor import BeamModel
 
 F64 = NDArray[np.float64]
+
+LEVELS = 9
+"""Gaussian widths of the histogram filter's likelihood grids: ``σ_0·√2^l``, ``σ_0`` to
+``16·σ_0``."""
+
+QUANTUM = 1.0 / 2048.0
+"""The likelihood grids hold ``log p`` in steps of this (int16: half the memory of float32,
+and far finer than the differences between states)."""
 
 _ERF = np.frompyfunc(math.erf, 1, 1)
 
@@ -113,6 +128,8 @@ class PoseHistogram:
         self.cell_y = lmap.origin[1] + (self.free_r + 0.5) * self.resolution
         self.belief = np.zeros((self.headings, rows, cols))
         self._spare = np.zeros_like(self.belief)
+        self._dense = np.zeros_like(self.belief)
+        self._grids: dict[float, tuple[NDArray[np.float32], F64, F64]] = {}
         self.steps = 0
         self.reset()
 
@@ -128,9 +145,10 @@ class PoseHistogram:
 
     def memory_bytes(self) -> int:
         """Bytes held by the belief, its spare buffer and the state lists."""
+        grids = sum(g[0].nbytes for g in self._grids.values())
         return int(
-            self.belief.nbytes + self._spare.nbytes + self.states.nbytes
-            + 2 * self.free_r.nbytes + 2 * self.cell_x.nbytes
+            self.belief.nbytes + self._spare.nbytes + self._dense.nbytes + self.states.nbytes
+            + 2 * self.free_r.nbytes + 2 * self.cell_x.nbytes + grids
         )  # fmt: skip
 
     def reset(self) -> None:
@@ -162,35 +180,65 @@ class PoseHistogram:
         spread = np.full(self.headings, sigma)
         row_first, row_w = cell_weights(wy / res, spread)
         col_first, col_w = cell_weights(wx / res, spread)
-        translate_blur(
-            self._spare, self.free_r, self.free_c, row_first, row_w, col_first, col_w, self.belief
-        )
+        shift_columns(self._spare, col_first, col_w, self._dense)
+        shift_rows(self._dense, self.free_r, self.free_c, row_first, row_w, self.belief)
         normalize(self.belief, float(self.belief[:, self.free_r, self.free_c].sum()))
 
     # -- update
+    def level_grids(self, model: BeamModel) -> tuple[NDArray[np.int16], F64, F64]:
+        """The beam model's log-likelihood over the map at :data:`LEVELS` Gaussian widths
+        (from ``σ_0 = sqrt(σ² + (cell/2)²)`` in steps of √2), each decimated by the coarse
+        factor from every phase: ``(grids (L, k, k, R, C) int16 in units of`` :data:`QUANTUM`
+        ``, far (L,), sigmas (L,))``; cached per sensor range."""
+        cached = self._grids.get(model.z_range)
+        if cached is not None:
+            return cached
+        k = self.factor
+        h, w = self.map.shape
+        rows, cols = -(-h // k), -(-w // k)
+        sigma0 = math.sqrt(model.sigma**2 + (self.resolution / 2) ** 2)
+        sigmas = sigma0 * np.sqrt(2.0) ** np.arange(LEVELS)
+        far = np.array([float(model.log_density(np.array([1e9]), s)[0]) for s in sigmas])
+        far = np.round(far / QUANTUM) * QUANTUM
+        grids = np.empty((LEVELS, k, k, rows, cols), dtype=np.int16)
+        for lv, sigma in enumerate(sigmas):
+            fine = np.full((rows * k, cols * k), far[lv] / QUANTUM, dtype=np.float64)
+            fine[:h, :w] = model.log_density(self.map.distance, float(sigma)) / QUANTUM
+            grids[lv] = (
+                np.round(fine).astype(np.int16).reshape(rows, k, cols, k).transpose(1, 3, 0, 2)
+            )
+        cached = (np.ascontiguousarray(grids), far, sigmas)
+        self._grids[model.z_range] = cached
+        return cached
+
     def loglik(self, ex: F64, ey: F64, model: BeamModel) -> F64:
-        """``(H, F)`` log-likelihood of the returns at every state (free cell ``f``)."""
-        ranges = np.hypot(ex, ey)
-        tables, step_inv = model.widened_tables(ranges, self.resolution, self.bin)
+        """``(H, F)`` log-likelihood of the returns at every state (free cell ``f``).
+
+        Beam ``b`` uses the level nearest (in ratio) to its
+        :meth:`~slam.localize.sensor.BeamModel.widened_sigma` (the widest for the longest
+        returns), looked up at the map cell its endpoint falls in.
+        """
+        grids, far, sigmas = self.level_grids(model)
+        wanted = model.widened_sigma(np.hypot(ex, ey), self.resolution, self.bin)
+        steps = np.log(wanted / sigmas[0]) / np.log(np.sqrt(2.0))
+        level = np.clip(np.round(steps), 0, LEVELS - 1).astype(np.int64)
         c, s = np.cos(self.theta)[:, None], np.sin(self.theta)[:, None]
-        rx = np.ascontiguousarray(c * ex[None, :] - s * ey[None, :])
-        ry = np.ascontiguousarray(s * ex[None, :] + c * ey[None, :])
+        rx = c * ex[None, :] - s * ey[None, :]
+        ry = s * ex[None, :] + c * ey[None, :]
+        # the coarse cell's centre lies k/2 fine cells from its first fine cell
+        inv = 1.0 / self.map.resolution
+        offset_c = np.floor(self.factor / 2 + rx * inv).astype(np.int64)
+        offset_r = np.floor(self.factor / 2 + ry * inv).astype(np.int64)
         out = np.empty((self.headings, self.free_r.shape[0]))
-        lmap = self.map
-        state_loglik(
-            lmap.distance, float(lmap.origin[0]), float(lmap.origin[1]), 1.0 / lmap.resolution,
-            self.cell_x, self.cell_y, rx, ry, tables, step_inv, out,
-        )  # fmt: skip
+        state_loglik(grids, far, level, offset_r, offset_c, self.free_r, self.free_c, QUANTUM, out)
         return out
 
     def update(self, ex: F64, ey: F64, model: BeamModel) -> None:
         """Multiply the belief by the scan's tempered likelihood and renormalise."""
-        prior = self.belief[:, self.free_r, self.free_c]
-        logw = self.loglik(ex, ey, model) / self.config.global_temperature
-        logw -= logw[prior > 0].max() if (prior > 0).any() else logw.max()
-        posterior = prior * np.exp(logw)
-        total = float(posterior.sum())
-        self.belief[:, self.free_r, self.free_c] = posterior
+        loglik = self.loglik(ex, ey, model)
+        total = apply_likelihood(
+            self.belief, self.free_r, self.free_c, loglik, 1.0 / self.config.global_temperature
+        )
         normalize(self.belief, total)
         self.steps += 1
 

@@ -6,7 +6,8 @@
 * :func:`systematic_draws` — low-variance (systematic) resampling of any number of draws;
 * :func:`kld_count` — how many of a stream of samples KLD-sampling keeps (Fox 2003), with the
   bins seen so far carried between calls;
-* :func:`state_loglik`, :func:`heading_mix`, :func:`translate_blur` — the histogram filter's
+* :func:`state_loglik`, :func:`heading_mix`, :func:`shift_columns`, :func:`shift_rows` — the
+  histogram filter's
   update and prediction over the free states of a coarse (x, y, θ) grid.
 
 Cell conventions are those of :mod:`slam.mapping`: ``array[iy, ix]``, lower-left corner of cell
@@ -171,45 +172,53 @@ def kld_count(
 
 @njit(cache=True, parallel=True)
 def state_loglik(
-    dist: np.ndarray,
-    ox: float,
-    oy: float,
-    inv_res: float,
-    cell_x: np.ndarray,
-    cell_y: np.ndarray,
-    rx: np.ndarray,
-    ry: np.ndarray,
-    tables: np.ndarray,
-    step_inv: np.ndarray,
+    grids: np.ndarray,
+    far: np.ndarray,
+    level: np.ndarray,
+    offset_r: np.ndarray,
+    offset_c: np.ndarray,
+    free_r: np.ndarray,
+    free_c: np.ndarray,
+    quantum: float,
     out: np.ndarray,
 ) -> None:
     """``out[h, f] = Σ_b log p_b(z_b | cell f, heading h)`` over the free states.
 
-    ``(cell_x[f], cell_y[f])`` is the centre of free cell ``f``; ``(rx[h, b], ry[h, b])`` the
-    robot-frame return ``b`` rotated by heading ``h``; ``tables[b]`` (sampled every
-    ``1/step_inv[b]`` m) beam ``b``'s log-likelihood over the distance to the nearest wall, with
-    the Gaussian widened for the cell's and heading bin's extent. The distance is the nearest
-    cell's (the tables are wider than a cell). Parallel over cells; every state writes its own
-    entry.
+    ``grids[l, py, px]`` is the fine log-likelihood grid of width level ``l`` decimated by the
+    coarse factor ``k`` from phase ``(py, px)``: ``grids[l, py, px, r, c] = L_l[k·r + py, k·c +
+    px]``, in units of ``quantum``. Return ``b`` seen from heading ``h`` lands ``offset_r[h, b]`` fine rows and
+    ``offset_c[h, b]`` fine columns from the coarse cell's first fine cell, so over all cells it
+    reads one decimated grid at a fixed shift: the inner loop walks the free cells in row-major
+    order through nearly contiguous memory. Off-grid reads count ``far[l]``. Parallel over
+    headings; every heading writes its own row.
     """
-    heads = rx.shape[0]
-    beams = rx.shape[1]
-    rows = dist.shape[0]
-    cols = dist.shape[1]
-    for f in prange(cell_x.shape[0]):
-        cx = cell_x[f]
-        cy = cell_y[f]
-        for h in range(heads):
-            acc = 0.0
-            for b in range(beams):
-                gx = (cx + rx[h, b] - ox) * inv_res
-                gy = (cy + ry[h, b] - oy) * inv_res
-                if gx < 0.0 or gy < 0.0 or gx >= cols or gy >= rows:
-                    d = FAR
+    k = grids.shape[1]
+    rows = grids.shape[3]
+    cols = grids.shape[4]
+    heads = offset_r.shape[0]
+    beams = offset_r.shape[1]
+    cells = free_r.shape[0]
+    for h in prange(heads):
+        row = out[h]
+        for i in range(cells):
+            row[i] = 0.0
+        for b in range(beams):
+            lv = level[b]
+            orow = offset_r[h, b]
+            ocol = offset_c[h, b]
+            qy = orow // k
+            qx = ocol // k
+            g = grids[lv, orow - qy * k, ocol - qx * k]
+            outside = far[lv] / quantum
+            for i in range(cells):
+                r = free_r[i] + qy
+                c = free_c[i] + qx
+                if 0 <= r < rows and 0 <= c < cols:
+                    row[i] += g[r, c]
                 else:
-                    d = dist[int(gy), int(gx)]
-                acc += table_lookup(tables[b], step_inv[b], d)
-            out[h, f] = acc
+                    row[i] += outside
+        for i in range(cells):
+            row[i] *= quantum
 
 
 @njit(cache=True, parallel=True)
@@ -240,44 +249,49 @@ def heading_mix(
 
 
 @njit(cache=True, parallel=True)
-def translate_blur(
+def shift_columns(
+    belief: np.ndarray, col_first: np.ndarray, col_weights: np.ndarray, out: np.ndarray
+) -> None:
+    """``out[h, r, c] = Σ_j wc[h, j] · belief[h, r, c − c0[h] − j]`` at every cell (sources off
+    the grid count 0): the column half of the translation, dense because the row half reads
+    it at rows that need not be states."""
+    heads, rows, cols = belief.shape
+    nc = col_weights.shape[1]
+    for h in prange(heads):
+        for r in range(rows):
+            src = belief[h, r]
+            dst = out[h, r]
+            for c in range(cols):
+                acc = 0.0
+                for j in range(nc):
+                    sc = c - col_first[h] - j
+                    if 0 <= sc < cols:
+                        acc += col_weights[h, j] * src[sc]
+                dst[c] = acc
+
+
+@njit(cache=True, parallel=True)
+def shift_rows(
     belief: np.ndarray,
     free_r: np.ndarray,
     free_c: np.ndarray,
     row_first: np.ndarray,
     row_weights: np.ndarray,
-    col_first: np.ndarray,
-    col_weights: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """``out[h, r, c] = Σ_i Σ_j wr[h, i]·wc[h, j]·belief[h, r − r0[h] − i, c − c0[h] − j]``.
-
-    The translation part of the prediction: heading ``h``'s displacement and its noise as
-    separable weights over integer cell offsets (``row_first``/``col_first`` the first offset).
-    A gather: each free destination cell sums its sources; sources off the grid count 0, and
-    non-free sources hold 0 already. Only free cells are written.
-    """
+    """``out[h, r, c] = Σ_i wr[h, i] · belief[h, r − r0[h] − i, c]`` at the free cells only (the
+    rest of ``out`` is left as it is: zero): the row half of the translation."""
     heads, rows, cols = belief.shape
     nr = row_weights.shape[1]
-    nc = col_weights.shape[1]
-    for f in prange(free_r.shape[0]):
-        r = free_r[f]
-        c = free_c[f]
-        for h in range(heads):
+    for h in prange(heads):
+        for f in range(free_r.shape[0]):
+            r = free_r[f]
+            c = free_c[f]
             acc = 0.0
             for i in range(nr):
                 sr = r - row_first[h] - i
-                if sr < 0 or sr >= rows:
-                    continue
-                wr = row_weights[h, i]
-                if wr == 0.0:
-                    continue
-                line = 0.0
-                for j in range(nc):
-                    sc = c - col_first[h] - j
-                    if 0 <= sc < cols:
-                        line += col_weights[h, j] * belief[h, sr, sc]
-                acc += wr * line
+                if 0 <= sr < rows:
+                    acc += row_weights[h, i] * belief[h, sr, c]
             out[h, r, c] = acc
 
 
@@ -447,3 +461,43 @@ def refine_pose(
     out[1] = y
     out[2] = (th + math.pi) % (2.0 * math.pi) - math.pi
     return cost
+
+
+@njit(cache=True, parallel=True)
+def apply_likelihood(
+    belief: np.ndarray,
+    free_r: np.ndarray,
+    free_c: np.ndarray,
+    loglik: np.ndarray,
+    inv_temperature: float,
+) -> float:
+    """``bel(x) ← bel(x) · exp((ℓ(x) − ℓ_max)/T)`` at the free states; returns the new total.
+
+    ``ℓ_max`` is the largest log-likelihood among states with mass (so the best of them keeps
+    its mass and nothing underflows to an all-zero belief). The total is summed per heading and
+    then over headings in order, so it does not depend on the number of threads.
+    """
+    heads = loglik.shape[0]
+    cells = loglik.shape[1]
+    best = np.full(heads, -np.inf)
+    for h in prange(heads):
+        m = -np.inf
+        for i in range(cells):
+            if belief[h, free_r[i], free_c[i]] > 0.0 and loglik[h, i] > m:
+                m = loglik[h, i]
+        best[h] = m
+    top = best.max()
+    partial = np.zeros(heads)
+    for h in prange(heads):
+        acc = 0.0
+        for i in range(cells):
+            r = free_r[i]
+            c = free_c[i]
+            v = belief[h, r, c] * math.exp((loglik[h, i] - top) * inv_temperature)
+            belief[h, r, c] = v
+            acc += v
+        partial[h] = acc
+    total = 0.0
+    for h in range(heads):
+        total += partial[h]
+    return total

@@ -12,10 +12,9 @@ mass, to 1 (checked by ``tests/test_localize_units.py``). Readings without a ret
 ``z_max`` at every pose, so they do not change the weights; the filters use the returns only.
 
 The functions of ``d`` are tabulated (:meth:`BeamModel.log_table`) so the kernels do one table
-lookup per beam instead of an ``exp`` and a ``log``. :meth:`BeamModel.widened_tables` gives one
-table per beam for the histogram filter, whose states are cells and heading bins: there the
-pose may lie anywhere within the cell and bin, and the Gaussian is widened by half a cell and by
-half a bin's sweep at the beam's range.
+lookup per beam instead of an ``exp`` and a ``log``. For the histogram filter, whose states are
+cells and heading bins, :meth:`BeamModel.widened_sigma` widens the Gaussian by half a cell and
+by half a bin's sweep at the beam's range (the pose may lie anywhere within its state).
 """
 
 from __future__ import annotations
@@ -60,18 +59,9 @@ class BeamModel:
         """The largest per-beam log-likelihood (an endpoint exactly on a wall)."""
         return float(self.log_density(np.zeros(1))[0])
 
-    def widened_tables(
-        self, ranges: F64, cell: float, bin_angle: float, size: int = 128
-    ) -> tuple[F64, F64]:
-        """One table per beam for states of ``cell`` metres and ``bin_angle`` radians.
-
-        Beam ``b`` at range ``r_b`` uses ``σ_b² = σ² + (cell/2)² + (r_b·bin_angle/2)²``; its table
-        spans ``d = 0 … 4σ_b``. Returns ``tables (B, size)`` and ``1/step (B,)``.
-        """
+    def widened_sigma(self, ranges: F64, cell: float, bin_angle: float) -> F64:
+        """Gaussian width for states of ``cell`` metres and ``bin_angle`` radians: the pose may
+        lie anywhere in its cell and bin, so a return at range ``r`` may land half a cell and
+        half a bin's sweep ``r·bin_angle/2`` away: ``σ_b² = σ² + (cell/2)² + (r·bin_angle/2)²``."""
         ranges = np.asarray(ranges, dtype=np.float64)
-        sig = np.sqrt(self.sigma**2 + (cell / 2) ** 2 + (ranges * bin_angle / 2) ** 2)
-        span = 4.0 * sig
-        d = np.linspace(0.0, 1.0, size)[None, :] * span[:, None]
-        gauss = np.exp(-0.5 * (d / sig[:, None]) ** 2) / (sig[:, None] * math.sqrt(2 * math.pi))
-        tables = np.log(self.z_hit * gauss + self.z_rand / self.z_range)
-        return np.ascontiguousarray(tables), (size - 1) / span
+        return np.sqrt(self.sigma**2 + (cell / 2) ** 2 + (ranges * bin_angle / 2) ** 2)

@@ -1,0 +1,275 @@
+"""``slam localize``: localize a recorded log on a saved map and write a run folder.
+
+:func:`localize` loads the map (a ``slam run`` folder or ``map.npz``) and the log, feeds every
+selected scan to a :class:`~slam.localize.localizer.Localizer` and writes, atomically (the folder
+appears complete or not at all):
+
+* ``trajectory.tum`` — one pose per scan (also while not localized: then the global filter's
+  best state, or the tracked pose during a recovery);
+* ``localization.npz`` — per scan: ``times``, ``poses``, ``covariances (N, 3, 3)``,
+  ``localized``, ``phase`` (0 global, 1 tracking, 2 recovering), ``particles``, ``quality``;
+* ``map.png`` — the map with the path; ``recording.rrd`` — the map, the particles and the
+  histogram posterior as a heat map (:mod:`slam.viz.localize`), unless ``viz.record`` is off;
+* ``metrics.json`` — time to convergence (and distance driven, histogram steps), share of time
+  localized, mean match quality, particles used, lost / re-localization counts, speed (wall and
+  CPU time, real-time factor), memory;
+* ``config.toml`` — the configuration used.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import Config, dumps
+from slam.errors import UsageError
+from slam.io.atomic import atomic_dir, write_text
+from slam.io.tum import format_tum
+from slam.localize.localizer import PHASES, Localizer
+from slam.localize.maps import LikelihoodMap, load_map
+
+F64 = NDArray[np.float64]
+
+
+@dataclass
+class LocalizeRequest:
+    """Everything ``slam localize`` was asked to do."""
+
+    name: str
+    """The log: a dataset name of the registry, ``demo``, or a path."""
+    map_path: Path
+    """A ``slam run`` folder or a ``map.npz`` file."""
+    config: Config
+    data_dir: Path
+    initial: tuple[float, ...] | None = None
+    """``(x, y, θ)`` or ``(x, y, θ, σ)``; ``None``: global localization."""
+    out: Path | None = None
+    force: bool = False
+    progress: bool = False
+
+
+@dataclass
+class LocalizationTrace:
+    """Per-scan results of a localization run."""
+
+    times: F64
+    poses: F64
+    covariances: F64
+    localized: NDArray[np.bool_]
+    phase: NDArray[np.int8]
+    particles: NDArray[np.int32]
+    quality: F64
+    updated: NDArray[np.bool_]
+    lost: NDArray[np.bool_]
+
+
+def parse_initial(text: str) -> tuple[float, ...]:
+    """``"x,y,theta[,sigma]"`` as numbers (``UsageError`` naming what was wrong)."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (3, 4):
+        raise UsageError(
+            f"--initial {text!r}: expected x,y,theta or x,y,theta,sigma (metres, radians), "
+            f"found {len(parts)} values"
+        )
+    values = []
+    for name, part in zip(("x", "y", "theta", "sigma"), parts, strict=False):
+        try:
+            value = float(part)
+        except ValueError:
+            raise UsageError(
+                f"--initial {text!r}: {name} must be a number, found {part!r}"
+            ) from None
+        if not math.isfinite(value):
+            raise UsageError(f"--initial {text!r}: {name} must be finite, found {part!r}")
+        values.append(value)
+    if len(values) == 4 and not values[3] > 0:
+        raise UsageError(f"--initial {text!r}: sigma must be > 0 m, found {parts[3]!r}")
+    return tuple(values)
+
+
+def run_localizer(
+    localizer: Localizer,
+    seq: Any,
+    start: int = 0,
+    stop: int | None = None,
+    recorder: Any = None,
+    progress: bool = False,
+) -> LocalizationTrace:
+    """Feed scans ``start .. stop`` of ``seq`` (a :class:`slam.particle_filter.ScanSequence`)
+    to ``localizer``; return the per-scan trace."""
+    stop = len(seq) if stop is None else min(stop, len(seq))
+    n = max(stop - start, 0)
+    poses = np.empty((n, 3))
+    cov = np.empty((n, 3, 3))
+    localized = np.zeros(n, dtype=bool)
+    phase = np.zeros(n, dtype=np.int8)
+    particles = np.zeros(n, dtype=np.int32)
+    quality = np.full(n, np.nan)
+    updated = np.zeros(n, dtype=bool)
+    lost = np.zeros(n, dtype=bool)
+    ex_all, ey_all = seq.endpoints()
+    detail = recorder.config.detail_every if recorder is not None else 0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, desc="localize", unit="scan", dynamic_ncols=True, mininterval=0.25)
+    for i, k in enumerate(range(start, stop)):
+        ok = ~np.isnan(ex_all[k])
+        steps_before = localizer.counters["histogram_steps"]
+        est = localizer.update_hits(
+            float(seq.times[k]), ex_all[k, ok], ey_all[k, ok], seq.odometry[k], seq.range_max
+        )
+        poses[i], cov[i] = est.pose, est.covariance
+        localized[i], phase[i] = est.localized, PHASES.index(est.phase)
+        particles[i], quality[i] = est.particles, est.quality
+        updated[i], lost[i] = est.updated, est.lost
+        if recorder is not None:
+            show = detail and i % detail == 0 and est.particles > 0
+            stepped = localizer.counters["histogram_steps"] != steps_before
+            recorder.on_step(
+                i, float(seq.times[k]), est.pose, est.particles, est.quality, est.localized,
+                localizer.particles.poses if show else None,
+                localizer.particles.weights if show else None,
+                localizer.histogram if stepped else None,
+            )  # fmt: skip
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return LocalizationTrace(
+        np.asarray(seq.times[start:stop], np.float64), poses, cov, localized, phase, particles,
+        quality, updated, lost,
+    )  # fmt: skip
+
+
+def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
+    """Convergence, localized share, quality and particle figures of a trace (``odometry`` the
+    ``(N, 3)`` odometry poses of the same scans, for the distance driven)."""
+    times = trace.times
+    n = times.shape[0]
+    steps = np.hypot(*np.diff(odometry[:, :2], axis=0).T) if n > 1 else np.zeros(0)
+    driven = np.concatenate([[0.0], np.cumsum(steps)])
+    first = int(np.argmax(trace.localized)) if trace.localized.any() else -1
+    duration = float(times.max() - times.min()) if n > 1 else 0.0
+    gaps = np.clip(np.diff(times), 0.0, None)
+    tracking = trace.particles > 0
+    quality = trace.quality[trace.updated & np.isfinite(trace.quality)]
+    out: dict[str, Any] = {
+        "scans": int(n),
+        "duration_s": round(duration, 3),
+        "converged": first >= 0,
+        "time_to_convergence_s": round(float(times[first] - times[0]), 3) if first >= 0 else None,
+        "distance_to_convergence_m": round(float(driven[first]), 3) if first >= 0 else None,
+        "localized_share": round(float(trace.localized.mean()), 4) if n else 0.0,
+        "localized_time_s": round(float(np.sum(gaps[trace.localized[:-1]])), 3) if n > 1 else 0.0,
+        "mean_match_quality": round(float(quality.mean()), 4) if quality.size else None,
+        "particles_mean": round(float(trace.particles[tracking].mean()), 1)
+        if tracking.any()
+        else 0,
+        "particles_max": int(trace.particles.max()) if n else 0,
+        "lost_events": int(trace.lost.sum()),
+        "path_length_m": round(float(driven[-1]) if n else 0.0, 3),
+    }
+    return out
+
+
+def splice(seq: Any, first: tuple[int, int], second: tuple[int, int]) -> Any:
+    """A kidnapping: scans ``first[0]:first[1]`` of ``seq`` then ``second[0]:second[1]``, the
+    second stretch's times shifted to follow the first by one scan period and its odometry
+    moved to continue the first's (the wheels do not notice the jump; the laser does)."""
+    import dataclasses
+
+    from slam.geometry import compose, relative
+
+    a = np.arange(*first)
+    b = np.arange(*second)
+    period = seq.scan_period()
+    shift = seq.times[a[-1]] + period - seq.times[b[0]]
+    odom_b = compose(seq.odometry[a[-1]], relative(seq.odometry[b[0] - 1], seq.odometry[b]))
+    idx = np.concatenate([a, b])
+    angles = seq.angles if seq.angles.ndim == 1 else seq.angles[idx]
+    return dataclasses.replace(
+        seq,
+        times=np.concatenate([seq.times[a], seq.times[b] + shift]),
+        ranges=np.ascontiguousarray(seq.ranges[idx]),
+        angles=angles,
+        odometry=np.ascontiguousarray(np.concatenate([seq.odometry[a], odom_b])),
+        indices=seq.indices[idx],
+    )
+
+
+def localize(request: LocalizeRequest) -> Path:
+    """Run ``slam localize`` end to end; return the run folder."""
+    from slam.particle_filter import ScanSequence
+    from slam.pipeline import _peak_rss_mb, _write_png, default_run_dir, load_source, render_map
+
+    config = request.config
+    lmap: LikelihoodMap = load_map(request.map_path)
+    out = request.out or default_run_dir(f"{Path(request.name).name.split('.')[0]}-localize")
+    if out.exists() and not request.force and any(out.iterdir()):
+        raise FileExistsError(f"{out}: output folder exists and is not empty")
+    source = load_source(request.name, request.data_dir, config, request.progress)
+    seq = ScanSequence.from_log(source.log, config)
+    localizer = Localizer(lmap, config, initial=request.initial)
+    with atomic_dir(out, overwrite=request.force) as tmp:
+        recorder = None
+        if config.viz.record:
+            from slam.viz.localize import LocalizeRecorder
+
+            recorder = LocalizeRecorder(
+                tmp / "recording.rrd", config.viz, lmap, f"slam localize {source.log.name}"
+            )
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        trace = run_localizer(localizer, seq, recorder=recorder, progress=request.progress)
+        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+        metrics: dict[str, Any] = {
+            "dataset": source.log.name,
+            "map": str(request.map_path),
+            "mode": "global" if request.initial is None else "initial pose",
+            "initial": None if request.initial is None else list(request.initial),
+            "seed": config.filter.seed,
+        }
+        metrics.update(trace_metrics(trace, seq.odometry))
+        metrics.update(
+            histogram_steps=localizer.counters["histogram_steps"],
+            mcl_updates=localizer.counters["mcl_updates"],
+            relocalizations=localizer.counters["reseeds"],
+            false_alarms=localizer.counters["false_alarms"],
+            estimate_wall_s=round(wall, 3),
+            estimate_cpu_s=round(cpu, 3),
+            scans_per_s=round(len(trace.times) / wall, 1) if wall > 0 else None,
+            real_time_factor=round(metrics["duration_s"] / wall, 2) if wall > 0 else None,
+            map_shape=list(lmap.shape),
+            map_resolution=lmap.resolution,
+            map_memory_mb=round(lmap.memory_bytes() / 2**20, 2),
+        )
+        if localizer.counters["histogram_steps"]:
+            hist = localizer.histogram
+            metrics["histogram"] = {
+                "resolution": hist.resolution,
+                "headings": hist.headings,
+                "states": hist.state_count,
+                "memory_mb": round(hist.memory_bytes() / 2**20, 2),
+            }
+        write_text(tmp / "config.toml", dumps(config))
+        write_text(tmp / "trajectory.tum", format_tum(trace.times, trace.poses))
+        np.savez_compressed(
+            tmp / "localization.npz",
+            times=trace.times, poses=trace.poses, covariances=trace.covariances,
+            localized=trace.localized, phase=trace.phase, particles=trace.particles,
+            quality=trace.quality,
+        )  # fmt: skip
+        _write_png(tmp / "map.png", render_map(lmap.grid, trace.poses))
+        if recorder is not None:
+            metrics["recording"] = recorder.finish(trace.poses)
+        metrics["peak_rss_mb"] = _peak_rss_mb()
+        write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    return out
