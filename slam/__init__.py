@@ -41,6 +41,9 @@ _EXPORTS = {
     "Observer": ("slam.observers", "Observer"),
     "StepRecord": ("slam.observers", "StepRecord"),
     "SlamError": ("slam.errors", "SlamError"),
+    "Localizer": ("slam.localize.localizer", "Localizer"),
+    "LocalizationEstimate": ("slam.localize.localizer", "LocalizationEstimate"),
+    "load_map": ("slam.localize.maps", "load_map"),
 }
 
 __all__ = [*_EXPORTS, "__version__"]

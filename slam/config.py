@@ -442,145 +442,115 @@ class ChecksConfig(Validated):
     machine's physical memory (or of the cgroup's limit, when lower)."""
 
 
+def _is_mixture(z_hit: float, z_rand: float, z_max: float) -> bool:
+    return abs(z_hit + z_rand + z_max - 1.0) <= 1e-9
+
+
 @dataclass(frozen=True)
-class LocalizeConfig:
+class LocalizeConfig(Validated):
     """``slam localize``: Monte Carlo localization on a saved map, global localization by an exact
     histogram filter, recovery from a lost robot (docs/localize.md). The motion model is the
     filter's (``filter.motion_alphas``, ``filter.motion_floor``)."""
 
-    update_distance: float = 0.2
+    SECTION: ClassVar[str] = "localize"
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(("z_hit", "z_rand", "z_max"), _is_mixture, "z_hit + z_rand + z_max = 1"),
+        Rule(
+            ("min_particles", "max_particles"),
+            lambda lo, hi: lo <= hi,
+            "min_particles <= max_particles",
+        ),
+        Rule(
+            ("min_particles", "global_particles", "max_particles"),
+            lambda lo, n, hi: lo <= n <= hi,
+            "min_particles <= global_particles <= max_particles",
+            blame=("global_particles",),
+        ),
+    )
+
+    update_distance: float = bounded(0.2, gt=0.0, le=100.0)
     """Run a particle update after this much travel since the last one (m) ..."""
-    update_angle: float = 0.1
+    update_angle: float = bounded(0.1, gt=0.0, le=TAU)
     """... or this much rotation (rad); scans in between move the estimate by odometry only."""
-    beams: int = 60
+    beams: int = bounded(60, ge=1, le=100000)
     """At most this many returns (evenly spread) weight the particles."""
-    sigma_hit: float = 0.1
+    sigma_hit: float = bounded(0.1, gt=0.0, le=10.0)
     """Standard deviation of the likelihood field's Gaussian term (m)."""
-    z_hit: float = 0.9
+    z_hit: float = bounded(0.9, gt=0.0, le=1.0)
     """Mixture weight of the Gaussian (hit) term of the beam model."""
-    z_rand: float = 0.05
+    z_rand: float = bounded(0.05, gt=0.0, le=1.0)
     """Mixture weight of the uniform term over ``[0, range_max]`` (unexplained readings)."""
-    z_max: float = 0.05
+    z_max: float = bounded(0.05, ge=0.0, le=1.0)
     """Mixture weight of the point mass at ``range_max`` (no return); ``z_hit + z_rand + z_max``
     must be 1."""
-    temperature: float = 4.0
+    temperature: float = bounded(4.0, ge=1.0, le=1000.0)
     """Scan log-likelihoods are divided by this before weighting (beams are not independent)."""
-    field_max: float = 2.0
-    """Distances to the nearest wall are looked up up to this far (m); beyond, the Gaussian term
+    field_max: float = bounded(2.0, gt=0.0, le=100.0)
+    """Distances to the nearest wall are tabulated up to this far (m); beyond, the Gaussian term
     is 0 anyway."""
-    refine_iterations: int = 10
-    """The reported pose is the particles' mean refined by this many Gauss-Newton steps on the
-    likelihood field (the most likely pose near the mean; 0: the mean itself)."""
-    refine_beams: int = 180
+    refine_iterations: int = bounded(10, ge=0, le=1000)
+    """Levenberg-Marquardt steps that refine the reported pose on the likelihood field (the most
+    likely pose near the candidates; 0: the particles' mean itself)."""
+    refine_beams: int = bounded(180, ge=1, le=100000)
     """At most this many returns (evenly spread) refine the pose."""
-    inject_share: float = 0.05
+    inject_share: float = bounded(0.05, ge=0.0, le=0.5)
     """At each update this share of the predicted particles is drawn around the scan-matched
     pose instead (sensor resetting; 0: off)."""
-    min_particles: int = 200
-    """KLD-sampling never draws fewer particles than this."""
-    max_particles: int = 10000
-    """... nor more than this."""
-    kld_epsilon: float = 0.05
+    min_particles: int = bounded(200, ge=1, le=1000000)
+    """KLD-sampling never draws fewer particles than this ..."""
+    max_particles: int = bounded(10000, ge=1, le=1000000)
+    """... nor more than this (also the size of the initial cloud around ``--initial``)."""
+    kld_epsilon: float = bounded(0.05, gt=0.0, le=1.0)
     """KLD-sampling: largest Kullback-Leibler distance between the sample and the posterior."""
-    kld_delta: float = 0.01
+    kld_delta: float = bounded(0.01, gt=0.0, lt=1.0)
     """KLD-sampling: the bound holds with probability ``1 − kld_delta``."""
-    kld_bin_xy: float = 0.2
+    kld_bin_xy: float = bounded(0.2, gt=0.0, le=100.0)
     """KLD-sampling histogram bin size in x and y (m)."""
-    kld_bin_theta: float = 0.1745
+    kld_bin_theta: float = bounded(0.1745, gt=0.0, le=TAU)
     """KLD-sampling histogram bin size in heading (rad, 10°)."""
-    initial_sigma_xy: float = 1.0
+    initial_sigma_xy: float = bounded(1.0, gt=0.0, le=1000.0)
     """Standard deviation of the initial particle cloud in x and y (m), when ``--initial`` gives
     no sigma."""
-    initial_sigma_theta: float = 0.35
+    initial_sigma_theta: float = bounded(0.35, gt=0.0, le=TAU)
     """Standard deviation of the initial particle cloud in heading (rad, 20°)."""
-    localized_std_xy: float = 0.15
+    localized_std_xy: float = bounded(0.15, gt=0.0, le=100.0)
     """The robot counts as localized when the particles' standard deviation in x and y is at
     most this (m) ..."""
-    localized_std_theta: float = 0.05
-    """... and in heading at most this (rad), and the filter is not lost."""
-    global_resolution: float = 0.25
+    localized_std_theta: float = bounded(0.05, gt=0.0, le=TAU)
+    """... and in heading at most this (rad), in the tracking phase."""
+    global_resolution: float = bounded(0.25, gt=0.0, le=10.0)
     """Cell size of the global histogram filter (m); a multiple of the map's cell size."""
-    global_headings: int = 36
+    global_headings: int = bounded(36, ge=4, le=3600)
     """Heading bins of the global histogram filter."""
-    global_beams: int = 30
+    global_beams: int = bounded(30, ge=1, le=100000)
     """At most this many returns weight the histogram filter's states."""
-    global_temperature: float = 4.0
+    global_temperature: float = bounded(4.0, ge=1.0, le=1000.0)
     """The histogram filter's log-likelihoods are divided by this."""
-    global_update_distance: float = 0.3
+    global_update_distance: float = bounded(0.3, gt=0.0, le=100.0)
     """The histogram filter steps after this much travel (m) ..."""
-    global_update_angle: float = 0.2
+    global_update_angle: float = bounded(0.2, gt=0.0, le=TAU)
     """... or this much rotation (rad)."""
-    global_min_free: float = 0.5
+    global_min_free: float = bounded(0.5, gt=0.0, le=1.0)
     """A histogram cell is a state when at least this share of its map cells is known free."""
-    global_mode_share: float = 0.9
+    global_mode_share: float = bounded(0.9, gt=0.0, le=1.0)
     """Global localization ends when one mode holds this share of the probability ..."""
-    global_mode_radius: float = 0.5
+    global_mode_radius: float = bounded(0.5, gt=0.0, le=100.0)
     """... a mode being the states within this distance (m) ..."""
-    global_mode_angle: float = 0.35
+    global_mode_angle: float = bounded(0.35, ge=0.0, le=math.pi)
     """... and this heading difference (rad) of the most probable state."""
-    global_particles: int = 5000
+    global_particles: int = bounded(5000, ge=1, le=1000000)
     """Particles drawn from the mode's states when MCL takes over."""
     recovery: bool = True
     """Watch the match quality and re-localize globally when the robot is lost."""
-    alpha_slow: float = 0.01
+    alpha_slow: float = bounded(0.01, gt=0.0, le=1.0)
     """Augmented MCL: rate of the long-term average of the match quality."""
-    alpha_fast: float = 0.2
+    alpha_fast: float = bounded(0.2, gt=0.0, le=1.0)
     """Augmented MCL: rate of the short-term average."""
-    lost_ratio: float = 0.5
+    lost_ratio: float = bounded(0.5, gt=0.0, lt=1.0)
     """The robot is lost when the short-term average falls below this fraction of the long-term
     one."""
-    monitor_warmup: int = 10
+    monitor_warmup: int = bounded(10, ge=0, le=1000000)
     """Updates after (re)localization before the lost test applies."""
-
-    def __post_init__(self) -> None:
-        positive = ("update_distance", "update_angle", "sigma_hit", "temperature", "field_max",
-                    "kld_epsilon", "kld_bin_xy", "kld_bin_theta", "initial_sigma_xy",
-                    "initial_sigma_theta", "localized_std_xy", "localized_std_theta",
-                    "global_resolution", "global_temperature", "global_update_distance",
-                    "global_update_angle", "global_mode_radius", "global_mode_angle",
-                    "alpha_slow", "alpha_fast")  # fmt: skip
-        for name in positive:
-            value = getattr(self, name)
-            if not (value > 0 and math.isfinite(value)):
-                raise ConfigError(f"localize.{name}: expected a finite number > 0, found {value}")
-        for name in ("beams", "refine_beams", "min_particles", "global_beams",
-                     "global_particles"):  # fmt: skip
-            if getattr(self, name) < 1:
-                raise ConfigError(
-                    f"localize.{name}: expected an integer ≥ 1, found {getattr(self, name)}"
-                )
-        if self.max_particles < self.min_particles:
-            raise ConfigError(
-                f"localize.max_particles: expected ≥ min_particles ({self.min_particles}), "
-                f"found {self.max_particles}"
-            )
-        if self.global_headings < 4:
-            raise ConfigError(
-                f"localize.global_headings: expected at least 4, found {self.global_headings}"
-            )
-        for name in ("z_hit", "z_rand", "z_max", "kld_delta", "inject_share", "global_min_free",
-                     "global_mode_share", "lost_ratio", "alpha_slow", "alpha_fast"):  # fmt: skip
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ConfigError(
-                    f"localize.{name}: expected a fraction in [0, 1], found {getattr(self, name)}"
-                )
-        if not 0.0 < self.kld_delta < 1.0:
-            raise ConfigError(f"localize.kld_delta: expected 0 < delta < 1, found {self.kld_delta}")
-        if self.z_hit <= 0:
-            raise ConfigError(f"localize.z_hit: expected > 0, found {self.z_hit}")
-        total = self.z_hit + self.z_rand + self.z_max
-        if abs(total - 1.0) > 1e-9:
-            raise ConfigError(
-                f"localize.z_hit + z_rand + z_max: expected 1 (a mixture), found {total:g}"
-            )
-        if self.refine_iterations < 0:
-            raise ConfigError(
-                f"localize.refine_iterations: expected 0 or more, found {self.refine_iterations}"
-            )
-        if self.monitor_warmup < 0:
-            raise ConfigError(
-                f"localize.monitor_warmup: expected 0 or more, found {self.monitor_warmup}"
-            )
 
 
 @dataclass(frozen=True)

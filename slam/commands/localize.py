@@ -52,7 +52,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
     )
-    parser.add_argument("--force", action="store_true", help="replace an existing run folder")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing folder of slam localize (never any other folder)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_data_dir_argument(parser)
     parser.set_defaults(func=localize_command)
@@ -64,21 +68,23 @@ def localize_command(args: argparse.Namespace) -> int:
 
     from slam.commands.run import overrides_from
     from slam.config import load_config
+    from slam.io.sources import resolve
     from slam.localize.run import LocalizeRequest, localize, parse_initial
 
     initial = parse_initial(args.initial) if args.initial is not None else None
-    name = args.name
-    dataset = Path(name).name.split(".")[0] if Path(name).exists() else name
-    config = load_config(dataset, args.config, overrides_from(args))
+    data_dir = data_dir_from(args)
+    ref = resolve(args.name, data_dir, where="slam localize LOG")
+    config = load_config(ref.config_name, args.config, overrides_from(args))
     out = localize(
         LocalizeRequest(
-            name=name,
+            name=args.name,
             map_path=args.map,
             config=config,
-            data_dir=data_dir_from(args),
+            data_dir=data_dir,
             initial=initial,
             out=args.out,
             force=args.force,
+            inputs=(args.config,) if args.config is not None else (),
             progress=show_progress(args),
         )
     )

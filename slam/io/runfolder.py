@@ -73,6 +73,13 @@ KINDS: dict[str, OutputKind] = {
         "run", "run folder", ".slam-run", ("metrics.json", "config.toml"), "slam run"
     ),
     "sim": OutputKind("sim", "simulated dataset", ".slam-sim", ("simulation.json",), "slam sim"),
+    "localize": OutputKind(
+        "localize",
+        "localization folder",
+        ".slam-localize",
+        ("metrics.json", "config.toml"),
+        "slam localize",
+    ),
 }
 """Every kind of output folder, by name."""
 

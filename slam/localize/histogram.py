@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import LocalizeConfig
 from slam.discrete.filter import normalize
 from slam.errors import ConfigError, DataError
@@ -82,6 +83,13 @@ def cell_weights(mean: F64, sigma: F64) -> tuple[NDArray[np.int64], F64]:
     return first, np.ascontiguousarray(weights)
 
 
+def histogram_memory(headings: int, rows: int, cols: int, factor: int) -> float:
+    """Bytes of the histogram filter's arrays: three float64 beliefs (the belief and two
+    buffers of the prediction) and the int16 likelihood grids (:data:`LEVELS` widths, every
+    phase of the decimation: ``LEVELS`` values per map cell)."""
+    return 3.0 * headings * rows * cols * 8 + LEVELS * factor * factor * rows * cols * 2
+
+
 @dataclass(frozen=True)
 class Mode:
     """The most probable state and the mass around it."""
@@ -98,7 +106,13 @@ class Mode:
 class PoseHistogram:
     """The belief over ``(heading, row, column)`` states of a coarse grid of the map."""
 
-    def __init__(self, lmap: LikelihoodMap, config: LocalizeConfig, motion: MotionModel) -> None:
+    def __init__(
+        self,
+        lmap: LikelihoodMap,
+        config: LocalizeConfig,
+        motion: MotionModel,
+        memory_share: float = DEFAULT_MEMORY_SHARE,
+    ) -> None:
         factor = config.global_resolution / lmap.resolution
         self.factor = int(round(factor))
         if self.factor < 1 or abs(factor - self.factor) > 1e-6:
@@ -115,6 +129,15 @@ class PoseHistogram:
         self.theta = -math.pi + self.bin * np.arange(self.headings)
         h, w = lmap.shape
         rows, cols = -(-h // self.factor), -(-w // self.factor)
+        needed = histogram_memory(self.headings, rows, cols, self.factor)
+        check_memory(
+            needed,
+            f"map {w}×{h} cells: the global histogram filter ({self.headings} headings × "
+            f"{cols}×{rows} cells of {self.resolution:g} m)",
+            "use a coarser localize.global_resolution or fewer localize.global_headings",
+            share=memory_share,
+            setting="checks.max_memory_share",
+        )
         padded = np.zeros((rows * self.factor, cols * self.factor), dtype=np.float64)
         padded[:h, :w] = lmap.free
         share = padded.reshape(rows, self.factor, cols, self.factor).mean(axis=(1, 3))

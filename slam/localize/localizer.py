@@ -20,8 +20,9 @@ Between updates the pose follows the odometry from the last update. A pose count
 *localized* in the tracking phase when the particles' standard deviations are at most
 ``localized_std_xy`` and ``localized_std_theta``.
 
-Inputs are robot-frame returns (:meth:`Localizer.update_hits`) with the odometry pose of the
-scan in any fixed frame; the localizer thins them to ``localize.beams`` (MCL) and
+Inputs are a :class:`slam.Scan` and the odometry pose of the robot at the scan, in any fixed
+frame (:meth:`Localizer.update`, the same inputs as :meth:`slam.Slam.update`); the localizer
+thins the scan's returns to ``localize.beams`` (MCL), ``localize.refine_beams`` (the pose) and
 ``localize.global_beams`` (histogram), evenly spread.
 """
 
@@ -35,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slam.config import Config
-from slam.errors import UsageError
+from slam.errors import DataError, UsageError
 from slam.geometry import compose, relative
 from slam.localize.histogram import Mode, PoseHistogram
 from slam.localize.kernels import refine_pose
@@ -45,6 +46,7 @@ from slam.localize.mcl import MotionModel, ParticleSet
 from slam.localize.recovery import LostMonitor
 from slam.localize.sensor import BeamModel
 from slam.mapping import OccupancyGrid
+from slam.scans import Scan
 
 F64 = NDArray[np.float64]
 
@@ -179,7 +181,9 @@ class Localizer:
     def histogram(self) -> PoseHistogram:
         """The global histogram filter (made on first use: it is the largest allocation)."""
         if self._histogram is None:
-            self._histogram = PoseHistogram(self.map, self.config.localize, self.motion)
+            self._histogram = PoseHistogram(
+                self.map, self.config.localize, self.motion, self.config.checks.max_memory_share
+            )
         return self._histogram
 
     @property
@@ -197,11 +201,35 @@ class Localizer:
         return cached
 
     # -- one scan
+    def update(self, scan: Scan, odometry: ArrayLike) -> LocalizationEstimate:
+        """Process one scan taken at the odometry pose ``odometry`` ``(x, y, θ)`` (any fixed
+        frame; only its increments are used); return the estimate after it.
+
+        What the scan leaves out (range semantics, laser offset) comes from ``[lidar]``, as for
+        :meth:`slam.Slam.update`.
+        """
+        if not isinstance(scan, Scan):
+            raise UsageError(f"Localizer.update: expected a slam.Scan, found {type(scan).__name__}")
+        pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise DataError(
+                f"scan at t={scan.time:.6f}: odometry must be a finite pose (x, y, theta), "
+                f"found {odometry!r}"
+            )
+        scan = scan.resolved(self.config.lidar)
+        if not math.isfinite(scan.range_max):  # type: ignore[arg-type]
+            raise UsageError(
+                f"scan at t={scan.time:.6f}: the beam model needs the sensor's longest range; "
+                "give the scan a range_max or set lidar.range_max"
+            )
+        ex, ey = scan.hits()
+        return self.update_hits(scan.time, ex, ey, pose, float(scan.range_max))  # type: ignore[arg-type]
+
     def update_hits(
         self, time: float, ex: ArrayLike, ey: ArrayLike, odometry: ArrayLike, z_range: float
     ) -> LocalizationEstimate:
-        """Process one scan given as robot-frame returns ``(ex, ey)`` (m) taken at the odometry
-        pose ``odometry``; ``z_range`` is the sensor's longest return (m)."""
+        """:meth:`update` for a scan given as its robot-frame returns ``(ex, ey)`` (m), taken at
+        the odometry pose ``odometry``; ``z_range`` is the sensor's longest return (m)."""
         ex = np.ascontiguousarray(ex, dtype=np.float64).reshape(-1)
         ey = np.ascontiguousarray(ey, dtype=np.float64).reshape(-1)
         odom = np.asarray(odometry, dtype=np.float64).reshape(3)

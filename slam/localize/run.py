@@ -18,9 +18,13 @@ appears complete or not at all):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import sys
 import time
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,10 +34,12 @@ from numpy.typing import NDArray
 
 from slam.config import Config, dumps
 from slam.errors import UsageError
-from slam.io.atomic import atomic_dir, write_text
+from slam.io.atomic import atomic_dir, atomic_path, write_text
 from slam.io.tum import format_tum
 from slam.localize.localizer import PHASES, Localizer
 from slam.localize.maps import LikelihoodMap, load_map
+from slam.scans import LogScans, Scan
+from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -52,6 +58,9 @@ class LocalizeRequest:
     """``(x, y, θ)`` or ``(x, y, θ, σ)``; ``None``: global localization."""
     out: Path | None = None
     force: bool = False
+    """Replace an existing localization folder (only one of ``slam localize``)."""
+    inputs: tuple[Path, ...] = ()
+    """Further files the run reads (the ``--config`` file): ``out`` may not hold them."""
     progress: bool = False
 
 
@@ -96,16 +105,14 @@ def parse_initial(text: str) -> tuple[float, ...]:
 
 def run_localizer(
     localizer: Localizer,
-    seq: Any,
-    start: int = 0,
-    stop: int | None = None,
+    scans: Sequence[tuple[Scan, F64]],
     recorder: Any = None,
     progress: bool = False,
 ) -> LocalizationTrace:
-    """Feed scans ``start .. stop`` of ``seq`` (a :class:`slam.particle_filter.ScanSequence`)
-    to ``localizer``; return the per-scan trace."""
-    stop = len(seq) if stop is None else min(stop, len(seq))
-    n = max(stop - start, 0)
+    """Feed ``(scan, odometry pose)`` pairs (a :class:`slam.scans.LogScans`, or a list such as
+    :func:`splice` makes) to ``localizer``; return the per-scan trace."""
+    n = len(scans)
+    times = np.empty(n)
     poses = np.empty((n, 3))
     cov = np.empty((n, 3, 3))
     localized = np.zeros(n, dtype=bool)
@@ -114,19 +121,16 @@ def run_localizer(
     quality = np.full(n, np.nan)
     updated = np.zeros(n, dtype=bool)
     lost = np.zeros(n, dtype=bool)
-    ex_all, ey_all = seq.endpoints()
     detail = recorder.config.detail_every if recorder is not None else 0
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=n, desc="localize", unit="scan", dynamic_ncols=True, mininterval=0.25)
-    for i, k in enumerate(range(start, stop)):
-        ok = ~np.isnan(ex_all[k])
+    for i, (scan, odometry) in enumerate(scans):
         steps_before = localizer.counters["histogram_steps"]
-        est = localizer.update_hits(
-            float(seq.times[k]), ex_all[k, ok], ey_all[k, ok], seq.odometry[k], seq.range_max
-        )
+        est = localizer.update(scan, odometry)
+        times[i] = est.time
         poses[i], cov[i] = est.pose, est.covariance
         localized[i], phase[i] = est.localized, PHASES.index(est.phase)
         particles[i], quality[i] = est.particles, est.quality
@@ -135,7 +139,7 @@ def run_localizer(
             show = detail and i % detail == 0 and est.particles > 0
             stepped = localizer.counters["histogram_steps"] != steps_before
             recorder.on_step(
-                i, float(seq.times[k]), est.pose, est.particles, est.quality, est.localized,
+                i, est.time, est.pose, est.particles, est.quality, est.localized,
                 localizer.particles.poses if show else None,
                 localizer.particles.weights if show else None,
                 localizer.histogram if stepped else None,
@@ -144,10 +148,7 @@ def run_localizer(
             bar.update(1)
     if bar is not None:
         bar.close()
-    return LocalizationTrace(
-        np.asarray(seq.times[start:stop], np.float64), poses, cov, localized, phase, particles,
-        quality, updated, lost,
-    )  # fmt: skip
+    return LocalizationTrace(times, poses, cov, localized, phase, particles, quality, updated, lost)
 
 
 def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
@@ -181,45 +182,52 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
     return out
 
 
-def splice(seq: Any, first: tuple[int, int], second: tuple[int, int]) -> Any:
-    """A kidnapping: scans ``first[0]:first[1]`` of ``seq`` then ``second[0]:second[1]``, the
-    second stretch's times shifted to follow the first by one scan period and its odometry
-    moved to continue the first's (the wheels do not notice the jump; the laser does)."""
-    import dataclasses
-
+def splice(
+    scans: LogScans, first: tuple[int, int], second: tuple[int, int]
+) -> list[tuple[Scan, F64]]:
+    """A kidnapping: selected scans ``first[0]:first[1]`` of ``scans``, then
+    ``second[0]:second[1]``, the second stretch's times shifted to follow the first by one scan
+    period and its odometry moved to continue the first's (the wheels do not notice the jump;
+    the laser does)."""
     from slam.geometry import compose, relative
 
-    a = np.arange(*first)
-    b = np.arange(*second)
-    period = seq.scan_period()
-    shift = seq.times[a[-1]] + period - seq.times[b[0]]
-    odom_b = compose(seq.odometry[a[-1]], relative(seq.odometry[b[0] - 1], seq.odometry[b]))
-    idx = np.concatenate([a, b])
-    angles = seq.angles if seq.angles.ndim == 1 else seq.angles[idx]
-    return dataclasses.replace(
-        seq,
-        times=np.concatenate([seq.times[a], seq.times[b] + shift]),
-        ranges=np.ascontiguousarray(seq.ranges[idx]),
-        angles=angles,
-        odometry=np.ascontiguousarray(np.concatenate([seq.odometry[a], odom_b])),
-        indices=seq.indices[idx],
+    a = range(*first)
+    b = range(*second)
+    if len(a) == 0 or len(b) == 0 or b.start < 1:
+        raise UsageError(f"splice: expected two non-empty stretches, found {first} and {second}")
+    times = scans.times
+    shift = times[a[-1]] + scans.scan_period() - times[b[0]]
+    odometry = compose(
+        scans.odometry[a[-1]], relative(scans.odometry[b[0] - 1], scans.odometry[list(b)])
     )
+    out = [(scans.scan(i), scans.odometry[i]) for i in a]
+    for j, i in enumerate(b):
+        scan = scans.scan(i)
+        out.append((dataclasses.replace(scan, time=scan.time + shift), odometry[j]))
+    return out
 
 
 def localize(request: LocalizeRequest) -> Path:
     """Run ``slam localize`` end to end; return the run folder."""
-    from slam.particle_filter import ScanSequence
-    from slam.pipeline import _peak_rss_mb, _write_png, default_run_dir, load_source, render_map
+    from slam.io import sources
+    from slam.io.atomic import check_output_dir, write_png
+    from slam.io.plausibility import check_plausibility
+    from slam.pipeline import _needs, _peak_rss_mb, default_run_dir, render_map
 
     config = request.config
+    ref = sources.resolve(request.name, request.data_dir, where="slam localize LOG")
+    out = request.out or default_run_dir(f"{ref.config_name}-localize")
+    inputs = (*request.inputs, request.data_dir, ref.path, request.map_path)
+    check_output_dir(out, "localize", request.force, inputs)  # before loading anything
     lmap: LikelihoodMap = load_map(request.map_path)
-    out = request.out or default_run_dir(f"{Path(request.name).name.split('.')[0]}-localize")
-    if out.exists() and not request.force and any(out.iterdir()):
-        raise FileExistsError(f"{out}: output folder exists and is not empty")
-    source = load_source(request.name, request.data_dir, config, request.progress)
-    seq = ScanSequence.from_log(source.log, config)
     localizer = Localizer(lmap, config, initial=request.initial)
-    with atomic_dir(out, overwrite=request.force) as tmp:
+    with atomic_dir(out, overwrite=request.force, kind="localize", inputs=inputs) as tmp:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            source = sources.load(ref, config, _needs(config), request.progress)
+            doubts = check_plausibility(source.log, config)
+            scans = LogScans.from_log(source.log, config)
+        messages = doubts + sorted({str(w.message) for w in caught})
         recorder = None
         if config.viz.record:
             from slam.viz.localize import LocalizeRecorder
@@ -228,7 +236,7 @@ def localize(request: LocalizeRequest) -> Path:
                 tmp / "recording.rrd", config.viz, lmap, f"slam localize {source.log.name}"
             )
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        trace = run_localizer(localizer, seq, recorder=recorder, progress=request.progress)
+        trace = run_localizer(localizer, scans, recorder=recorder, progress=request.progress)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
         metrics: dict[str, Any] = {
             "dataset": source.log.name,
@@ -237,7 +245,7 @@ def localize(request: LocalizeRequest) -> Path:
             "initial": None if request.initial is None else list(request.initial),
             "seed": config.filter.seed,
         }
-        metrics.update(trace_metrics(trace, seq.odometry))
+        metrics.update(trace_metrics(trace, scans.odometry))
         metrics.update(
             histogram_steps=localizer.counters["histogram_steps"],
             mcl_updates=localizer.counters["mcl_updates"],
@@ -259,17 +267,21 @@ def localize(request: LocalizeRequest) -> Path:
                 "states": hist.state_count,
                 "memory_mb": round(hist.memory_bytes() / 2**20, 2),
             }
+        metrics["warnings"] = messages
         write_text(tmp / "config.toml", dumps(config))
-        write_text(tmp / "trajectory.tum", format_tum(trace.times, trace.poses))
-        np.savez_compressed(
-            tmp / "localization.npz",
-            times=trace.times, poses=trace.poses, covariances=trace.covariances,
-            localized=trace.localized, phase=trace.phase, particles=trace.particles,
-            quality=trace.quality,
-        )  # fmt: skip
-        _write_png(tmp / "map.png", render_map(lmap.grid, trace.poses))
+        write_text(tmp / "trajectory.tum", format_tum(Trajectory(trace.times, trace.poses)))
+        with atomic_path(tmp / "localization.npz") as target:
+            np.savez_compressed(
+                target,
+                times=trace.times, poses=trace.poses, covariances=trace.covariances,
+                localized=trace.localized, phase=trace.phase, particles=trace.particles,
+                quality=trace.quality,
+            )  # fmt: skip
+        write_png(tmp / "map.png", render_map(lmap.grid, trace.poses))
         if recorder is not None:
             metrics["recording"] = recorder.finish(trace.poses)
         metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    for message in messages:
+        print(f"slam: warning: {message}", file=sys.stderr, flush=True)
     return out
