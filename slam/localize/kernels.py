@@ -185,12 +185,14 @@ def state_loglik(
     """``out[h, f] = Σ_b log p_b(z_b | cell f, heading h)`` over the free states.
 
     ``grids[l, py, px]`` is the fine log-likelihood grid of width level ``l`` decimated by the
-    coarse factor ``k`` from phase ``(py, px)``: ``grids[l, py, px, r, c] = L_l[k·r + py, k·c +
-    px]``, in units of ``quantum``. Return ``b`` seen from heading ``h`` lands ``offset_r[h, b]`` fine rows and
-    ``offset_c[h, b]`` fine columns from the coarse cell's first fine cell, so over all cells it
-    reads one decimated grid at a fixed shift: the inner loop walks the free cells in row-major
-    order through nearly contiguous memory. Off-grid reads count ``far[l]``. Parallel over
-    headings; every heading writes its own row.
+    coarse factor ``k`` from phase ``(py, px)``, in units of ``quantum`` above its value far from
+    any wall ``far[l]``: ``grids[l, py, px, r, c] = (L_l[k·r + py, k·c + px] − far[l]) /
+    quantum`` (reads off the grid count 0). Return ``b`` seen from heading ``h`` lands
+    ``offset_r[h, b]`` fine rows and ``offset_c[h, b]`` fine columns from a coarse cell's first
+    fine cell, so over all cells it reads one decimated grid at a fixed shift: the inner loop
+    walks the free cells in row-major order through nearly contiguous memory, without a bounds
+    test when the whole shifted block of states lies inside the grid. Parallel over headings;
+    every heading writes its own row.
     """
     k = grids.shape[1]
     rows = grids.shape[3]
@@ -198,27 +200,33 @@ def state_loglik(
     heads = offset_r.shape[0]
     beams = offset_r.shape[1]
     cells = free_r.shape[0]
+    lo_r = free_r.min()
+    hi_r = free_r.max()
+    lo_c = free_c.min()
+    hi_c = free_c.max()
+    base = 0.0
+    for b in range(beams):
+        base += far[level[b]]
     for h in prange(heads):
-        row = out[h]
-        for i in range(cells):
-            row[i] = 0.0
+        acc = np.zeros(cells, dtype=np.int32)
         for b in range(beams):
-            lv = level[b]
             orow = offset_r[h, b]
             ocol = offset_c[h, b]
             qy = orow // k
             qx = ocol // k
-            g = grids[lv, orow - qy * k, ocol - qx * k]
-            outside = far[lv] / quantum
+            g = grids[level[b], orow - qy * k, ocol - qx * k]
+            if lo_r + qy >= 0 and hi_r + qy < rows and lo_c + qx >= 0 and hi_c + qx < cols:
+                for i in range(cells):
+                    acc[i] += g[free_r[i] + qy, free_c[i] + qx]
+                continue
             for i in range(cells):
                 r = free_r[i] + qy
                 c = free_c[i] + qx
                 if 0 <= r < rows and 0 <= c < cols:
-                    row[i] += g[r, c]
-                else:
-                    row[i] += outside
+                    acc[i] += g[r, c]
+        row = out[h]
         for i in range(cells):
-            row[i] *= quantum
+            row[i] = base + acc[i] * quantum
 
 
 @njit(cache=True, parallel=True)
@@ -234,40 +242,53 @@ def heading_mix(
 
     The heading part of the prediction: the rotation ``dθ`` and its noise as weights over
     integer bin shifts ``first_shift + k``. Only free cells are written (the rest of ``out`` is
-    left as it is: zero).
+    left as it is: zero). Parallel over headings; each reads whole source layers in order.
     """
     heads = belief.shape[0]
-    for f in prange(free_r.shape[0]):
-        r = free_r[f]
-        c = free_c[f]
-        for h in range(heads):
-            acc = 0.0
-            for k in range(weights.shape[0]):
-                src = (h - first_shift - k) % heads
-                acc += weights[k] * belief[src, r, c]
-            out[h, r, c] = acc
+    cells = free_r.shape[0]
+    for h in prange(heads):
+        dst = out[h]
+        for i in range(cells):
+            dst[free_r[i], free_c[i]] = 0.0
+        for k in range(weights.shape[0]):
+            w = weights[k]
+            if w == 0.0:
+                continue
+            src = belief[(h - first_shift - k) % heads]
+            for i in range(cells):
+                r = free_r[i]
+                c = free_c[i]
+                dst[r, c] += w * src[r, c]
 
 
 @njit(cache=True, parallel=True)
 def shift_columns(
-    belief: np.ndarray, col_first: np.ndarray, col_weights: np.ndarray, out: np.ndarray
+    belief: np.ndarray,
+    cells_r: np.ndarray,
+    cells_c: np.ndarray,
+    col_first: np.ndarray,
+    col_weights: np.ndarray,
+    out: np.ndarray,
 ) -> None:
-    """``out[h, r, c] = Σ_j wc[h, j] · belief[h, r, c − c0[h] − j]`` at every cell (sources off
-    the grid count 0): the column half of the translation, dense because the row half reads
-    it at rows that need not be states."""
+    """``out[h, r, c] = Σ_j wc[h, j] · belief[h, r, c − c0[h] − j]`` at the cells
+    ``(cells_r, cells_c)`` (sources off the grid count 0): the column half of the translation,
+    at every cell the row half will read (states and the cells above and below them within the
+    row kernel's reach), not only at states."""
     heads, rows, cols = belief.shape
     nc = col_weights.shape[1]
     for h in prange(heads):
-        for r in range(rows):
-            src = belief[h, r]
-            dst = out[h, r]
-            for c in range(cols):
-                acc = 0.0
-                for j in range(nc):
-                    sc = c - col_first[h] - j
-                    if 0 <= sc < cols:
-                        acc += col_weights[h, j] * src[sc]
-                dst[c] = acc
+        src = belief[h]
+        dst = out[h]
+        c0 = col_first[h]
+        for i in range(cells_r.shape[0]):
+            r = cells_r[i]
+            c = cells_c[i]
+            acc = 0.0
+            for j in range(nc):
+                sc = c - c0 - j
+                if 0 <= sc < cols:
+                    acc += col_weights[h, j] * src[r, sc]
+            dst[r, c] = acc
 
 
 @njit(cache=True, parallel=True)
@@ -493,9 +514,11 @@ def apply_likelihood(
         for i in range(cells):
             r = free_r[i]
             c = free_c[i]
-            v = belief[h, r, c] * math.exp((loglik[h, i] - top) * inv_temperature)
-            belief[h, r, c] = v
-            acc += v
+            v = belief[h, r, c]
+            if v > 0.0:
+                v *= math.exp((loglik[h, i] - top) * inv_temperature)
+                belief[h, r, c] = v
+                acc += v
         partial[h] = acc
     total = 0.0
     for h in range(heads):
