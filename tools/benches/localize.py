@@ -71,8 +71,9 @@ def _scans(name: str, config):
 
 def _relation_summary(times, poses, relations) -> dict:
     from slam.eval.relations import relation_errors
+    from slam.trajectory import Trajectory
 
-    s = relation_errors(times, poses, relations).summary()
+    s = relation_errors(Trajectory(times, poses), relations).summary()
     return {
         "trans_mean": round(s["trans_mean"], 4),
         "trans_std": round(s["trans_std"], 4),

@@ -1,0 +1,207 @@
+"""``slam localize`` end to end on a synthetic box room, the Python API, and the CLI's errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic_logs import carmen_lines, path, ray_cast, write_carmen
+
+from slam.cli import main
+from slam.io.tum import read_tum
+
+SCANS = 160
+
+
+def one_line_error(capsys) -> str:
+    """The stderr of a failed command: exactly one ``slam: error:`` line, no traceback."""
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("slam: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> tuple[Path, Path]:
+    """A synthetic CARMEN log of a box room and the ``slam run`` folder of its map."""
+    folder = tmp_path_factory.mktemp("room")
+    log = write_carmen(folder, carmen_lines(SCANS))
+    run = folder / "run"
+    assert main(["run", str(log), "--out", str(run), "--no-record", "--no-texture", "--quiet"]) == 0
+    return log, run
+
+
+@pytest.fixture(scope="module")
+def tracked(room, tmp_path_factory) -> Path:
+    log, run = room
+    out = tmp_path_factory.mktemp("loc") / "tracked"
+    x, y, theta = read_tum(run / "trajectory.tum").poses[0]
+    code = main(["localize", str(log), "--map", str(run), f"--initial={x},{y},{theta},0.1",
+                 "--out", str(out), "--quiet"])  # fmt: skip
+    assert code == 0
+    return out
+
+
+def test_localize_writes_the_run_folder(tracked):
+    names = {p.name for p in tracked.iterdir()}
+    assert {".slam-localize", "config.toml", "trajectory.tum", "localization.npz", "map.png",
+            "metrics.json", "recording.rrd"} <= names  # fmt: skip
+    m = json.loads((tracked / "metrics.json").read_text())
+    for key in ("time_to_convergence_s", "distance_to_convergence_m", "localized_share",
+                "mean_match_quality", "particles_mean", "particles_max", "real_time_factor",
+                "estimate_cpu_s", "peak_rss_mb", "histogram_steps", "lost_events"):  # fmt: skip
+        assert key in m, key
+    assert m["scans"] == SCANS and m["mode"] == "initial pose"
+    assert m["localized_share"] == 1.0 and m["time_to_convergence_s"] == 0.0
+    assert m["mean_match_quality"] > 0.9 and m["lost_events"] == 0
+    assert 200 <= m["particles_mean"] <= 10000
+    with np.load(tracked / "localization.npz") as d:
+        assert d["covariances"].shape == (SCANS, 3, 3)
+        assert np.all(np.linalg.eigvalsh(d["covariances"]) >= -1e-12)
+        assert set(np.unique(d["phase"])) == {1}
+
+
+def test_tracking_follows_the_map_run(room, tracked):
+    slam = read_tum(room[1] / "trajectory.tum")
+    loc = read_tum(tracked / "trajectory.tum")
+    err = np.hypot(*(loc.poses[:, :2] - slam.poses[:, :2]).T)
+    # the box's walls lie on cell boundaries: the distance field (to occupied cell centres)
+    # sits half a cell (2.5 cm) inside them, and the poses follow it
+    assert np.median(err) < 0.04 and err.max() < 0.06
+    assert np.all(np.abs(np.angle(np.exp(1j * (loc.poses[:, 2] - slam.poses[:, 2])))) < 0.03)
+
+
+def test_recording_holds_map_particles_and_series(tracked):
+    from slam.viz.stream import summarize
+
+    entities = summarize(tracked / "recording.rrd")
+    assert entities["/world/map"].static_rows == 1
+    assert entities["/world/particles"].rows == SCANS // 10
+    assert entities["/world/trajectory/final"].rows == 1
+    for name in ("robot", "trajectory/live"):
+        assert entities[f"/world/{name}"].rows == SCANS, name
+    for name in ("quality", "particles", "localized"):
+        assert entities[f"/metrics/{name}"].rows == SCANS, name
+    assert "/world/histogram" not in entities  # tracking from the start: no global filter
+
+
+def test_global_localization_finds_the_room_pose(room, tmp_path):
+    log, run = room
+    out = tmp_path / "global"
+    assert main(["localize", str(log), "--map", str(run), "--global", "--out", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["mode"] == "global" and m["converged"] and m["histogram_steps"] >= 1
+    assert m["time_to_convergence_s"] < 5.0
+    assert m["histogram"]["headings"] == 36 and m["histogram"]["resolution"] == 0.25
+    slam = read_tum(run / "trajectory.tum").poses
+    with np.load(out / "localization.npz") as d:
+        localized = d["localized"]
+        poses = d["poses"]
+    err = np.hypot(*(poses[localized, :2] - slam[localized, :2]).T)
+    assert localized.mean() > 0.85 and err.max() < 0.1
+    from slam.viz.stream import summarize
+
+    assert summarize(out / "recording.rrd")["/world/histogram"].rows >= m["histogram_steps"]
+
+
+def test_python_api_localizes_hand_made_scans(room):
+    """slam.Localizer(map, config).update(slam.Scan, odometry): scans ray-cast in the room at
+    the true poses, odometry with a constant offset (any frame will do)."""
+    import slam
+    from slam.localize.maps import load_map
+
+    config = slam.load_config("room", None, ["lidar.range_max=30", "lidar.no_return=30",
+                                               "lidar.x=0", "lidar.range_min=0.05"])  # fmt: skip
+    slam_start = read_tum(room[1] / "trajectory.tum").poses[0]
+    loc = slam.Localizer(load_map(room[1]), config, initial=(*slam_start, 0.1), seed=3)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    truth = path(SCANS)
+    offset = np.array([10.0, -4.0, 0.0])
+    for k, pose in enumerate(truth):
+        est = loc.update(slam.Scan(100.0 + 0.1 * k, ray_cast(pose, angles), angles), pose + offset)
+    assert isinstance(est, slam.LocalizationEstimate)
+    assert est.localized and est.phase == "tracking"
+    assert np.hypot(*(est.pose[:2] - truth[-1][:2])) < 0.1
+    assert est.covariance.shape == (3, 3) and est.particles >= 200
+
+
+def test_python_api_refuses_what_it_cannot_use(room):
+    import slam
+    from slam.errors import DataError, UsageError
+    from slam.localize.maps import load_map
+
+    loc = slam.Localizer(load_map(room[1]), slam.load_config("room"))
+    with pytest.raises(UsageError, match="expected a slam.Scan"):
+        loc.update(np.zeros(180), np.zeros(3))
+    scan = slam.Scan(1.0, np.ones(3), np.zeros(3), range_max=20.0)
+    with pytest.raises(DataError, match="odometry must be a finite pose"):
+        loc.update(scan, [0.0, np.nan, 0.0])
+    with pytest.raises(UsageError, match="initial pose: expected x, y, theta"):
+        slam.Localizer(load_map(room[1]), initial=(1.0, 2.0))
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("1,2", "expected x,y,theta or x,y,theta,sigma (metres, radians), found 2 values"),
+        ("1,2,3,4,5", "found 5 values"),
+        ("a,2,3", "x must be a number, found 'a'"),
+        ("1,2,nan", "theta must be finite, found 'nan'"),
+        ("1,2,3,0", "sigma must be > 0 m, found '0'"),
+        ("1,2,3,-1", "sigma must be > 0 m, found '-1'"),
+    ],
+)
+def test_bad_initial_is_one_line(room, tmp_path, capsys, value, message):
+    log, run = room
+    code = main(["localize", str(log), "--map", str(run), f"--initial={value}",
+                 "--out", str(tmp_path / "o"), "--quiet"])  # fmt: skip
+    assert code == 2
+    line = one_line_error(capsys)
+    assert f"--initial {value!r}" in line and message in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_missing_or_bad_map_is_one_line(room, tmp_path, capsys):
+    log, _ = room
+    missing = tmp_path / "nowhere"
+    assert main(["localize", str(log), "--map", str(missing), "--out", str(tmp_path / "o")]) == 2
+    assert f"{missing}: map not found" in one_line_error(capsys)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["localize", str(log), "--map", str(empty), "--out", str(tmp_path / "o")]) == 2
+    assert "no map.npz in this folder" in one_line_error(capsys)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, log_odds=np.zeros((4, 4)), resolution=0.05)
+    assert main(["localize", str(log), "--map", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert f"{bad}: expected keys log_odds, resolution, origin; missing origin" in one_line_error(
+        capsys
+    )
+    flat = tmp_path / "flat.npz"
+    np.savez(flat, log_odds=np.zeros((4, 4)), resolution=0.05, origin=np.zeros(2))
+    assert main(["localize", str(log), "--map", str(flat), "--out", str(tmp_path / "o")]) == 2
+    assert "map: no occupied cell" in one_line_error(capsys)
+    assert not (tmp_path / "o").exists()
+
+
+def test_initial_and_global_exclude_each_other(room, capsys):
+    log, run = room
+    with pytest.raises(SystemExit) as exc:
+        main(["localize", str(log), "--map", str(run), "--initial=0,0,0", "--global"])
+    assert exc.value.code == 2
+    assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_existing_output_needs_force(room, tracked, capsys):
+    log, run = room
+    args = ["localize", str(log), "--map", str(run), "--initial=-3,-1,0.15,0.1", "--out",
+            str(tracked), "--quiet", "--no-record", "--max-scans", "20"]  # fmt: skip
+    assert main(args) == 2
+    assert "output folder exists and is not empty (use --force" in one_line_error(capsys)
+    assert main([*args, "--force"]) == 0
+    assert json.loads((tracked / "metrics.json").read_text())["scans"] == 20
+    # a slam run folder is not ours to replace
+    assert main([*args[:-6], "--out", str(run), "--force"]) == 2
+    assert "holds an input of this command" in one_line_error(capsys)
