@@ -113,20 +113,32 @@ class Localizer:
     """Localize a robot on a saved map, one scan at a time (see the module docstring).
 
     ``map`` is a :class:`LikelihoodMap` or an :class:`~slam.mapping.OccupancyGrid`; ``config``
-    the configuration (its ``[localize]`` and ``[filter]`` sections); ``initial`` a starting
-    pose (then tracking starts at once) or ``None`` (global localization); ``seed`` replaces
-    ``filter.seed``.
+    the configuration (its ``[localize]`` and ``[filter]`` sections; default: the defaults);
+    ``initial`` a starting pose ``(x, y, θ)`` or ``(x, y, θ, σ_xy)`` in the map frame (then
+    tracking starts at once, particles drawn around it with ``σ_xy`` or
+    ``localize.initial_sigma_xy`` and ``localize.initial_sigma_theta``) or ``None`` (global
+    localization); ``seed`` replaces ``filter.seed``.
     """
 
     def __init__(
         self,
-        map: LikelihoodMap | OccupancyGrid,  # noqa: A002 - the issue's name for the argument
+        map: LikelihoodMap | OccupancyGrid,
         config: Config | None = None,
         *,
         initial: InitialPose | ArrayLike | None = None,
         seed: int | None = None,
     ) -> None:
         config = Config() if config is None else config
+        if not isinstance(config, Config):
+            raise UsageError(
+                f"Localizer(config): expected a slam.Config (slam.load_config(...)), found "
+                f"{type(config).__name__}"
+            )
+        if not isinstance(map, LikelihoodMap | OccupancyGrid):
+            raise UsageError(
+                f"Localizer(map): expected a map (slam.load_map(RUN_DIR)) or an OccupancyGrid, "
+                f"found {type(map).__name__}"
+            )
         if seed is not None:
             config = dataclasses.replace(
                 config, filter=dataclasses.replace(config.filter, seed=int(seed))
