@@ -539,7 +539,11 @@ class LocalizeConfig(Validated):
     global_mode_angle: float = bounded(0.35, ge=0.0, le=math.pi)
     """... and this heading difference (rad) of the most probable state."""
     global_particles: int = bounded(5000, ge=1, le=1000000)
-    """Particles drawn from the mode's states when MCL takes over."""
+    """Particles drawn from the mode's states when MCL takes over ..."""
+    relocalize_quality: float = bounded(0.8, ge=0.0, le=1.0)
+    """... provided the scan matches at the mode's refined centre with at least this quality
+    (the geometric mean per-beam likelihood over its largest value): a mode the map explains
+    poorly is a guess, not a place."""
     recovery: bool = True
     """Watch the match quality and re-localize globally when the robot is lost."""
     alpha_slow: float = bounded(0.01, gt=0.0, le=1.0)
@@ -551,6 +555,13 @@ class LocalizeConfig(Validated):
     one."""
     monitor_warmup: int = bounded(10, ge=0, le=1000000)
     """Updates after (re)localization before the lost test applies."""
+    kidnap_prior: float = bounded(0.01, ge=0.0, lt=1.0)
+    """Probability that the robot was carried anywhere since the last histogram step: each
+    prediction spreads this share of the mass over every state. When the robot is lost, the
+    histogram filter also starts from this much spread over the whole map and the rest around
+    the tracked pose (``global_mode_radius``, ``global_mode_angle``, or the particles' spread
+    when wider): a real kidnapping soon shows, a poorly mapped stretch does not throw the pose
+    away."""
 
 
 @dataclass(frozen=True)

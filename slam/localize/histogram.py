@@ -17,6 +17,10 @@ none is sampled, so a symmetric building keeps its symmetric modes until a scan 
   of :mod:`slam.localize.sensor` with its Gaussian widened for the state's extent.
 * **mode**: the states within ``global_mode_radius`` and ``global_mode_angle`` of the most
   probable one; global localization ends when they hold ``global_mode_share`` of the mass.
+* **kidnapping**: every prediction also spreads ``localize.kidnap_prior`` of the mass evenly
+  over all states (the robot may have been carried anywhere), so no state's probability ever
+  becomes exactly 0: a place the robot left the map from, or a true pose an unlucky scan
+  ruled out, can always come back.
 
 The kernels (:mod:`slam.localize.kernels`) loop over free cells only; the belief is stored dense
 (``(H, R, C)``, zero outside the states) so the prediction can gather from neighbours.
@@ -182,6 +186,25 @@ class PoseHistogram:
         self.belief[:, self.free_r, self.free_c] = 1.0 / self.state_count
         self.steps = 0
 
+    def reset_around(
+        self, pose: F64, sigma_xy: float, sigma_theta: float, elsewhere: float
+    ) -> None:
+        """A belief that the robot is still near ``pose`` (a Gaussian of ``sigma_xy``,
+        ``sigma_theta`` over the states) with probability ``1 − elsewhere``, and anywhere else
+        (uniform over every state) with probability ``elsewhere``: the prior of a recovery, where
+        being carried away is possible but rarer than a poorly mapped stretch."""
+        dx = self.cell_x - pose[0]
+        dy = self.cell_y - pose[1]
+        near = np.exp(-0.5 * (dx**2 + dy**2) / sigma_xy**2)
+        turn = np.remainder(self.theta - pose[2] + math.pi, 2 * math.pi) - math.pi
+        heading = np.exp(-0.5 * (turn / sigma_theta) ** 2)
+        local = heading[:, None] * near[None, :]
+        total = float(local.sum())
+        self.reset()
+        if total > 0 and elsewhere < 1.0:
+            self.belief[:, self.free_r, self.free_c] *= elsewhere
+            self.belief[:, self.free_r, self.free_c] += (1.0 - elsewhere) * local / total
+
     # -- predict
     def predict(self, increment: F64) -> None:
         """Move the belief by the odometry ``increment`` (robot frame) with the motion noise."""
@@ -207,7 +230,11 @@ class PoseHistogram:
         col_first, col_w = cell_weights(wx / res, spread)
         reach_r, reach_c = self._row_reach(row_first, row_w.shape[1])
         shift_columns(self._spare, reach_r, reach_c, col_first, col_w, self._dense)
-        shift_rows(self._dense, self.free_r, self.free_c, row_first, row_w, self.belief)
+        anywhere = self.config.kidnap_prior
+        shift_rows(
+            self._dense, self.free_r, self.free_c, row_first, row_w,
+            1.0 - anywhere, anywhere / self.state_count, self.belief,
+        )  # fmt: skip
         normalize(self.belief, float(self.belief[:, self.free_r, self.free_c].sum()))
 
     def _row_reach(self, row_first: NDArray[np.int64], width: int) -> tuple[NDArray, NDArray]:

@@ -298,10 +298,13 @@ def shift_rows(
     free_c: np.ndarray,
     row_first: np.ndarray,
     row_weights: np.ndarray,
+    keep: float,
+    floor: float,
     out: np.ndarray,
 ) -> None:
-    """``out[h, r, c] = Σ_i wr[h, i] · belief[h, r − r0[h] − i, c]`` at the free cells only (the
-    rest of ``out`` is left as it is: zero): the row half of the translation."""
+    """``out[h, r, c] = keep · Σ_i wr[h, i] · belief[h, r − r0[h] − i, c] + floor`` at the free
+    cells only (the rest of ``out`` is left as it is: zero): the row half of the translation,
+    with a share ``1 − keep`` of the mass spread evenly (``floor`` per state)."""
     heads, rows, cols = belief.shape
     nr = row_weights.shape[1]
     for h in prange(heads):
@@ -313,7 +316,7 @@ def shift_rows(
                 sr = r - row_first[h] - i
                 if 0 <= sr < rows:
                     acc += row_weights[h, i] * belief[h, sr, c]
-            out[h, r, c] = acc
+            out[h, r, c] = keep * acc + floor
 
 
 @njit(cache=True, inline="always")

@@ -171,7 +171,7 @@ class Localizer:
         self._quality = math.nan
         self._mode: Mode | None = None
         self.counters = {"mcl_updates": 0, "histogram_steps": 0, "lost": 0, "reseeds": 0,
-                         "false_alarms": 0, "scan_to_scan": 0}  # fmt: skip
+                         "false_alarms": 0, "scan_to_scan": 0, "weak_modes": 0}  # fmt: skip
         self._pose = np.zeros(3)
         self._odom_prev = np.zeros(3)
 
@@ -306,7 +306,13 @@ class Localizer:
         if lost and cfg.recovery:
             self.counters["lost"] += 1
             self.phase = "recovering"
-            self.histogram.reset()
+            spread = math.sqrt(max(np.linalg.eigvalsh(self._mcl_cov[:2, :2]).max(), 0.0))
+            self.histogram.reset_around(
+                self._pose,
+                max(spread, cfg.global_mode_radius),
+                max(math.sqrt(max(self._mcl_cov[2, 2], 0.0)), cfg.global_mode_angle),
+                cfg.kidnap_prior,
+            )
             self._histogram_step(beams, None, odom)
         return True, lost
 
@@ -364,7 +370,7 @@ class Localizer:
         return first
 
     def _histogram_step(self, beams: _Beams, inc: F64 | None, odom: F64) -> None:
-        """One histogram step; hand over to MCL when the mode holds enough of the mass."""
+        """One histogram step, then the hand-over test (:meth:`_hand_over`)."""
         hist = self.histogram
         if inc is not None:
             hist.predict(inc)
@@ -372,30 +378,44 @@ class Localizer:
         hist.update(ex, ey, beams.model)
         self._odom_hist = odom
         self.counters["histogram_steps"] += 1
-        mode = self._mode = hist.mode()
+        self._mode = hist.mode()
+        self._hand_over(self._mode, beams, odom)
+
+    def _hand_over(self, mode: Mode, beams: _Beams, odom: F64) -> None:
+        """MCL takes over when the histogram's mode holds ``global_mode_share`` of the mass and
+        its refined centre explains the scan (match quality ≥ ``relocalize_quality``).
+
+        While recovering, the tracked pose is kept (a false alarm) when it lies in the mode or
+        explains the scan at least as well as the mode's centre; otherwise the particles are
+        drawn anew from the mode's states.
+        """
         cfg = self.config.localize
         if mode.share < cfg.global_mode_share:
             return
-        if self.phase == "recovering" and self._holds(mode, beams):
+        recovering = self.phase == "recovering"
+        if recovering and self.histogram.contains(mode, self._pose):
+            self._resume_tracking(false_alarm=True)
+            return
+        candidate, cost = self._match(mode.pose, beams)
+        if self._match_quality(candidate, beams) < cfg.relocalize_quality:
+            self.counters["weak_modes"] += 1
+            return
+        if recovering and self._match(self._pose, beams)[1] <= cost:
+            self._resume_tracking(false_alarm=True)
+            return
+        self.counters["reseeds"] += 1
+        self.particles.set_particles(self.histogram.sample(mode, cfg.global_particles, self.rng))
+        self._mcl_update(beams, None)
+        self._odom_mcl = odom
+        self._pose = self._best(self._mcl_pose, candidate, beams)
+        self._quality = self._match_quality(self._pose, beams)
+        self._resume_tracking(false_alarm=False)
+
+    def _resume_tracking(self, false_alarm: bool) -> None:
+        if false_alarm:
             self.counters["false_alarms"] += 1
-        else:
-            self.counters["reseeds"] += 1
-            self.particles.set_particles(hist.sample(mode, cfg.global_particles, self.rng))
-            self._mcl_update(beams, None)
-            self._odom_mcl = odom
-            self._pose = self._best(self._mcl_pose, None, beams)
-            self._quality = self._match_quality(self._pose, beams)
         self.phase = "tracking"
         self.monitor.reset()
-
-    def _holds(self, mode: Mode, beams: _Beams) -> bool:
-        """Whether the tracked pose survives the histogram's verdict: it lies in the mode, or
-        it explains the scan at least as well as the mode's refined centre."""
-        if self.histogram.contains(mode, self._pose):
-            return True
-        _, here = self._match(self._pose, beams)
-        _, there = self._match(mode.pose, beams)
-        return here <= there
 
     def _estimate(
         self, time: float, updated: bool, lost: bool, beams: _Beams
