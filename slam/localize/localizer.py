@@ -198,11 +198,6 @@ class Localizer:
             )
         return self._histogram
 
-    @property
-    def histogram_running(self) -> bool:
-        """Whether the histogram filter is stepping (global or recovering phase)."""
-        return self.phase != "tracking"
-
     def _model(self, z_range: float) -> tuple[BeamModel, tuple[F64, float]]:
         cached = self._models.get(z_range)
         if cached is None:

@@ -94,16 +94,6 @@ class LikelihoodMap:
         """Cell indices ``(..., 2)`` as ``(ix, iy)`` of world points ``(..., 2)``."""
         return self.grid.world_to_cell(xy)
 
-    def is_free(self, xy: F64) -> NDArray[np.bool_]:
-        """Whether world points ``(..., 2)`` lie in free cells (outside the map: no)."""
-        cells = self.world_to_cell(np.asarray(xy, np.float64))
-        h, w = self.shape
-        ix, iy = cells[..., 0], cells[..., 1]
-        inside = (ix >= 0) & (iy >= 0) & (ix < w) & (iy < h)
-        out = np.zeros(ix.shape, dtype=bool)
-        out[inside] = self.free[iy[inside], ix[inside]]
-        return out
-
     def memory_bytes(self) -> int:
         """Bytes held by the masks, the distance field and the grid."""
         return int(

@@ -162,7 +162,3 @@ class ParticleSet:
     def estimate(self) -> tuple[F64, F64]:
         """Weighted mean pose and covariance."""
         return weighted_mean_pose(self.poses, self.weights)
-
-    def effective_size(self) -> float:
-        """``1 / Σ w²``."""
-        return float(1.0 / np.sum(self.weights**2))
