@@ -205,3 +205,34 @@ def test_existing_output_needs_force(room, tracked, capsys):
     # a slam run folder is not ours to replace
     assert main([*args[:-6], "--out", str(run), "--force"]) == 2
     assert "holds an input of this command" in one_line_error(capsys)
+
+
+def test_map_yaml_of_a_run_localizes_like_its_run_folder(room, tmp_path):
+    """``--map RUN/map.yaml`` (the map_server files every run writes) tracks like ``--map RUN``:
+    the map's occupied and free cells are the same masks, up to map_server's thresholds."""
+    from slam.localize.maps import load_map
+
+    log, run = room
+    from_yaml, from_run = load_map(run / "map.yaml"), load_map(run)
+    assert from_yaml.resolution == from_run.resolution
+    np.testing.assert_allclose(from_yaml.origin, from_run.origin)
+    x, y, theta = read_tum(run / "trajectory.tum").poses[0]
+    for name, where in (("folder", run), ("yaml", run / "map.yaml")):
+        code = main(["localize", str(log), "--map", str(where), f"--initial={x},{y},{theta},0.1",
+                     "--out", str(tmp_path / name), "--quiet"])  # fmt: skip
+        assert code == 0
+    a = read_tum(tmp_path / "folder" / "trajectory.tum").poses
+    b = read_tum(tmp_path / "yaml" / "trajectory.tum").poses
+    assert a.shape == b.shape == (SCANS, 3)
+    assert np.hypot(*(a[:, :2] - b[:, :2]).T).max() < 0.02
+
+
+def test_map_yaml_with_a_rotated_origin_is_one_line(room, tmp_path, capsys):
+    log, run = room
+    text = (run / "map.yaml").read_text()
+    bad = tmp_path / "map.yaml"
+    (tmp_path / "map.pgm").write_bytes((run / "map.pgm").read_bytes())
+    origin = next(line for line in text.splitlines() if line.startswith("origin"))
+    bad.write_text(text.replace(origin, origin.replace(", 0.0]", ", 0.5]")))
+    assert main(["localize", str(log), "--map", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "origin yaw 0.5 rad" in one_line_error(capsys)

@@ -1,4 +1,4 @@
-"""``slam localize LOG --map RUN_DIR``: localize a log on a saved map and write a run folder."""
+"""``slam localize LOG --map RUN_DIR|map.yaml``: localize a log on a saved map and write a run folder."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="localize a log on a saved map (Monte Carlo localization, global localization)",
         description=(
             "Localize LOG (a dataset name, 'demo', or a path) on the map of a slam run folder "
-            "(or a map.npz). With --initial the particles start around that pose; without it "
+            "(or a map.npz, or a ROS map_server map.yaml). With --initial the particles start around that pose; without it "
             "(or with --global) an exact histogram filter over the map's free cells and "
             "headings finds the pose first. Writes trajectory.tum, localization.npz, "
             "metrics.json, map.png, config.toml and recording.rrd to the run folder."
@@ -23,7 +23,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("name", metavar="LOG", help="dataset name, 'demo', or a path")
     parser.add_argument(
-        "--map", required=True, type=Path, metavar="RUN_DIR", help="slam run folder or map.npz"
+        "--map",
+        required=True,
+        type=Path,
+        metavar="MAP",
+        help="slam run folder, map.npz or map.yaml",
     )
     start = parser.add_mutually_exclusive_group()
     start.add_argument(

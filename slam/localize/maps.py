@@ -138,7 +138,8 @@ def _read_npz(path: Path) -> OccupancyGrid:
 
 
 def load_map(path: Path | str) -> LikelihoodMap:
-    """The map at ``path``: a run folder (its ``map.npz``) or a ``map.npz`` file."""
+    """The map at ``path``: a run folder (its ``map.npz``), a ``map.npz`` file, or a ROS
+    map_server ``map.yaml`` (with its image; :func:`slam.io.mapserver.read_map_yaml`)."""
     path = Path(path)
     if path.is_dir():
         npz = path / "map.npz"
@@ -146,7 +147,31 @@ def load_map(path: Path | str) -> LikelihoodMap:
             raise DataError(f"{path}: no map.npz in this folder (expected a slam run folder)")
         return LikelihoodMap.from_grid(_read_npz(npz))
     if not path.exists():
-        raise DataError(f"{path}: map not found (expected a run folder or a map.npz file)")
+        raise DataError(
+            f"{path}: map not found (expected a run folder, a map.npz or a map.yaml file)"
+        )
     if path.suffix == ".npz":
         return LikelihoodMap.from_grid(_read_npz(path))
-    raise DataError(f"{path}: unknown map format (expected a run folder or a .npz file)")
+    if path.suffix in (".yaml", ".yml"):
+        return _from_map_yaml(path)
+    raise DataError(
+        f"{path}: unknown map format (expected a run folder, a .npz or a map_server .yaml file)"
+    )
+
+
+def _from_map_yaml(path: Path) -> LikelihoodMap:
+    """A map_server map: occupied (100) and free (0) cells become masks; unknown stays unknown."""
+    from slam.io.mapserver import read_map_yaml
+
+    m = read_map_yaml(path)
+    if abs(float(m.origin[2])) > 1e-9:
+        raise DataError(
+            f"{path}: origin yaw {float(m.origin[2]):g} rad: expected 0 (maps are axis-aligned "
+            "grids here, as map_server writes them)"
+        )
+    occupancy = np.asarray(m.occupancy)
+    occupied = occupancy >= 100  # read_map_yaml already applied the file's thresholds
+    free = occupancy == 0
+    return LikelihoodMap.from_masks(
+        occupied, free, m.resolution, (float(m.origin[0]), float(m.origin[1]))
+    )
