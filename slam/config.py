@@ -239,9 +239,13 @@ MAX_SEARCH_CANDIDATES = 1_000_000
 
 
 def _search_candidates(xy: float, step: float, th: float, th_step: float) -> bool:
-    cells = 2 * math.ceil(xy / step) + 1
-    turns = 2 * math.ceil(th / th_step) + 1
-    return cells * cells * turns <= MAX_SEARCH_CANDIDATES
+    cells = 2 * (xy / step) + 1  # floats: a tiny step gives inf, which fails the bound
+    turns = 2 * (th / th_step) + 1
+    if not cells * cells * turns <= 2 * MAX_SEARCH_CANDIDATES:
+        return False
+    return (2 * math.ceil(xy / step) + 1) ** 2 * (2 * math.ceil(th / th_step) + 1) <= (
+        MAX_SEARCH_CANDIDATES
+    )
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,16 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 os.environ.setdefault("RERUN_TELEMETRY", "0")
+
+# Property tests draw the same examples on every run (the suite is deterministic, like the
+# toolkit); `SLAM_HYPOTHESIS_PROFILE=explore` (or `--hypothesis-profile=explore`) draws fresh ones to hunt for new failures.
+settings.register_profile("default", derandomize=True, print_blob=True)
+settings.register_profile("explore", derandomize=False, print_blob=True)
+settings.load_profile(os.environ.get("SLAM_HYPOTHESIS_PROFILE", "default"))
 
 
 def _shared_data_dir() -> Path | None:

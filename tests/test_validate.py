@@ -21,7 +21,7 @@ import typing
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 from synthetic_logs import carmen_lines, write_carmen
 
@@ -424,6 +424,7 @@ def room_log(tmp_path_factory) -> Path:
 @settings(
     max_examples=2,
     deadline=None,
+    phases=[Phase.explicit, Phase.generate],  # no shrinking: an example is 8 subprocess runs
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(st.lists(valid_overrides(), min_size=8, max_size=8))
@@ -457,3 +458,10 @@ def test_fuzz_every_valid_config_runs_slam(room_log, tmp_path_factory, tables):
     errors = [line for line in proc.stderr.splitlines() if line.startswith("slam: error:")]
     exits = re.findall(r"^exit \d+ (\d+)$", proc.stdout, flags=re.M)
     assert len(exits) == len(paths) and exits.count("2") == len(errors)  # fmt: skip
+
+
+def test_a_vanishing_search_step_is_a_config_error_not_an_overflow():
+    """Found by the run fuzz: ``loops.search_th_step = 1e-323`` made the search-size rule raise
+    OverflowError (``math.ceil(inf)``) instead of refusing the value."""
+    with pytest.raises(ConfigError, match="candidate poses"):
+        load_config("", overrides=["loops.search_th_step=1e-323"])
