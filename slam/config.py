@@ -399,6 +399,44 @@ class TextureConfig(Validated):
 
 
 @dataclass(frozen=True)
+class QualityConfig(Validated):
+    """Map quality without ground truth (docs/evaluation.md, "Map quality without ground truth")."""
+
+    SECTION: ClassVar[str] = "quality"
+
+    enabled: bool = True
+    """``slam run`` scores its map at the end (metrics.json ``quality``, ``quality.png``)."""
+    resolution: float = bounded(0.1, ge=0.005, le=10.0)
+    """Cell size of the count grids the score uses (m): half the map's resolution halves the
+    cost and changes the figures by about 0.01 (docs/evaluation.md)."""
+    stretch_m: float = bounded(10.0, gt=0.0, le=1e6)
+    """A stretch is this much path (m) of consecutive scans."""
+    separation_m: float = bounded(10.0, ge=0.0, le=1e6)
+    """A stretch is judged against the scans more than this much path (m) away from it."""
+    max_range_m: float = bounded(10.0, gt=0.0, le=MAX_RANGE_M)
+    """Rays are cut at this range (m): farther returns are not judged and clear space only up
+    to here (far points are placed too loosely: 0.3° of heading moves a point 5 cm at 10 m)."""
+    tolerance_m: float = bounded(0.15, gt=0.0, le=100.0)
+    """An endpoint agrees when a surface of the other stretches lies within this distance (m)."""
+    min_free_rays: int = bounded(2, ge=1, le=1000000)
+    """A cell counts as seen free when at least this many rays of the others crossed it (and its
+    log-odds are negative)."""
+    min_incidence_deg: float = bounded(15.0, ge=0.0, lt=90.0)
+    """Beams meeting their surface at less than this angle are not tested for passing through
+    the others' surfaces (a grazing beam skims the wall it ends on)."""
+    max_offset_m: float = bounded(2.0, ge=0.0, le=1000.0)
+    """How far past a conflicting endpoint the others' surface is looked for (m)."""
+    min_checked: int = bounded(200, ge=0)
+    """A stretch is ranked only when at least this many of its returns were judged ..."""
+    min_coverage: float = bounded(0.1, ge=0.0, le=1.0)
+    """... and at least this share of them."""
+    flag_below: float = bounded(0.8, ge=0.0, le=1.0)
+    """A ranked stretch whose score is below this is flagged as inconsistent."""
+    worst: int = bounded(5, ge=0, le=1000)
+    """How many of the worst stretches are reported and marked on ``quality.png``."""
+
+
+@dataclass(frozen=True)
 class VizConfig(Validated):
     """Rerun recording of a run."""
 
@@ -582,6 +620,7 @@ class Config:
     classic: ClassicConfig = field(default_factory=ClassicConfig)
     loops: LoopConfig = field(default_factory=LoopConfig)
     texture: TextureConfig = field(default_factory=TextureConfig)
+    quality: QualityConfig = field(default_factory=QualityConfig)
     viz: VizConfig = field(default_factory=VizConfig)
     checks: ChecksConfig = field(default_factory=ChecksConfig)
     localize: LocalizeConfig = field(default_factory=LocalizeConfig)

@@ -14,6 +14,8 @@ for bit), and writes the run folder atomically (it appears complete or not at al
   (:mod:`slam.io.mapserver`) and the picture without the trajectory;
 * ``texture.npz``, ``texture.png``, ``texture_overlay.png`` — the floor texture on the map's
   grid when the log has RGB-D frames (:mod:`slam.texture`, off with ``--no-texture``);
+* ``quality.png`` — the map-quality score without ground truth (:mod:`slam.eval.quality_run`,
+  ``quality.enabled``), its figures in ``metrics.json`` under ``quality``;
 * ``metrics.json``  — sizes, timings (wall, scans/s, real-time factor, peak memory), filter
   diagnostics, and ATE/RPE when the dataset has a ground-truth trajectory.
 
@@ -169,6 +171,9 @@ def execute(request: RunRequest) -> Result:
             from slam.texture import run_stage
 
             result.metrics.update(run_stage(source.log, result, config, tmp, request.progress))
+            from slam.eval.quality_run import quality_stage
+
+            result.metrics.update(quality_stage(source.log, result.trajectory, config, tmp))
         messages = doubts + sorted({str(w.message) for w in caught})
         clock = clock_warning(result.trajectory.times)
         messages += [clock] if clock else []

@@ -1,10 +1,12 @@
-"""``slam eval RUN_DIR``: accuracy of a run's trajectory against ground truth.
+"""``slam eval RUN_DIR``: how good is a run's trajectory and map, with or without ground truth.
 
-``--relations FILE`` applies the Kümmerle relation metric (CARMEN benchmark logs);
-``--reference FILE.tum`` computes ATE and RPE against a reference trajectory. Both may be given;
-with neither, the ground truth of the run's dataset is used (the 'dataset' of its config.toml, or
---dataset NAME_OR_PATH): the registry's relations file of a CARMEN benchmark log, the
-groundtruth.tum of the demo or of a simulated dataset folder. The command reads
+Without options it scores the map's consistency, which needs no ground truth (each stretch of
+the run is compared with the map of the other stretches, re-reading the run's log; the worst
+stretches are listed and drawn in RUN_DIR/quality.png), and adds the ground truth of the run's
+dataset when it has one (the registry's relations file of a CARMEN benchmark log, the
+groundtruth.tum of the demo or of a simulated dataset folder). ``--relations FILE`` applies the
+Kümmerle relation metric, ``--reference FILE.tum`` computes ATE and RPE against a reference
+trajectory; with either, ``--quality`` adds the map score. The command reads
 ``RUN_DIR/trajectory.tum``, prints a table (or the JSON with ``--json``) and writes the same JSON
 to ``RUN_DIR/eval.json`` atomically (replacing an earlier one). With ``RUN_DIR/map.yaml`` (runs
 since map_server output) the report also gives the map's size and occupied / free / unknown cell
@@ -35,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     parser = subparsers.add_parser(
         "eval",
-        help="evaluate a run's trajectory (relations metric, ATE, RPE)",
+        help="evaluate a run: map quality without ground truth, relations metric, ATE, RPE",
         description=__doc__.split("\n\n")[1].replace("``", "'"),
     )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder to evaluate")
@@ -71,10 +73,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="unit of --delta (default frames)",
     )
     parser.add_argument(
+        "--quality",
+        action="store_true",
+        help="also score the map's consistency without ground truth (the default when neither "
+        "--relations nor --reference is given); re-reads the run's log",
+    )
+    parser.add_argument(
         "--dataset",
         metavar="NAME_OR_PATH",
-        help="dataset whose ground truth to use when neither --relations nor --reference is given "
-        "(default: the 'dataset' of the run's config.toml)",
+        help="the run's log, to re-read for the map score and whose ground truth to use when "
+        "neither --relations nor --reference is given (default: the 'dataset' of the run's "
+        "config.toml, or the log_source its metrics.json recorded)",
     )
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_eval)
@@ -104,14 +113,29 @@ def run_eval(args: argparse.Namespace) -> int:
             raise DataError(f"{path}: {option} expected a file, found a folder")
     result: dict[str, Any] = {"trajectory": str(run_dir / TRAJECTORY_FILE)}
     relations, reference = args.relations, args.reference
-    if relations is None and reference is None:
-        result["dataset"], relations, reference = _dataset_ground_truth(args, run_dir)
+    quality = args.quality or (relations is None and reference is None)
+    ref = None
+    if quality:
+        from slam.eval.quality_run import resolve_run_log
+
+        ref = resolve_run_log(run_dir, data_dir_from(args), args.dataset)
+    implicit = relations is None and reference is None
+    if implicit:
+        result["dataset"] = ref.name
+        relations, reference = _ground_truth_of(ref)
     trajectory = read_tum(run_dir / TRAJECTORY_FILE)
     result["poses"] = len(trajectory)
     if relations is not None:
-        result["relations"] = _relations(
-            trajectory, relations, args.tolerance, run_dir / TRAJECTORY_FILE
-        )
+        try:
+            result["relations"] = _relations(
+                trajectory, relations, args.tolerance, run_dir / TRAJECTORY_FILE
+            )
+        except DataError as exc:
+            if not implicit:
+                raise
+            # The dataset's own relations that match nothing (mit-killian's shared copy has
+            # synthetic times) must not cost the map score that was asked for.
+            print(f"slam: warning: {exc}; left out", file=sys.stderr)
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(trajectory, reference, args))
@@ -119,8 +143,19 @@ def run_eval(args: argparse.Namespace) -> int:
         from slam.io.mapserver import read_map_yaml
 
         result["map"] = read_map_yaml(run_dir / "map.yaml").summary()
+    picture = None
+    if ref is not None:
+        from slam.eval.quality_run import PICTURE, evaluate_run, render_quality
+
+        result["quality"], scored = evaluate_run(run_dir, ref, trajectory)
+        picture = render_quality(scored)
+        result["quality"]["picture"] = str(run_dir / PICTURE)
 
     try:
+        if picture is not None:
+            from slam.eval.quality_run import write_picture
+
+            write_picture(run_dir / PICTURE, picture)
         write_eval_json(run_dir, result)
     except OSError as exc:
         raise DataError(f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})") from None
@@ -158,34 +193,18 @@ def _relations(
     return summary
 
 
-def _dataset_ground_truth(
-    args: argparse.Namespace, run_dir: Path
-) -> tuple[str, Path | None, Path | None]:
-    """The dataset of the run (``--dataset``, else its ``config.toml``) and its ground truth:
-    ``(name, relations file or None, reference trajectory or None)``, one of them set."""
-    from slam.config import load_config
+def _ground_truth_of(ref: Any) -> tuple[Path | None, Path | None]:
+    """The ground truth of the run's dataset ``ref`` when it has one: ``(relations file or None,
+    reference trajectory or None)``; both ``None`` for a log without (the map score stands
+    alone then)."""
     from slam.io import sources
 
-    usage = "give --relations FILE and/or --reference FILE.tum"
-    config_file = run_dir / "config.toml"
-    name = args.dataset
-    if name is None and config_file.is_file():
-        name = load_config("", config_file).dataset or None
-    if name is None:
-        raise UsageError(f"slam eval: {usage} (no --dataset, and {config_file} names no dataset)")
-    where = "--dataset" if args.dataset else f"{config_file}: dataset"
-    ref = sources.resolve(name, data_dir_from(args), where=where, hint=usage)
-    relations = ref.relations
     reference = ref.reference
     if reference is not None:
         sources.ensure(ref, progress=sys.stderr.isatty())  # the demo, generated if absent
         reference = reference if reference.is_file() else None
-    if relations is None and reference is None:
-        expected = sources.GROUND_TRUTH_FILE if ref.reference is not None else "relations file"
-        raise UsageError(
-            f"{where}: dataset {name!r} ({ref.kind}) has no ground truth (no {expected}); {usage}"
-        )
-    return name, relations, reference
+    relations = ref.relations if ref.relations is not None and ref.relations.is_file() else None
+    return relations, reference
 
 
 def _reference(trajectory: Trajectory, path: Path, args: argparse.Namespace) -> dict[str, Any]:

@@ -1,8 +1,8 @@
 """The thin report layer of evaluation: the text table of ``slam eval`` and ``eval.json``.
 
-The result is one JSON-ready dictionary: ``{"relations": {...}}`` for the relation metric and
-flat ``ate_*`` / ``rpe_*`` keys for a reference trajectory (both when both were asked for), plus
-the paths evaluated. Non-finite numbers (a statistic over nothing) are written as ``null``.
+The result is one JSON-ready dictionary: ``{"relations": {...}}`` for the relation metric, flat
+``ate_*`` / ``rpe_*`` keys for a reference trajectory and ``{"quality": {...}}`` for the map score
+without ground truth (each when asked for), plus the paths evaluated. Non-finite numbers (a statistic over nothing) are written as ``null``.
 """
 
 from __future__ import annotations
@@ -108,5 +108,9 @@ def format_table(result: dict[str, Any]) -> str:
                 f"  rmse {_fmt(result['rpe_rot_rmse_deg'], '°', 3)}",
             ),
         ]
+    if "quality" in result:
+        from slam.eval.quality_run import format_quality
+
+        rows += format_quality(result["quality"])
     width = max(len(label) for label, _ in rows)
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows) + "\n"

@@ -1,0 +1,382 @@
+"""Map quality of a run folder: re-read its log, score it, print it, draw ``quality.png``.
+
+The metric itself is :mod:`slam.eval.quality` (pure); this module owns what surrounds it:
+
+* :func:`resolve_run_log` finds the log a run folder came from (``demo``, a registry dataset,
+  or the file/folder path :func:`quality_stage` recorded in ``metrics.json`` as
+  ``log_source``), and :func:`evaluate_run` re-reads its scans through
+  :mod:`slam.io.sources`, as ``slam run`` does;
+* :func:`quality_stage` scores a run at the end of ``slam run`` (``quality.enabled``);
+* :func:`render_quality` draws ``quality.png``; :func:`format_quality` the printed table.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import Config, load_config
+from slam.errors import DataError
+from slam.eval.quality import QualityResult, Rays, map_quality, scan_rays, select_scans, summary
+from slam.io.log import Log, ScanStream
+
+if TYPE_CHECKING:
+    from slam.io.sources import DatasetRef
+    from slam.trajectory import Trajectory
+
+F64 = NDArray[np.float64]
+
+PICTURE = "quality.png"
+"""The picture :func:`evaluate_run` and :func:`quality_stage` write into the run folder."""
+PICTURE_MIN_SIDE = 1200
+"""The picture's long side is at least this many pixels (small maps are enlarged) ..."""
+PICTURE_MAX_SIDE = 3000
+"""... and at most this many (big buildings are reduced)."""
+MAX_DRAWN_CONFLICTS = 300_000
+"""Conflicting endpoints drawn at most (evenly thinned beyond)."""
+
+
+def rays_of(scans: ScanStream, config: Config) -> tuple[F64, Rays]:
+    """Times and rays of the scans a run with ``config`` processed (``filter.every``,
+    ``filter.max_scans``; the lidar's range semantics as :class:`ScanSequence` resolves them)."""
+    idx = select_scans(len(scans), config.filter.every, config.filter.max_scans)
+    lidar = config.lidar
+    range_max = lidar.range_max if lidar.range_max is not None else scans.range_max
+    no_return = lidar.no_return if lidar.no_return is not None else scans.no_return
+    range_min = lidar.range_min if lidar.range_min is not None else scans.range_min
+    angles = scans.angles if scans.angles.ndim == 1 else scans.angles[idx]
+    rays = scan_rays(
+        scans.ranges[idx], angles, scans.laser_offset, range_min, range_max, no_return,
+        config.map.free_range_no_return,
+    )  # fmt: skip
+    return np.asarray(scans.time[idx], dtype=np.float64), rays
+
+
+def poses_at_scans(
+    traj_times: F64, traj_poses: F64, scan_times: F64, where: Path
+) -> tuple[F64, NDArray[np.bool_]]:
+    """Robot pose at each scan: the trajectory's rows themselves when they are one per scan (the
+    times agree to 1e-5 s), else interpolated at the scan times (``odometry`` runs on ECE276A
+    logs write one pose per encoder reading). Returns the poses and which scans have one."""
+    if traj_times.shape == scan_times.shape and np.all(np.abs(traj_times - scan_times) <= 1e-5):
+        return traj_poses, np.ones(scan_times.shape, dtype=bool)
+    from slam.geometry import interpolate_poses
+
+    order = np.argsort(traj_times, kind="stable")
+    t, p = traj_times[order], traj_poses[order]
+    inside = (scan_times >= t[0]) & (scan_times <= t[-1])
+    if not inside.any():
+        raise DataError(
+            f"{where}: its {t.size} poses ({t[0]:.3f}..{t[-1]:.3f} s) cover none of the log's "
+            f"{scan_times.size} scans ({scan_times.min():.3f}..{scan_times.max():.3f} s): "
+            "is it the same log?"
+        )
+    return interpolate_poses(t, p, scan_times[inside]), inside
+
+
+def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -> DatasetRef:
+    """The log ``run_dir`` was made from, resolved by :func:`slam.io.sources.resolve`.
+
+    ``dataset`` (a registry name, ``demo`` or a path) wins; else the ``dataset`` of the run's
+    ``config.toml`` when it is ``demo`` or a registry name; else the ``log_source`` path the run
+    recorded in ``metrics.json`` (a run made from a path records only the file's stem as its
+    dataset); else that stem as a path. A log that is no longer there is a :class:`DataError`.
+    """
+    from slam.io import registry, sources
+
+    run_dir = Path(run_dir)
+    config = _run_config(run_dir)
+    if dataset is not None:
+        return sources.resolve(dataset, data_dir, where="--dataset")
+    name = config.dataset
+    where = f"{run_dir / 'config.toml'}: dataset"
+    if name == "demo" or name in registry.load_registry():
+        return sources.resolve(name, data_dir, where=where)
+    recorded = _recorded_source(run_dir)
+    if recorded is not None:
+        if not recorded.exists():
+            raise DataError(
+                f"{run_dir / 'metrics.json'}: log_source {recorded} no longer exists (the log this "
+                "run was made from); give the log with --dataset PATH"
+            )
+        return sources.resolve(str(recorded), data_dir, where=f"{run_dir / 'metrics.json'}")
+    return sources.resolve(
+        name, data_dir, where=where, hint="the run recorded no log_source; give --dataset PATH"
+    )
+
+
+def _run_config(run_dir: Path) -> Config:
+    path = run_dir / "config.toml"
+    if not path.is_file():
+        raise DataError(
+            f"{path}: not found (the map-quality score needs the configuration `slam run` "
+            "writes to its run folder, to re-read the log)"
+        )
+    return load_config("", path)
+
+
+def _recorded_source(run_dir: Path) -> Path | None:
+    path = run_dir / "metrics.json"
+    if not path.is_file():
+        return None
+    try:
+        value = json.loads(path.read_text()).get("log_source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return Path(value) if isinstance(value, str) and value else None
+
+
+def score_scans(
+    trajectory: Trajectory, scans: ScanStream, config: Config, where: Path
+) -> QualityResult:
+    """Score ``trajectory`` with the scans of its log."""
+    scan_times, rays = rays_of(scans, config)
+    poses, inside = poses_at_scans(trajectory.times, trajectory.poses, scan_times, where)
+    if not inside.all():
+        rays = Rays(rays.ex[inside], rays.ey[inside], rays.kind[inside], rays.laser_xy)
+        scan_times = scan_times[inside]
+    return map_quality(scan_times, poses, rays, config.quality, config.map)
+
+
+def evaluate_run(
+    run_dir: Path, log: DatasetRef, trajectory: Trajectory | None = None
+) -> tuple[dict[str, Any], QualityResult]:
+    """Score the run folder ``run_dir`` (its ``trajectory.tum``, or ``trajectory`` when given,
+    and its ``config.toml``) with the scans of ``log``; return the JSON summary and the result.
+    Writes nothing."""
+    from slam.io import sources
+    from slam.io.tum import read_tum
+
+    run_dir = Path(run_dir)
+    config = _run_config(run_dir)
+    if trajectory is None:
+        trajectory = read_tum(run_dir / "trajectory.tum")
+    scans = sources.load(log, config, need=("scans",)).log.scans
+    if scans is None or len(scans) == 0:
+        raise DataError(f"{log.path}: the log has no laser scans to score the map with")
+    result = score_scans(trajectory, scans, config, run_dir / "trajectory.tum")
+    return summary(result), result
+
+
+def quality_stage(log: Log, trajectory: Trajectory, config: Config, out_dir: Path) -> dict:
+    """The end of ``slam run``: score the run's map when ``quality.enabled`` and the log has
+    scans, write ``quality.png``; return the metrics to add (``quality``, and ``log_source``, so
+    that ``slam eval`` can find the log of a run made from a path). A score that cannot be
+    computed is a warning, never a failed run."""
+    import warnings
+
+    metrics: dict[str, Any] = {}
+    if log.source is not None:
+        metrics["log_source"] = str(Path(log.source).resolve())
+    if not config.quality.enabled or log.scans is None or len(trajectory) == 0:
+        return metrics
+    try:
+        result = score_scans(as_written(trajectory), log.scans, config, out_dir / "trajectory.tum")
+    except DataError as exc:
+        warnings.warn(f"map quality not computed: {exc}", stacklevel=2)
+        return metrics
+    report = summary(result)
+    report.pop("per_stretch")  # metrics.json stays small; `slam eval` lists every stretch
+    write_picture(out_dir / PICTURE, render_quality(result))
+    report["picture"] = PICTURE
+    metrics["quality"] = report
+    return metrics
+
+
+def as_written(trajectory: Trajectory) -> Trajectory:
+    """The trajectory as ``trajectory.tum`` holds it (microseconds and micrometres, the heading
+    through its quaternion), so the score ``slam run`` writes equals what ``slam eval`` finds."""
+    from slam.geometry import quaternion_to_yaw
+    from slam.io.tum import format_tum
+    from slam.trajectory import Trajectory
+
+    data = np.loadtxt(io.StringIO(format_tum(trajectory)), comments="#", ndmin=2)
+    poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], 1)
+    return Trajectory(data[:, 0], poses)
+
+
+def write_picture(path: Path, image: NDArray[np.uint8]) -> None:
+    """Write a BGR image as PNG atomically."""
+    import cv2
+
+    from slam.io.atomic import write_bytes
+
+    ok, data = cv2.imencode(".png", image)
+    if not ok:
+        raise DataError(f"{path}: PNG encoding failed")
+    try:
+        write_bytes(path, data.tobytes())
+    except OSError as exc:
+        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+def score_colour(score: float) -> tuple[int, int, int]:
+    """BGR colour of a stretch score: green at 1, yellow at 0.9, red at 0.6 and below; grey
+    when the stretch was not judged."""
+    if not math.isfinite(score):
+        return (170, 150, 150)
+    u = min(max((score - 0.6) / 0.4, 0.0), 1.0)
+    if u >= 0.75:  # 0.9 .. 1: yellow to green
+        f = (u - 0.75) / 0.25
+        return (0, 230, int(round(255 * (1 - f))))
+    f = u / 0.75  # 0.6 .. 0.9: red to yellow
+    return (0, int(round(230 * f)), 255)
+
+
+def render_quality(result: QualityResult) -> NDArray[np.uint8]:
+    """``quality.png``: the run's map (grey), the conflicting endpoints (red dots), the path
+    coloured by each stretch's score, the worst stretches circled and labelled with their times
+    and scores, and a legend. The long side is 1200–3000 px.
+
+    Long because it is one drawing, step by step (map, dots, path, marks, legend); splitting it
+    would only pass the same dozen local values between helpers.
+    """
+    import cv2
+
+    from slam.eval.quality import UNSEEN_SHADE
+
+    shades = result.shades
+    seen = shades != UNSEEN_SHADE
+    rows = np.flatnonzero(seen.any(axis=1))
+    cols = np.flatnonzero(seen.any(axis=0))
+    pad = int(math.ceil(1.0 / result.resolution))
+    r0, r1 = max(rows[0] - pad, 0), min(rows[-1] + pad + 1, seen.shape[0])
+    c0, c1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, seen.shape[1])
+    del seen
+    grey = shades[r0:r1, c0:c1]
+    image = np.ascontiguousarray(grey[::-1])
+    h, w = image.shape[:2]
+    long_side = max(h, w)
+    scale = max(PICTURE_MIN_SIDE / long_side, 1.0) if long_side < PICTURE_MIN_SIDE else 1.0
+    scale = (
+        min(scale, PICTURE_MAX_SIDE / long_side) if long_side * scale > PICTURE_MAX_SIDE else scale
+    )
+    size = (max(int(round(w * scale)), 1), max(int(round(h * scale)), 1))
+    if scale < 1:  # reducing: keep thin walls dark (a minimum filter first, then average)
+        reach = int(math.ceil(1 / scale))
+        image = cv2.erode(image, np.ones((reach, reach), np.uint8))
+    interpolation = cv2.INTER_NEAREST if scale >= 1 else cv2.INTER_AREA
+    image = cv2.cvtColor(cv2.resize(image, size, interpolation=interpolation), cv2.COLOR_GRAY2BGR)
+    origin = result.origin + np.array([c0, r0]) * result.resolution
+    rows_total = r1 - r0
+
+    def pixels(xy: F64) -> NDArray[np.int32]:
+        cell = (np.asarray(xy, dtype=np.float64) - origin) / result.resolution
+        px = np.stack([cell[..., 0], rows_total - cell[..., 1]], axis=-1) * scale
+        return np.round(px).astype(np.int32)
+
+    unit = max(1, int(round(max(image.shape[:2]) / 1000)))
+    conflicts = result.conflict_points()
+    if conflicts.shape[0] > MAX_DRAWN_CONFLICTS:
+        pick = np.linspace(0, conflicts.shape[0] - 1, MAX_DRAWN_CONFLICTS).astype(np.int64)
+        conflicts = conflicts[pick]
+    if conflicts.shape[0]:
+        px = pixels(conflicts)
+        ok = (px[:, 0] >= 0) & (px[:, 0] < size[0]) & (px[:, 1] >= 0) & (px[:, 1] < size[1])
+        px = px[ok]
+        for d in range(unit):  # dots of `unit` pixels
+            for e in range(unit):
+                x = np.clip(px[:, 0] + d, 0, size[0] - 1)
+                y = np.clip(px[:, 1] + e, 0, size[1] - 1)
+                image[y, x] = (40, 40, 230)
+    for s in result.stretches:
+        path = pixels(result.poses[s.first : s.last + 2, :2]).reshape(-1, 1, 2)
+        cv2.polylines(image, [path], False, score_colour(s.score), 2 * unit + 1, cv2.LINE_AA)
+    start = pixels(result.poses[0, :2])
+    cv2.circle(image, (int(start[0]), int(start[1])), 4 * unit, (200, 110, 20), -1)
+    t0 = float(result.times[0])
+    font, fscale, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.55 * unit, max(1, unit)
+
+    placed: list[tuple[int, int, int, int]] = []
+
+    def label(text: str, org: tuple[int, int], colour: tuple[int, int, int]) -> None:
+        """A label on a white box, moved down until it overlaps no earlier label."""
+        (tw, th), base = cv2.getTextSize(text, font, fscale, thick)
+        x, y = org
+        box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
+        while any(
+            box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed
+        ):
+            y += th + base + 6
+            box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
+        placed.append(box)
+        cv2.rectangle(image, box[:2], box[2:], (255, 255, 255), -1)
+        cv2.putText(image, text, (x, y), font, fscale, colour, thick, cv2.LINE_AA)
+
+    worst = result.worst()
+    for s in worst:
+        path = pixels(result.poses[s.first : s.last + 1, :2]).reshape(-1, 1, 2)
+        cv2.polylines(image, [path], False, (160, 0, 160), 2 * unit, cv2.LINE_AA)
+        cx, cy = (int(v) for v in pixels(np.array(s.place_xy)))
+        radius = 18 * unit
+        cv2.circle(image, (cx, cy), radius, (255, 255, 255), 3 * unit + 2, cv2.LINE_AA)
+        cv2.circle(image, (cx, cy), radius, (160, 0, 160), 2 * unit, cv2.LINE_AA)
+    score = result.score
+    lines = [
+        f"map quality {score:.3f}" if math.isfinite(score) else "map quality n/a",
+        "path: score per stretch (green 1.0, yellow 0.9, red <= 0.6, grey not judged)",
+        "red dots: returns in conflict with the other stretches' map",
+        "purple: worst stretches (path, circle at the conflicts; #rank, time since start, score)",
+    ]
+    y = 22 * unit
+    for text in lines:
+        label(text, (10, y), (20, 20, 20))
+        y += 24 * unit
+    for rank, s in enumerate(worst, start=1):  # labels last, on top of every mark
+        cx, cy = (int(v) for v in pixels(np.array(s.place_xy)))
+        text = f"#{rank} {s.t_start - t0:.0f}-{s.t_end - t0:.0f} s  {s.score:.2f}"
+        label(text, (cx + 18 * unit + 6, cy + 5 * unit), (120, 0, 120))
+    return image
+
+
+def _fmt(value: Any, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def format_quality(report: dict[str, Any]) -> list[tuple[str, str]]:
+    """Rows of the quality part of the ``slam eval`` table."""
+    p = report["parameters"]
+    rows = [
+        (
+            "map quality",
+            f"score {_fmt(report['score'])} (share of judged returns that agree with the map of "
+            f"the other stretches)",
+        ),
+        (
+            "  returns",
+            f"{report['returns']} judged {report['checked']} (coverage {_fmt(report['coverage'])}):"
+            f" agree {report['agree']}, in free space {report['conflict_free']}, through a "
+            f"surface {report['conflict_through']}",
+        ),
+        (
+            "  stretches",
+            f"{report['stretches']} of {p['stretch_m']:g} m ({report['judged_stretches']} ranked):"
+            f" median score {_fmt(report['median_stretch_score'])}, worst "
+            f"{_fmt(report['worst_score'])}, {report['flagged']} below {p['flag_below']:g}",
+        ),
+    ]
+    if report["worst"]:
+        rows.append(
+            ("  worst", "rank  time (s)        path (m)        place (x, y) m    score  offset")
+        )
+    for w in report["worst"]:
+        t, pm, xy = w["time_s"], w["path_m"], w["place_xy"]
+        offset = "n/a" if w["offset_m"] is None else f"{w['offset_m']:.2f} m"
+        rows.append(
+            (
+                "",
+                f"#{w['rank']:<4d}{t[0]:7.1f}-{t[1]:<7.1f} {pm[0]:7.1f}-{pm[1]:<7.1f} "
+                f"({xy[0]:7.2f}, {xy[1]:7.2f})  {_fmt(w['score'])}  {offset}",
+            )
+        )
+    if "picture" in report:
+        rows.append(("  picture", str(report["picture"])))
+    return rows

@@ -1,0 +1,500 @@
+"""Kernels of the map-quality score (:mod:`slam.eval.quality`): ray counts and beam verdicts.
+
+The score compares each stretch of a run with the map the *other* stretches build. That map is
+kept as integer counts per cell, hits (rays that ended in the cell on an obstacle) and misses
+(rays that passed through it, or ended there without an echo), so the contribution of any set
+of scans can be added and removed again exactly (log-odds, being clamped, cannot be un-added).
+Cells follow the project's convention: cell ``(ix, iy)`` has its lower-left corner at
+``(ox + ix·res, oy + iy·res)``.
+
+**Layout.** Square tiles of ``T`` × ``T`` cells (``T`` = :data:`TILE`) with both counts side by
+side, allocated only where some ray passes: ``table[iy // T, ix // T]`` is the tile's index in
+``pool`` (−1: no ray came there, every count 0), and ``pool[t, iy % T, ix % T, layer]`` holds
+the hits (layer 0) and misses (layer 1). A ray walks through neighbouring cells; in a plain
+row-major grid every step in y lands on another memory page, in tiles the cells it visits share a
+few pages; and a building's corridors fill a small part of its bounding box, so the pool is a
+fraction of a full grid. :func:`touched_tiles` finds the tiles to allocate, :func:`to_rows`
+returns plain ``(H, W)`` grids, :func:`map_shades` a one-byte picture.
+
+Rays are given in the robot frame, one row per scan: ``ex[k, j], ey[k, j]`` is where ray ``j``
+of scan ``k`` ends, ``kind[k, j]`` is :data:`NO_RAY`, :data:`HIT` (an obstacle return) or
+:data:`FREE` (a reading past the obstacle range: clears space only), and ``(lx, ly)`` is the
+laser's position in the robot frame. The robot poses are ``poses[k] = (x, y, θ)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+TILE = 16
+"""Side of a tile of the count layout (cells)."""
+SHIFT = 4
+"""``log2(TILE)``."""
+
+NO_RAY = 0
+"""``kind`` of a beam that casts no ray (invalid reading, or "no return")."""
+HIT = 1
+"""``kind`` of an obstacle return: the end cell is a hit, the cells before it misses."""
+FREE = 2
+"""``kind`` of a reading beyond the obstacle range: every cell of the ray is a miss."""
+
+ISOLATED = -2
+"""Verdict of a return with no neighbouring return close to it (a leg, a cable, a mixed pixel:
+nothing that traces a surface), not judged."""
+UNCHECKED = -1
+"""Verdict of a beam that is not an obstacle return (not judged)."""
+UNKNOWN = 0
+"""Verdict: the other stretches saw neither a surface near the endpoint nor free space there."""
+AGREE = 1
+"""Verdict: a surface of the other stretches lies within the tolerance of the endpoint."""
+CONFLICT_FREE = 2
+"""Verdict: the endpoint lies in space the other stretches saw as free, no surface near it."""
+CONFLICT_THROUGH = 3
+"""Verdict: no surface near the endpoint, and the beam passed through a surface of the others."""
+
+
+def empty_counts(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(table, pool)`` of zero counts with every tile of a ``height × width`` grid allocated."""
+    ty = -(-height // TILE)
+    tx = -(-width // TILE)
+    table = np.arange(ty * tx, dtype=np.int32).reshape(ty, tx)
+    return table, np.zeros((ty * tx, TILE, TILE, 2), dtype=np.int32)
+
+
+def counts_for(touched: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(table, pool)`` of zero counts with the ``touched`` tiles ``(TY, TX)`` allocated."""
+    table = np.full(touched.shape, -1, dtype=np.int32)
+    table[touched] = np.arange(int(touched.sum()), dtype=np.int32)
+    return table, np.zeros((int(touched.sum()), TILE, TILE, 2), dtype=np.int32)
+
+
+def to_rows(table: np.ndarray, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plain ``(H, W)`` hit and miss grids (rows up in y) of tiled counts."""
+    ty, tx = table.shape
+    padded = np.concatenate([pool, np.zeros((1, TILE, TILE, 2), np.int32)])
+    tiles = padded[np.where(table < 0, pool.shape[0], table)]  # (TY, TX, T, T, 2)
+    plain = tiles.transpose(0, 2, 1, 3, 4).reshape(ty * TILE, tx * TILE, 2)
+    return np.ascontiguousarray(plain[..., 0]), np.ascontiguousarray(plain[..., 1])
+
+
+@njit(cache=True, inline="always")
+def _hits(table, pool, x, y):
+    t = table[y >> SHIFT, x >> SHIFT]
+    return 0 if t < 0 else pool[t, y & (TILE - 1), x & (TILE - 1), 0]
+
+
+@njit(cache=True, inline="always")
+def _misses(table, pool, x, y):
+    t = table[y >> SHIFT, x >> SHIFT]
+    return 0 if t < 0 else pool[t, y & (TILE - 1), x & (TILE - 1), 1]
+
+
+@njit(cache=True, inline="always")
+def _add(table, pool, x, y, layer, value):
+    pool[table[y >> SHIFT, x >> SHIFT], y & (TILE - 1), x & (TILE - 1), layer] += value
+
+
+@njit(cache=True)
+def touched_tiles(
+    tiles_y: int,
+    tiles_x: int,
+    ox: float,
+    oy: float,
+    res: float,
+    poses: np.ndarray,
+    lx: float,
+    ly: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    kind: np.ndarray,
+) -> np.ndarray:
+    """``(TY, TX)`` mask of the tiles holding a cell some ray passes through or ends in (the
+    cells :func:`count_rays` updates)."""
+    mask = np.zeros((tiles_y, tiles_x), dtype=np.bool_)
+    h = tiles_y * TILE
+    w = tiles_x * TILE
+    for k in range(poses.shape[0]):
+        c = math.cos(poses[k, 2])
+        s = math.sin(poses[k, 2])
+        sx = poses[k, 0] + c * lx - s * ly
+        sy = poses[k, 1] + s * lx + c * ly
+        x0 = int(math.floor((sx - ox) / res))
+        y0 = int(math.floor((sy - oy) / res))
+        for j in range(kind.shape[1]):
+            if kind[k, j] == NO_RAY:
+                continue
+            wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
+            wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
+            x1 = int(math.floor((wx - ox) / res))
+            y1 = int(math.floor((wy - oy) / res))
+            dx = abs(x1 - x0)
+            dy = abs(y1 - y0)
+            stepx = 1 if x1 >= x0 else -1
+            stepy = 1 if y1 >= y0 else -1
+            x, y = x0, y0
+            n = max(dx, dy)
+            err = 2 * dy - dx if dx >= dy else 2 * dx - dy
+            for _ in range(n + 1):
+                if 0 <= x < w and 0 <= y < h:
+                    mask[y >> SHIFT, x >> SHIFT] = True
+                if dx >= dy:
+                    if err > 0:
+                        y += stepy
+                        err -= 2 * dx
+                    err += 2 * dy
+                    x += stepx
+                else:
+                    if err > 0:
+                        x += stepx
+                        err -= 2 * dy
+                    err += 2 * dx
+                    y += stepy
+    return mask
+
+
+@njit(cache=True)
+def count_rays(
+    table: np.ndarray,
+    pool: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    poses: np.ndarray,
+    lx: float,
+    ly: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    kind: np.ndarray,
+    k0: int,
+    k1: int,
+    sign: int,
+) -> None:
+    """Add ``sign`` (+1 or −1) to the counts of the rays of scans ``k0 .. k1 − 1``.
+
+    Every cell a ray passes through gets a miss (Bresenham, end cell excluded); the end cell gets
+    a hit for a :data:`HIT` ray and a miss for a :data:`FREE` ray, as the occupancy map does.
+    Cells outside the grid are skipped (the caller sizes the grid to hold every ray).
+    """
+    h = table.shape[0] * TILE
+    w = table.shape[1] * TILE
+    for k in range(k0, k1):
+        c = math.cos(poses[k, 2])
+        s = math.sin(poses[k, 2])
+        sx = poses[k, 0] + c * lx - s * ly
+        sy = poses[k, 1] + s * lx + c * ly
+        x0 = int(math.floor((sx - ox) / res))
+        y0 = int(math.floor((sy - oy) / res))
+        for j in range(kind.shape[1]):
+            what = kind[k, j]
+            if what == NO_RAY:
+                continue
+            wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
+            wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
+            x1 = int(math.floor((wx - ox) / res))
+            y1 = int(math.floor((wy - oy) / res))
+            dx = abs(x1 - x0)
+            dy = abs(y1 - y0)
+            stepx = 1 if x1 >= x0 else -1
+            stepy = 1 if y1 >= y0 else -1
+            x, y = x0, y0
+            if dx >= dy:
+                err = 2 * dy - dx
+                for _ in range(dx):
+                    if 0 <= x < w and 0 <= y < h:
+                        _add(table, pool, x, y, 1, sign)
+                    if err > 0:
+                        y += stepy
+                        err -= 2 * dx
+                    err += 2 * dy
+                    x += stepx
+            else:
+                err = 2 * dx - dy
+                for _ in range(dy):
+                    if 0 <= x < w and 0 <= y < h:
+                        _add(table, pool, x, y, 1, sign)
+                    if err > 0:
+                        x += stepx
+                        err -= 2 * dy
+                    err += 2 * dx
+                    y += stepy
+            if 0 <= x1 < w and 0 <= y1 < h:
+                _add(table, pool, x1, y1, 0 if what == HIT else 1, sign)
+
+
+@njit(cache=True)
+def _occupied(table, pool, x, y, l_hit, l_miss, occupied_above):
+    n_hit = _hits(table, pool, x, y)
+    return n_hit > 0 and n_hit * l_hit + _misses(table, pool, x, y) * l_miss > occupied_above
+
+
+@njit(cache=True)
+def _solid(table, pool, x, y):
+    n_hit = _hits(table, pool, x, y)
+    return n_hit > 0 and n_hit >= _misses(table, pool, x, y)
+
+
+@njit(cache=True)
+def _free(table, pool, x, y, l_hit, l_miss, min_free_rays):
+    n_miss = _misses(table, pool, x, y)
+    return n_miss >= min_free_rays and _hits(table, pool, x, y) * l_hit + n_miss * l_miss < 0.0
+
+
+@njit(cache=True)
+def _near_surface(table, pool, x, y, disc, w, h, l_hit, l_miss, occupied_above):
+    for d in range(disc.shape[0]):
+        cx = x + disc[d, 0]
+        cy = y + disc[d, 1]
+        if (
+            0 <= cx < w
+            and 0 <= cy < h
+            and _occupied(table, pool, cx, cy, l_hit, l_miss, occupied_above)
+        ):
+            return True
+    return False
+
+
+@njit(cache=True)
+def _near_hit(table, pool, x, y, disc, w, h):
+    for d in range(disc.shape[0]):
+        cx = x + disc[d, 0]
+        cy = y + disc[d, 1]
+        if 0 <= cx < w and 0 <= cy < h and _hits(table, pool, cx, cy) > 0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _incidence_sin(ex, ey, kind, k, j, sx, sy, wx, wy, c, s, px, py, gap, relative_gap):
+    """|sin| of the angle between beam ``j`` and the surface the scan's neighbouring returns
+    trace (1: the beam meets it head on, 0: it grazes it); −1 when no neighbour is close."""
+    nb = kind.shape[1]
+    rng = math.hypot(wx - sx, wy - sy)
+    limit = gap + relative_gap * rng
+    tx = 0.0
+    ty = 0.0
+    found = False
+    for nj in (j - 1, j + 1):
+        if nj < 0 or nj >= nb or kind[k, nj] != HIT:
+            continue
+        nx = px + c * ex[k, nj] - s * ey[k, nj]
+        ny = py + s * ex[k, nj] + c * ey[k, nj]
+        ddx = nx - wx
+        ddy = ny - wy
+        if math.hypot(ddx, ddy) < limit:
+            if nj < j:
+                ddx, ddy = -ddx, -ddy
+            tx += ddx
+            ty += ddy
+            found = True
+    norm = math.hypot(tx, ty)
+    if not found or norm < 1e-9 or rng < 1e-9:
+        return -1.0
+    ux = (wx - sx) / rng
+    uy = (wy - sy) / rng
+    return abs(ux * ty - uy * tx) / norm
+
+
+@njit(cache=True)
+def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
+    """Distance along the ray from cell ``(x0, y0)`` to cell ``(x1, y1)`` (``r`` metres long) of
+    the first solid cell it crosses (Bresenham) before ``stop`` metres, or −1. Solid: at least
+    as many rays ended in the cell as passed through it (a cell a door frame's corner only
+    partly fills is crossed by more rays than end in it, and is not solid)."""
+    dx = abs(x1 - x0)
+    dy = abs(y1 - y0)
+    n = max(dx, dy)
+    stepx = 1 if x1 >= x0 else -1
+    stepy = 1 if y1 >= y0 else -1
+    x, y = x0, y0
+    major_x = dx >= dy
+    err = 2 * dy - dx if major_x else 2 * dx - dy
+    for i in range(n):
+        along = r * i / n
+        if along >= stop:
+            break
+        if 0 <= x < w and 0 <= y < h and _solid(table, pool, x, y):
+            return along
+        if major_x:
+            if err > 0:
+                y += stepy
+                err -= 2 * dx
+            err += 2 * dy
+            x += stepx
+        else:
+            if err > 0:
+                x += stepx
+                err -= 2 * dy
+            err += 2 * dx
+            y += stepy
+    return -1.0
+
+
+@njit(cache=True)
+def classify_beams(
+    table: np.ndarray,
+    pool: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    poses: np.ndarray,
+    lx: float,
+    ly: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    kind: np.ndarray,
+    k0: int,
+    k1: int,
+    disc: np.ndarray,
+    tolerance: float,
+    l_hit: float,
+    l_miss: float,
+    occupied_above: float,
+    min_free_rays: int,
+    min_incidence_sin: float,
+    max_offset: float,
+    neighbour_gap: float,
+    neighbour_relative_gap: float,
+    verdict: np.ndarray,
+    offset: np.ndarray,
+) -> None:
+    """Judge each obstacle return of scans ``k0 .. k1 − 1`` against the counts (the map of the
+    *other* stretches); write ``verdict[k, j]`` and the signed ``offset[k, j]`` (m).
+
+    A return with no neighbouring return close to it (within ``neighbour_gap +
+    neighbour_relative_gap·r``) traces no surface and is :data:`ISOLATED` (not judged). For
+    another return ending at cell ``e``, ``r`` metres from the laser along unit direction ``u``:
+
+    * :data:`AGREE` when a cell within ``tolerance`` of ``e`` (the offsets ``disc``) is occupied
+      in the others' map; offset 0;
+    * else :data:`CONFLICT_THROUGH` when the ray crossed a solid cell at ``s < r − r_excl``
+      along it, ``r_excl = tolerance / sin β`` (β: incidence on the surface the scan's own
+      neighbouring returns trace; a beam that grazes it, ``sin β < min_incidence_sin``, is not
+      tested this way); offset ``r − s > 0`` (behind the others' wall);
+    * else :data:`CONFLICT_FREE` when ``e`` is a free cell of the others, no cell within
+      ``tolerance`` of it holds a single hit of theirs, and the cell at ``e + tolerance·u`` was
+      observed by them too (a wall face the others only skimmed is cleared by their grazing rays
+      in a thin band, but some of their rays still ended there, and the inside of the wall
+      behind it was never observed); offset ``−d``,
+      ``d`` how far past ``e`` along the beam the first occupied cell lies (NaN beyond
+      ``max_offset``);
+    * else :data:`UNKNOWN` (the others did not observe that place); offset NaN.
+
+    A cell is occupied when it has hits and ``hits·l_hit + misses·l_miss > occupied_above``,
+    solid when it has hits and ``hits ≥ misses``, free when it has at least ``min_free_rays``
+    misses and that sum is negative. Beams that are not
+    returns get :data:`UNCHECKED`. Long because the four tests share the beam's geometry.
+    """
+    h = table.shape[0] * TILE
+    w = table.shape[1] * TILE
+    nb = kind.shape[1]
+    for k in range(k0, k1):
+        c = math.cos(poses[k, 2])
+        s = math.sin(poses[k, 2])
+        px = poses[k, 0]
+        py = poses[k, 1]
+        sx = px + c * lx - s * ly
+        sy = py + s * lx + c * ly
+        x0 = int(math.floor((sx - ox) / res))
+        y0 = int(math.floor((sy - oy) / res))
+        for j in range(nb):
+            offset[k, j] = np.nan
+            if kind[k, j] != HIT:
+                verdict[k, j] = UNCHECKED
+                continue
+            wx = px + c * ex[k, j] - s * ey[k, j]
+            wy = py + s * ex[k, j] + c * ey[k, j]
+            x1 = int(math.floor((wx - ox) / res))
+            y1 = int(math.floor((wy - oy) / res))
+            if not (0 <= x1 < w and 0 <= y1 < h):
+                verdict[k, j] = UNKNOWN
+                continue
+            sin_b = _incidence_sin(
+                ex, ey, kind, k, j, sx, sy, wx, wy, c, s, px, py,
+                neighbour_gap, neighbour_relative_gap,
+            )  # fmt: skip
+            if sin_b < 0.0:
+                verdict[k, j] = ISOLATED
+                continue
+            if _near_surface(table, pool, x1, y1, disc, w, h, l_hit, l_miss, occupied_above):
+                verdict[k, j] = AGREE
+                offset[k, j] = 0.0
+                continue
+            r = math.hypot(wx - sx, wy - sy)
+            ux = (wx - sx) / r if r > 1e-9 else 0.0
+            uy = (wy - sy) / r if r > 1e-9 else 0.0
+            if sin_b >= min_incidence_sin:
+                through = _through(table, pool, x0, y0, x1, y1, r, r - tolerance / sin_b, w, h)
+                if through >= 0.0:
+                    verdict[k, j] = CONFLICT_THROUGH
+                    offset[k, j] = r - through
+                    continue
+            bx = int(math.floor((wx + ux * tolerance - ox) / res))
+            by = int(math.floor((wy + uy * tolerance - oy) / res))
+            if not (
+                _free(table, pool, x1, y1, l_hit, l_miss, min_free_rays)
+                and not _near_hit(table, pool, x1, y1, disc, w, h)
+                and 0 <= bx < w
+                and 0 <= by < h
+                and (
+                    _hits(table, pool, bx, by) > 0 or _misses(table, pool, bx, by) >= min_free_rays
+                )
+            ):
+                verdict[k, j] = UNKNOWN
+                continue
+            verdict[k, j] = CONFLICT_FREE
+            # How far in front of the others' surface: march on along the beam in half cells.
+            step = 0.5 * res
+            for i in range(1, int(max_offset / step) + 1):
+                qx = int(math.floor((wx + ux * step * i - ox) / res))
+                qy = int(math.floor((wy + uy * step * i - oy) / res))
+                if not (0 <= qx < w and 0 <= qy < h):
+                    break
+                if _occupied(table, pool, qx, qy, l_hit, l_miss, occupied_above):
+                    offset[k, j] = -step * i
+                    break
+
+
+@njit(cache=True)
+def map_shades(
+    table: np.ndarray, pool: np.ndarray, l_hit: float, l_miss: float, unknown: int
+) -> np.ndarray:
+    """The counts as a picture: ``(H, W)`` uint8, rows up in y, ``255·(1 − p)`` with ``p`` the
+    occupancy probability of the unclamped log-odds ``hits·l_hit + misses·l_miss`` (clipped to
+    ±6), and ``unknown`` where no ray came. One byte per cell instead of the counts' eight."""
+    ty, tx = table.shape
+    out = np.empty((ty * TILE, tx * TILE), dtype=np.uint8)
+    for y in range(ty * TILE):
+        for x in range(tx * TILE):
+            n_hit = _hits(table, pool, x, y)
+            n_miss = _misses(table, pool, x, y)
+            if n_hit == 0 and n_miss == 0:
+                out[y, x] = unknown
+                continue
+            lo = min(max(n_hit * l_hit + n_miss * l_miss, -6.0), 6.0)
+            out[y, x] = int(255.0 / (1.0 + math.exp(lo)) + 0.5)
+    return out
+
+
+@njit(cache=True)
+def ray_bounds(poses: np.ndarray, lx: float, ly: float, ex: np.ndarray, ey: np.ndarray,
+               kind: np.ndarray) -> np.ndarray:  # fmt: skip
+    """``(xmin, ymin, xmax, ymax)`` of every ray end and laser position (world frame)."""
+    out = np.array([np.inf, np.inf, -np.inf, -np.inf])
+    for k in range(poses.shape[0]):
+        c = math.cos(poses[k, 2])
+        s = math.sin(poses[k, 2])
+        for j in range(-1, kind.shape[1]):
+            if j >= 0 and kind[k, j] == NO_RAY:
+                continue
+            px = lx if j < 0 else ex[k, j]
+            py = ly if j < 0 else ey[k, j]
+            wx = poses[k, 0] + c * px - s * py
+            wy = poses[k, 1] + s * px + c * py
+            out[0] = min(out[0], wx)
+            out[1] = min(out[1], wy)
+            out[2] = max(out[2], wx)
+            out[3] = max(out[3], wy)
+    return out

@@ -1,0 +1,176 @@
+"""``slam eval RUN_DIR`` without ground truth, and the score ``slam run`` writes at its end: the
+table, eval.json, quality.png, and one-line errors (exit 2) for run folders that cannot be
+scored."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from slam.cli import main
+
+SCANS = 900  # every other scan of the 45 s log: one loop, back past the start
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory) -> Path:
+    """The simulator's small loop (45 s, no RGB-D) as an ECE276A folder."""
+    from slam.sim.dataset import SimOptions, generate_dataset
+
+    folder = tmp_path_factory.mktemp("quality") / "small"
+    generate_dataset(folder, SimOptions(scenario="small", seed=3, rgbd=False))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def run_folder(small_log, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("quality-run") / "run"
+    assert main(["run", str(small_log), "--out", str(out), "--every", "2", "--quiet",
+                 "--no-record"]) == 0  # fmt: skip
+    return out
+
+
+def copy_run(run_folder: Path, folder: Path) -> Path:
+    """A copy of the run folder as `slam run` left it (no eval.json, no quality.png)."""
+    shutil.copytree(run_folder, folder, ignore=shutil.ignore_patterns("eval.json", "quality.png"))
+    return folder
+
+
+def one_line_error(capsys) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+def test_slam_run_scores_its_map(run_folder):
+    metrics = json.loads((run_folder / "metrics.json").read_text())
+    quality = metrics["quality"]
+    assert metrics["log_source"].endswith("small")
+    assert quality["score"] > 0.99  # the filter closes this small loop
+    assert quality["stretches"] == 3 and quality["judged_stretches"] == 2
+    assert quality["returns"] > 500_000 and quality["coverage"] > 0.4
+    assert quality["picture"] == "quality.png"
+    assert "per_stretch" not in quality  # metrics.json stays small
+    image = cv2.imread(str(run_folder / "quality.png"))
+    assert image is not None and max(image.shape[:2]) >= 1200
+
+
+def test_eval_without_reference_prints_writes_and_draws(run_folder, capsys):
+    (run_folder / "quality.png").unlink()
+    assert main(["eval", str(run_folder)]) == 0
+    out = capsys.readouterr().out
+    assert "map quality  score 1.000" in out or "map quality  score 0.99" in out
+    assert "stretches  3 of 10 m (2 ranked)" in out
+    assert "worst      rank  time (s)" in out
+    report = json.loads((run_folder / "eval.json").read_text())
+    quality = report["quality"]
+    assert report["poses"] == SCANS and "relations" not in report
+    assert len(quality["per_stretch"]) == 3
+    assert quality["per_stretch"][0]["scans"] == [0, quality["per_stretch"][1]["scans"][0] - 1]
+    assert (
+        quality["checked"]
+        == quality["agree"] + quality["conflict_free"] + quality["conflict_through"]
+    )
+    # The same figures as the run's own score (same trajectory, same scans, same parameters).
+    metrics = json.loads((run_folder / "metrics.json").read_text())["quality"]
+    for key in ("score", "coverage", "checked", "agree", "worst_score"):
+        assert quality[key] == metrics[key]
+    image = cv2.imread(str(run_folder / "quality.png"))
+    assert image is not None and max(image.shape[:2]) >= 1200
+    assert not list(run_folder.glob(".*"))  # no temporary file left behind
+
+
+def test_eval_with_reference_adds_quality_only_when_asked(run_folder, small_log, capsys):
+    reference = small_log / "groundtruth.tum"
+    assert main(["eval", str(run_folder), "--reference", str(reference), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert "quality" not in report and report["ate_rmse"] < 0.05
+    assert main(["eval", str(run_folder), "--reference", str(reference), "--quality",
+                 "--json"]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    assert report["ate_rmse"] < 0.05 and report["quality"]["score"] > 0.99
+
+
+def test_an_opened_loop_in_a_run_folder_scores_worse(run_folder, tmp_path, capsys):
+    """The same run folder with its trajectory bent after the midpoint: the score drops."""
+    from slam.geometry import compose, relative
+    from slam.io.tum import read_tum, write_tum
+
+    bent = copy_run(run_folder, tmp_path / "bent")
+    times, poses = read_tum(bent / "trajectory.tum")
+    steps = relative(poses[:-1], poses[1:])
+    half = len(poses) // 2
+    for k in range(half, len(poses) - 1):
+        step = steps[k] * np.array([1.015, 1.015, 1.0]) + np.array([0, 0, np.radians(8) / half])
+        poses[k + 1] = compose(poses[k], step)
+    write_tum(bent / "trajectory.tum", times, poses)
+    assert main(["eval", str(bent), "--json"]) == 0
+    bad = json.loads(capsys.readouterr().out)["quality"]
+    good = json.loads((run_folder / "metrics.json").read_text())["quality"]
+    assert bad["score"] < good["score"] - 0.1
+    # The worst stretch is one of the two passes by the start, where the bent half meets the first.
+    assert bad["worst"][0]["index"] in (0, 2) and bad["worst"][0]["score"] < 0.85
+
+
+def test_run_folder_without_trajectory(run_folder, tmp_path, capsys):
+    broken = copy_run(run_folder, tmp_path / "broken")
+    (broken / "trajectory.tum").unlink()
+    assert main(["eval", str(broken)]) == 2
+    assert "broken/trajectory.tum: trajectory file not found" in one_line_error(capsys)
+    assert not (broken / "eval.json").exists()
+
+
+def test_run_folder_without_config(run_folder, tmp_path, capsys):
+    broken = copy_run(run_folder, tmp_path / "noconfig")
+    (broken / "config.toml").unlink()
+    assert main(["eval", str(broken)]) == 2
+    assert "noconfig/config.toml: not found" in one_line_error(capsys)
+    assert not (broken / "eval.json").exists() and not (broken / "quality.png").exists()
+
+
+def test_log_no_longer_present(run_folder, small_log, tmp_path, capsys):
+    moved = copy_run(run_folder, tmp_path / "moved")
+    gone = tmp_path / "gone"
+    metrics = json.loads((moved / "metrics.json").read_text())
+    metrics["log_source"] = str(gone)
+    (moved / "metrics.json").write_text(json.dumps(metrics))
+    assert main(["eval", str(moved)]) == 2
+    err = one_line_error(capsys)
+    assert f"log_source {gone} no longer exists" in err and "--dataset PATH" in err
+    assert not (moved / "eval.json").exists() and not (moved / "quality.png").exists()
+    # Given the log again, the same folder scores as before.
+    assert main(["eval", str(moved), "--dataset", str(small_log), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["quality"]["score"] > 0.99
+    assert main(["eval", str(moved), "--dataset", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere: log not found" in one_line_error(capsys)
+
+
+def test_a_run_of_another_log_is_refused(run_folder, tmp_path, capsys):
+    other = copy_run(run_folder, tmp_path / "other")
+    text = (other / "trajectory.tum").read_text().splitlines()
+    shifted = []
+    for line in text:
+        if line.startswith("#") or not line.strip():
+            shifted.append(line)
+            continue
+        t, *rest = line.split()
+        shifted.append(" ".join([f"{float(t) + 1e5:.6f}", *rest]))
+    (other / "trajectory.tum").write_text("\n".join(shifted) + "\n")
+    assert main(["eval", str(other)]) == 2
+    assert "cover none of the log's" in one_line_error(capsys)
+
+
+def test_the_score_can_be_switched_off(small_log, tmp_path):
+    out = tmp_path / "off"
+    assert main(["run", str(small_log), "--out", str(out), "--max-scans", "50", "--quiet",
+                 "--no-record", "--set", "quality.enabled=false"]) == 0  # fmt: skip
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert "quality" not in metrics and metrics["log_source"].endswith("small")
+    assert not (out / "quality.png").exists()
+    assert "enabled = false" in (out / "config.toml").read_text().split("[quality]")[1]

@@ -1,0 +1,301 @@
+"""Map quality without ground truth (slam.eval.quality): the kernels' verdicts on hand-made
+geometry, stretches, the simulated loop closed versus opened, and the score against relations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from slam.config import MapConfig, QualityConfig
+from slam.eval.quality import (
+    Rays,
+    map_quality,
+    rank_correlation,
+    scan_rays,
+    stretch_bounds,
+    stretch_relation_errors,
+    summary,
+    within_range,
+)
+from slam.geometry import compose, relative
+from slam.io.relations import Relations
+from slam.kernels.quality import (
+    AGREE,
+    CONFLICT_FREE,
+    CONFLICT_THROUGH,
+    HIT,
+    ISOLATED,
+    UNCHECKED,
+    UNKNOWN,
+    classify_beams,
+    count_rays,
+    counts_for,
+    empty_counts,
+    to_rows,
+    touched_tiles,
+)
+
+RES = 0.05
+ORIGIN = (-1.0, -3.0)
+
+
+def wall_scan(x_wall: float, half_width: float = 1.0, beams: int = 41) -> tuple[np.ndarray, ...]:
+    """Robot-frame ray ends of a laser at the origin looking at the wall x = ``x_wall``."""
+    y = np.linspace(-half_width, half_width, beams)
+    ex = np.full((1, beams), x_wall, dtype=np.float32)
+    ey = y[None, :].astype(np.float32)
+    kind = np.full((1, beams), HIT, dtype=np.int8)
+    return ex, ey, kind
+
+
+def counts_seeing_wall(x_wall: float) -> tuple[np.ndarray, np.ndarray]:
+    """Counts of a dense scan from the origin ending on the wall x = ``x_wall`` (a hundred times,
+    so every cell in front of the wall is crossed by many rays)."""
+    counts = empty_counts(120, 80)
+    ex, ey, kind = wall_scan(x_wall, half_width=1.6, beams=401)
+    poses = np.zeros((100, 3))
+    ex, ey, kind = (np.repeat(a, 100, axis=0) for a in (ex, ey, kind))
+    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, poses, 0.0, 0.0, ex, ey, kind, 0, 100, 1)
+    return counts
+
+
+def classify(counts: tuple[np.ndarray, np.ndarray], x_wall: float, tolerance: float = 0.15):
+    """Verdicts and offsets of one scan from the origin ending on the wall x = ``x_wall``."""
+    ex, ey, kind = wall_scan(x_wall)
+    verdict = np.empty(kind.shape, np.int8)
+    offset = np.empty(kind.shape, np.float32)
+    disc = np.array([[dx, dy] for dx in range(-3, 4) for dy in range(-3, 4)
+                     if (dx * dx + dy * dy) * RES**2 <= tolerance**2 + 1e-12])  # fmt: skip
+    mc = MapConfig()
+    classify_beams(
+        *counts, ORIGIN[0], ORIGIN[1], RES, np.zeros((1, 3)), 0.0, 0.0, ex, ey, kind, 0, 1, disc,
+        tolerance, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
+        math.sin(math.radians(15)), 2.0, 0.1, 0.02, verdict, offset,
+    )  # fmt: skip
+    return verdict[0], offset[0]
+
+
+def test_counts_add_and_remove_exactly():
+    counts = counts_seeing_wall(2.0)
+    hits, misses = to_rows(*counts)
+    assert hits.sum() == 100 * 401  # every return is one hit
+    # The cell on y = 0 just before the wall: crossed by the central ray and its neighbours.
+    ix, iy = int((1.9 - ORIGIN[0]) / RES), int((0.0 - ORIGIN[1]) / RES)
+    assert misses[iy, ix] >= 100 and misses[iy, ix] % 100 == 0 and hits[iy, ix] == 0
+    ex, ey, kind = (np.repeat(a, 100, axis=0) for a in wall_scan(2.0, half_width=1.6, beams=401))
+    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, np.zeros((100, 3)), 0.0, 0.0, ex, ey, kind,
+               0, 100, -1)  # fmt: skip
+    assert not counts[1].any()
+
+
+def test_tiles_are_allocated_where_rays_pass_and_count_the_same():
+    """Counts in the tiles :func:`touched_tiles` allocates equal those of a full grid."""
+    rng = np.random.default_rng(4)
+    n, beams = 30, 50
+    poses = np.column_stack([rng.uniform(0, 2, n), rng.uniform(-1, 1, n), rng.uniform(-3, 3, n)])
+    reach = rng.uniform(0.2, 1.5, (n, beams))
+    angle = np.linspace(-1.5, 1.5, beams)[None, :]
+    ex = (reach * np.cos(angle)).astype(np.float32)
+    ey = (reach * np.sin(angle)).astype(np.float32)
+    kind = rng.choice(np.array([HIT, 2], np.int8), (n, beams))
+    full = empty_counts(120, 80)
+    count_rays(*full, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind, 0, n, 1)
+    touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind)
+    assert 0 < touched.sum() < touched.size  # rays of at most 1.6 m miss part of the 4 x 6 m
+    sparse = counts_for(touched)
+    count_rays(*sparse, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind, 0, n, 1)
+    for a, b in zip(to_rows(*full), to_rows(*sparse), strict=True):
+        assert np.array_equal(a, b) and a.sum() > 0
+
+
+def test_the_four_verdicts_on_a_wall():
+    # The others saw the wall where this scan sees it: every return agrees.
+    verdict, offset = classify(counts_seeing_wall(2.0), 2.0)
+    assert (verdict == AGREE).all() and (offset == 0).all()
+    # The others saw it 0.5 m further: this scan's endpoints lie in their free space, 0.5 m in
+    # front of their wall (the offset is measured along the beam, so it grows off-axis).
+    verdict, offset = classify(counts_seeing_wall(2.5), 2.0)
+    assert (verdict == CONFLICT_FREE).all()
+    assert offset[20] == pytest.approx(-0.5, abs=RES)
+    assert (offset <= -0.45).all() and (offset >= -0.7).all()
+    # The others saw it 0.5 m nearer: this scan's beams pass through their wall.
+    verdict, offset = classify(counts_seeing_wall(1.5), 2.0)
+    assert (verdict[1:-1] == CONFLICT_THROUGH).all()  # the end beams have one neighbour only
+    assert offset[20] == pytest.approx(0.5, abs=RES)
+    # The others never looked here.
+    verdict, offset = classify(empty_counts(120, 80), 2.0)
+    assert (verdict == UNKNOWN).all() and np.isnan(offset).all()
+
+
+def test_a_wall_face_the_others_only_skimmed_is_not_a_conflict():
+    """Rays grazing a wall clear the cells of its face; the inside of the wall behind the face was
+    never observed, so an endpoint on the face is unknown, not a conflict."""
+    counts = empty_counts(120, 80)
+    n = 60
+    # Rays along y = 1.02 from x = -0.5 to 2.5, just in front of the face y = 1 (seen head-on
+    # below by the scan judged); they end on nothing (FREE rays).
+    ex = np.tile(np.linspace(2.5, 2.4, n)[:, None], (1, 1)).astype(np.float32)
+    ey = np.full((n, 1), 1.02, np.float32)
+    poses = np.zeros((n, 3))
+    poses[:, 0] = -0.5
+    kind = np.full((n, 1), 2, np.int8)
+    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, poses, 0.0, 0.0, ex - 0.0, ey, kind, 0, n, 1)
+    # The judged scan: a laser at (1, 0) looking up at the face y = 1.02 (robot frame: x forward).
+    verdict = np.empty((1, 9), np.int8)
+    offset = np.empty((1, 9), np.float32)
+    xs = np.linspace(-0.2, 0.2, 9).astype(np.float32)
+    ex2 = np.full((1, 9), 1.02, np.float32)
+    ey2 = -xs[None, :]
+    kind2 = np.full((1, 9), HIT, np.int8)
+    disc = np.array([[0, 0]])
+    mc = MapConfig()
+    classify_beams(
+        *counts, ORIGIN[0], ORIGIN[1], RES, np.array([[1.0, 0.0, math.pi / 2]]), 0.0, 0.0, ex2, ey2,
+        kind2, 0, 1, disc, 0.15, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
+        math.sin(math.radians(15)), 2.0, 0.1, 0.02, verdict, offset,
+    )  # fmt: skip
+    assert (verdict == UNKNOWN).all()
+
+
+def test_scan_rays_follow_the_range_semantics():
+    ranges = np.array([[1.0, np.nan, 0.01, 29.0, 31.0, 40.0]], dtype=np.float32)
+    angles = np.zeros(6)
+    rays = scan_rays(ranges, angles, np.array([0.1, 0.0, 0.0]), 0.05, 30.0, 35.0)
+    assert rays.kind.tolist() == [[1, 0, 0, 1, 2, 0]]  # hit, invalid, short, hit, free, no return
+    assert rays.ex[0, 0] == pytest.approx(1.1) and rays.ex[0, 4] == pytest.approx(30.1)
+    with_no_return = scan_rays(ranges, angles, np.zeros(3), 0.05, 30.0, 35.0, 5.0)
+    assert with_no_return.kind[0, 5] == 2 and with_no_return.ex[0, 5] == pytest.approx(5.0)
+
+
+def test_stretch_bounds_cut_the_path_every_stretch_m():
+    x = np.linspace(0.0, 34.0, 341)  # 0.1 m steps along a line
+    poses = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    bounds = stretch_bounds(poses, 10.0)
+    assert bounds.tolist() == [0, 100, 200, 341]  # the last 4 m join the third stretch
+    assert stretch_bounds(poses[:10], 10.0).tolist() == [0, 10]
+
+
+def test_config_rejects_bad_quality_parameters():
+    from slam.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"quality.tolerance_m: expected > 0, found 0"):
+        QualityConfig(tolerance_m=0.0)
+    with pytest.raises(ConfigError, match=r"quality.flag_below: expected 0..1"):
+        QualityConfig(flag_below=1.5)
+
+
+# --- a simulated loop, closed and opened ------------------------------------------------------
+
+
+def open_the_loop(poses: np.ndarray, start: int, yaw_deg: float, scale: float) -> np.ndarray:
+    """The trajectory with a growing drift after row ``start``: every later step is scaled by
+    ``scale`` and turned so that the heading error reaches ``yaw_deg`` at the end (a loop that
+    did not close: the second pass lays its walls beside the first pass's)."""
+    steps = relative(poses[:-1], poses[1:])
+    length = np.hypot(steps[:, 0], steps[:, 1])
+    tail = length[start:].sum()
+    out = poses.copy()
+    for k in range(start, len(poses) - 1):
+        step = steps[k].copy()
+        step[:2] *= scale
+        step[2] += math.radians(yaw_deg) * length[k] / tail
+        out[k + 1] = compose(out[k], step)
+    return out
+
+
+@pytest.fixture(scope="module")
+def demo_loop():
+    """The simulator's demo building (124 s, 4960 scans, one loop around the ring and back past
+    the start) with its true trajectory at the scan times and the rays of every scan."""
+    from slam.sim.dataset import SimOptions, simulate_log
+
+    log = simulate_log(SimOptions(scenario="demo", rgbd=False))
+    lidar = log.options.lidar
+    times = log.lidar_time
+    truth = log.scene.trajectory.pose_at(times)
+    rays = scan_rays(log.ranges, lidar.angles(), np.array([lidar.x, 0.0, 0.0]),
+                     lidar.range_min, lidar.range_max, lidar.range_max)  # fmt: skip
+    return times, truth, rays
+
+
+@pytest.fixture(scope="module")
+def scored(demo_loop):
+    times, truth, rays = demo_loop
+    opened = open_the_loop(truth, len(truth) // 2, 5.0, 1.015)
+    return map_quality(times, truth, rays), map_quality(times, opened, rays), opened
+
+
+def test_the_true_trajectory_scores_near_perfect(scored):
+    closed, _, _ = scored
+    report = summary(closed)
+    assert report["stretches"] == 7 and report["judged_stretches"] == 7
+    assert report["score"] > 0.999
+    assert report["worst_score"] > 0.995
+    assert report["flagged"] == 0
+    assert report["coverage"] > 0.5  # the loop revisits: half the returns can be judged
+
+
+def test_an_opened_loop_scores_clearly_worse_where_the_walls_double(scored, demo_loop):
+    closed, opened, poses = scored
+    times = demo_loop[0]
+    report = summary(opened)
+    assert report["score"] < 0.87 and summary(closed)["score"] - report["score"] > 0.12
+    assert report["worst_score"] < 0.7
+    assert report["flagged"] == 1
+    worst = opened.worst()[0]
+    # The worst stretch is the last one, driving back past the start: its walls lie beside the
+    # first pass's (5° and 1.5 % of drift since the midpoint) ...
+    assert worst.index == len(opened.stretches) - 1
+    assert worst.t_start - times[0] > 90.0
+    # ... and the conflicts it finds lie where the two passes overlap, by the first stretch's path.
+    first = opened.stretches[0]
+    assert np.hypot(*(poses[first.first : first.last + 1, :2] - worst.place_xy).T).min() < 2.0
+    assert worst.offset_m == pytest.approx(0.35, abs=0.15)
+    # The first stretch sees the same doubled walls from the other pass, the middle ones do not.
+    scores = [s.score for s in opened.stretches]
+    assert scores[0] < 0.85 and min(scores[2:4]) > 0.99
+    assert opened.worst()[1].index == 0
+
+
+def test_the_score_flags_the_stretches_with_large_relation_errors(scored, demo_loop):
+    """Relations from the truth between nearby poses (like the benchmark's): the stretches the
+    score ranks worst are the ones whose relations the opened loop gets wrong."""
+    times, truth, _ = demo_loop
+    _, opened, _ = scored
+    rng = np.random.default_rng(0)
+    i, j = rng.integers(0, len(times), (2, 20000))
+    near = (np.hypot(*(truth[i, :2] - truth[j, :2]).T) < 3.0) & (times[j] - times[i] > 1.0)
+    i, j = i[near][:2000], j[near][:2000]
+    motion = relative(truth[i], truth[j])
+    relations = Relations(times[i], times[j], motion[:, 0], motion[:, 1], motion[:, 2])
+    per = stretch_relation_errors(opened, relations)
+    assert per.count.sum() >= 2000 and (per.count > 0).all()
+    scores = np.array([s.score for s in opened.stretches])
+    assert rank_correlation(scores, per.mean) < -0.6
+    worst = opened.worst()[0].index
+    assert per.max[worst] > 0.25 and per.max[2] < 0.1
+
+
+def test_rank_correlation():
+    a = np.array([1.0, 2.0, 3.0, 4.0, np.nan])
+    assert rank_correlation(a, a**2) == pytest.approx(1.0)
+    assert rank_correlation(a, -a) == pytest.approx(-1.0)
+    assert math.isnan(rank_correlation(a[:2], a[:2]))
+
+
+def test_only_returns_within_range_are_judged(demo_loop):
+    times, truth, rays = demo_loop
+    few = Rays(rays.ex[:400], rays.ey[:400], rays.kind[:400], rays.laser_xy)
+    config = QualityConfig(stretch_m=2.0)
+    result = map_quality(times[:400], truth[:400], few, config)
+    near = within_range(few, config.max_range_m)
+    reach = np.hypot(near.ex - few.laser_xy[0], near.ey - few.laser_xy[1])[near.kind != 0]
+    assert reach.max() <= config.max_range_m + 1e-4
+    assert (near.kind == HIT).sum() < (few.kind == HIT).sum()  # some returns lie beyond 10 m
+    assert ((result.verdict == UNCHECKED) == (near.kind != HIT)).all()
+    t = result.totals()
+    assert t["returns"] == int((near.kind == HIT).sum())
+    assert t["checked"] + t["unknown"] + t["isolated"] == t["returns"]
+    assert t["isolated"] == int((result.verdict == ISOLATED).sum()) > 0

@@ -1,0 +1,155 @@
+"""Map quality without ground truth: the figures of docs/evaluation.md, "Map quality".
+
+``synthetic``: the simulator's demo building (124 s, one loop) scored with its true trajectory
+and with the loop opened (a drift of 5° and 1.5 % of scale growing after the midpoint, so the
+second pass lays its walls beside the first pass's).
+
+One bench per benchmark log (``intel``, ``aces``, ``fr079``, ``fr-clinic``, ``mit-csail``,
+``mit-killian``): ``slam run LOG`` with the default configuration (texture and recording off),
+the score it writes to metrics.json, its cost beside the filter's, and, where the log has
+relations, how the per-stretch scores line up with the relation errors of the same trajectory
+(:func:`slam.eval.quality.stretch_relation_errors`): a relation counts for the stretch of each
+of its ends; "bad" stretches are those with a relation error above 0.5 m.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+import time
+from pathlib import Path
+
+from benches._util import data_dir, skip
+
+LOGS = ("intel", "aces", "fr079", "fr-clinic", "mit-csail", "mit-killian")
+BAD_RELATION_M = 0.5
+"""A stretch is "bad" by the relations when one of its relations is off by more than this."""
+
+
+def _round(value: float | None, digits: int = 4) -> float | None:
+    return None if value is None or not math.isfinite(value) else round(float(value), digits)
+
+
+def synthetic() -> dict:
+    """Scores of the demo building's true trajectory and of the same trajectory, loop opened."""
+    import numpy as np
+
+    from slam.eval.quality import map_quality, scan_rays, summary
+    from slam.geometry import compose, relative
+    from slam.sim.dataset import SimOptions, simulate_log
+
+    log = simulate_log(SimOptions(scenario="demo", rgbd=False))
+    lidar = log.options.lidar
+    times = log.lidar_time
+    truth = log.scene.trajectory.pose_at(times)
+    rays = scan_rays(log.ranges, lidar.angles(), np.array([lidar.x, 0.0, 0.0]),
+                     lidar.range_min, lidar.range_max, lidar.range_max)  # fmt: skip
+    steps = relative(truth[:-1], truth[1:])
+    length = np.hypot(steps[:, 0], steps[:, 1])
+    half = len(truth) // 2
+    opened = truth.copy()
+    for k in range(half, len(truth) - 1):
+        step = steps[k] * np.array([1.015, 1.015, 1.0])
+        step[2] += math.radians(5.0) * length[k] / length[half:].sum()
+        opened[k + 1] = compose(opened[k], step)
+    out: dict = {"scans": int(len(times))}
+    for name, poses in (("truth", truth), ("opened_loop", opened)):
+        start = time.perf_counter()
+        result = map_quality(times, poses, rays)
+        wall = time.perf_counter() - start
+        s = summary(result)
+        worst = s["worst"][0]
+        out[name] = {
+            "score": s["score"],
+            "worst_score": s["worst_score"],
+            "flagged": s["flagged"],
+            "judged_stretches": s["judged_stretches"],
+            "worst_time_s": worst["time_s"],
+            "worst_place_xy": worst["place_xy"],
+            "worst_offset_m": worst["offset_m"],
+            "wall_s": round(wall, 3),
+        }
+    return out
+
+
+def _log_bench(name: str) -> dict:
+    import numpy as np
+
+    from slam.config import load_config
+    from slam.eval.quality import rank_correlation, stretch_relation_errors
+    from slam.eval.quality_run import evaluate_run
+    from slam.eval.relations import relation_errors
+    from slam.io.registry import get_dataset
+    from slam.io.relations import read_relations
+    from slam.pipeline import RunRequest, run
+
+    root = data_dir()
+    dataset = get_dataset(name)
+    if not dataset.log_file().location(root).is_file():
+        return skip(f"{name}: log absent from {root}")
+    config = load_config(name, None, ["texture.enabled=false", "viz.record=false"])
+    with tempfile.TemporaryDirectory(prefix="slam-bench-") as tmp:
+        start = time.perf_counter()
+        folder = run(RunRequest(name=name, config=config, data_dir=root, out=Path(tmp) / "run"))
+        run_wall = time.perf_counter() - start
+        metrics = json.loads((folder / "metrics.json").read_text())
+        report, result = evaluate_run(folder, root)
+    q = metrics["quality"]
+    out: dict = {
+        "scans": metrics["scans"],
+        "path_length_m": metrics["path_length_m"],
+        "score": q["score"],
+        "coverage": q["coverage"],
+        "median_stretch_score": q["median_stretch_score"],
+        "worst_score": q["worst_score"],
+        "flagged": q["flagged"],
+        "judged_stretches": q["judged_stretches"],
+        "stretches": q["stretches"],
+        "worst": [
+            {k: w[k] for k in ("rank", "time_s", "path_m", "place_xy", "score", "offset_m")}
+            for w in q["worst"]
+        ],
+        "quality_wall_s": q["wall_s"],
+        "quality_cpu_s": q["cpu_s"],
+        "estimate_wall_s": metrics["estimate_wall_s"],
+        "run_wall_s": round(run_wall, 3),
+        "quality_share_of_run": round(q["wall_s"] / metrics["wall_s"], 4),
+        "quality_cpu_share_of_estimate": round(q["cpu_s"] / metrics["estimate_wall_s"], 4),
+        "peak_rss_mb": metrics["peak_rss_mb"],
+        "same_as_slam_eval": report["score"] == q["score"],
+    }
+    path = root / dataset.relations if dataset.relations else None
+    # mit-killian's shared copy has synthetic times: its relations match no scan.
+    if path is not None and path.is_file() and name != "mit-killian":
+        relations = read_relations(path)
+        errors = relation_errors(result.times, result.poses, relations)
+        per = stretch_relation_errors(result, relations)
+        judged = {s.index for s in result.judged()}
+        scores = np.array([s.score if s.index in judged else np.nan for s in result.stretches])
+        bad = np.nan_to_num(per.max, nan=0.0) > BAD_RELATION_M
+        flagged = scores < config.quality.flag_below  # NaN (not judged) compares False
+        bad_judged = bad & np.isfinite(scores)
+        out["relations"] = {
+            "trans_mean": _round(float(errors.trans.mean()), 4),
+            "trans_max": _round(float(errors.trans.max()), 3),
+            "share_over_0.2m": _round(float((errors.trans > 0.2).mean()), 4),
+            "rank_correlation_score_vs_mean_error": _round(rank_correlation(scores, per.mean), 3),
+            "bad_stretches": int(bad.sum()),
+            "bad_stretches_judged": int(bad_judged.sum()),
+            "bad_stretches_flagged": int((bad & flagged).sum()),
+            "flagged": int(flagged.sum()),
+            "median_score_bad": _round(float(np.nanmedian(scores[bad_judged])), 4)
+            if bad_judged.any()
+            else None,
+            "median_score_other": _round(float(np.nanmedian(scores[~bad])), 4),
+        }
+    return out
+
+
+def benches() -> dict:
+    """The synthetic check and one bench per benchmark log."""
+    found = {"synthetic": synthetic}
+    for name in LOGS:
+        found[name.replace("-", "_")] = lambda name=name: _log_bench(name)
+    return found
