@@ -71,6 +71,8 @@ def test_eval_without_reference_prints_writes_and_draws(run_folder, capsys):
     report = json.loads((run_folder / "eval.json").read_text())
     quality = report["quality"]
     assert report["poses"] == SCANS and "relations" not in report
+    assert report["reference"].endswith("groundtruth.tum")  # the simulated folder's truth, too
+    assert report["ate_rmse"] < 0.05
     assert len(quality["per_stretch"]) == 3
     assert quality["per_stretch"][0]["scans"] == [0, quality["per_stretch"][1]["scans"][0] - 1]
     assert (
@@ -83,7 +85,7 @@ def test_eval_without_reference_prints_writes_and_draws(run_folder, capsys):
         assert quality[key] == metrics[key]
     image = cv2.imread(str(run_folder / "quality.png"))
     assert image is not None and max(image.shape[:2]) >= 1200
-    assert not list(run_folder.glob(".*"))  # no temporary file left behind
+    assert [p.name for p in run_folder.glob(".*")] == [".slam-run"]  # no temporary file left
 
 
 def test_eval_with_reference_adds_quality_only_when_asked(run_folder, small_log, capsys):
@@ -101,6 +103,7 @@ def test_an_opened_loop_in_a_run_folder_scores_worse(run_folder, tmp_path, capsy
     """The same run folder with its trajectory bent after the midpoint: the score drops."""
     from slam.geometry import compose, relative
     from slam.io.tum import read_tum, write_tum
+    from slam.trajectory import Trajectory
 
     bent = copy_run(run_folder, tmp_path / "bent")
     times, poses = read_tum(bent / "trajectory.tum")
@@ -109,7 +112,7 @@ def test_an_opened_loop_in_a_run_folder_scores_worse(run_folder, tmp_path, capsy
     for k in range(half, len(poses) - 1):
         step = steps[k] * np.array([1.015, 1.015, 1.0]) + np.array([0, 0, np.radians(8) / half])
         poses[k + 1] = compose(poses[k], step)
-    write_tum(bent / "trajectory.tum", times, poses)
+    write_tum(bent / "trajectory.tum", Trajectory(times, poses))
     assert main(["eval", str(bent), "--json"]) == 0
     bad = json.loads(capsys.readouterr().out)["quality"]
     good = json.loads((run_folder / "metrics.json").read_text())["quality"]
@@ -148,7 +151,7 @@ def test_log_no_longer_present(run_folder, small_log, tmp_path, capsys):
     assert main(["eval", str(moved), "--dataset", str(small_log), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["quality"]["score"] > 0.99
     assert main(["eval", str(moved), "--dataset", str(tmp_path / "nowhere")]) == 2
-    assert "nowhere: log not found" in one_line_error(capsys)
+    assert "--dataset: '" in (err := one_line_error(capsys)) and "nowhere' is not 'demo'" in err
 
 
 def test_a_run_of_another_log_is_refused(run_folder, tmp_path, capsys):
@@ -162,8 +165,13 @@ def test_a_run_of_another_log_is_refused(run_folder, tmp_path, capsys):
         t, *rest = line.split()
         shifted.append(" ".join([f"{float(t) + 1e5:.6f}", *rest]))
     (other / "trajectory.tum").write_text("\n".join(shifted) + "\n")
-    assert main(["eval", str(other)]) == 2
-    assert "cover none of the log's" in one_line_error(capsys)
+    assert main(["eval", str(other)]) == 2  # the simulated folder's truth says it first
+    assert "is it the same log?" in one_line_error(capsys)
+    # Against itself as the reference, the trajectory passes; the map score still refuses it.
+    itself = ["--reference", str(other / "trajectory.tum"), "--quality"]
+    assert main(["eval", str(other), *itself]) == 2
+    assert "cover none of the log's 900 scans" in one_line_error(capsys)
+    assert not (other / "eval.json").exists() and not (other / "quality.png").exists()
 
 
 def test_the_score_can_be_switched_off(small_log, tmp_path):

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from slam.commands._common import add_data_dir_argument, data_dir_from
-from slam.errors import DataError, UsageError
+from slam.errors import DataError, SlamError, UsageError
 
 if TYPE_CHECKING:
     from slam.trajectory import Trajectory
@@ -113,16 +113,12 @@ def run_eval(args: argparse.Namespace) -> int:
             raise DataError(f"{path}: {option} expected a file, found a folder")
     result: dict[str, Any] = {"trajectory": str(run_dir / TRAJECTORY_FILE)}
     relations, reference = args.relations, args.reference
-    quality = args.quality or (relations is None and reference is None)
-    ref = None
-    if quality:
-        from slam.eval.quality_run import resolve_run_log
-
-        ref = resolve_run_log(run_dir, data_dir_from(args), args.dataset)
     implicit = relations is None and reference is None
+    no_truth = None  # why the run's dataset gives no ground truth
     if implicit:
-        result["dataset"] = ref.name
-        relations, reference = _ground_truth_of(ref)
+        name, relations, reference, no_truth = _dataset_ground_truth(args, run_dir)
+        if name is not None:
+            result["dataset"] = name
     trajectory = read_tum(run_dir / TRAJECTORY_FILE)
     result["poses"] = len(trajectory)
     if relations is not None:
@@ -134,8 +130,9 @@ def run_eval(args: argparse.Namespace) -> int:
             if not implicit:
                 raise
             # The dataset's own relations that match nothing (mit-killian's shared copy has
-            # synthetic times) must not cost the map score that was asked for.
+            # synthetic times) must not cost the map score.
             print(f"slam: warning: {exc}; left out", file=sys.stderr)
+            relations = None
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(trajectory, reference, args))
@@ -144,12 +141,21 @@ def run_eval(args: argparse.Namespace) -> int:
 
         result["map"] = read_map_yaml(run_dir / "map.yaml").summary()
     picture = None
-    if ref is not None:
-        from slam.eval.quality_run import PICTURE, evaluate_run, render_quality
+    if args.quality or implicit:
+        from slam.eval.quality_run import PICTURE, evaluate_run, render_quality, resolve_run_log
 
-        result["quality"], scored = evaluate_run(run_dir, ref, trajectory)
-        picture = render_quality(scored)
-        result["quality"]["picture"] = str(run_dir / PICTURE)
+        try:
+            log = resolve_run_log(run_dir, data_dir_from(args), args.dataset)
+            result["quality"], scored = evaluate_run(run_dir, log, trajectory)
+        except SlamError as exc:
+            if args.quality:
+                raise
+            if "relations" not in result and reference is None:
+                raise type(exc)(f"{exc}; and no ground truth either: {no_truth}") from None
+            print(f"slam: warning: map quality not computed: {exc}", file=sys.stderr)
+        else:
+            picture = render_quality(scored)
+            result["quality"]["picture"] = str(run_dir / PICTURE)
 
     try:
         if picture is not None:
@@ -193,18 +199,42 @@ def _relations(
     return summary
 
 
-def _ground_truth_of(ref: Any) -> tuple[Path | None, Path | None]:
-    """The ground truth of the run's dataset ``ref`` when it has one: ``(relations file or None,
-    reference trajectory or None)``; both ``None`` for a log without (the map score stands
-    alone then)."""
-    from slam.io import sources
+def _dataset_ground_truth(
+    args: argparse.Namespace, run_dir: Path
+) -> tuple[str | None, Path | None, Path | None, str | None]:
+    """The dataset of the run (``--dataset``, else its ``config.toml``) and its ground truth:
+    ``(name, relations file or None, reference trajectory or None, why there is none)``."""
+    from slam.config import load_config
+    from slam.io import registry, sources
 
+    usage = "give --relations FILE and/or --reference FILE.tum"
+    config_file = run_dir / "config.toml"
+    name = args.dataset
+    if name is None and config_file.is_file():
+        name = load_config("", config_file).dataset or None
+    if name is None:
+        return None, None, None, f"no --dataset, and {config_file} names no dataset; {usage}"
+    where = "--dataset" if args.dataset else f"{config_file}: dataset"
+    if args.dataset is None and name != "demo" and name not in registry.load_registry():
+        from slam.eval.quality_run import recorded_source
+
+        recorded = recorded_source(run_dir)  # a run made from a path records only its stem
+        if recorded is not None and recorded.exists():
+            name, where = str(recorded), f"{run_dir / 'metrics.json'}: log_source"
+    try:
+        ref = sources.resolve(name, data_dir_from(args), where=where, hint=usage)
+    except SlamError as exc:
+        return name, None, None, str(exc)
     reference = ref.reference
     if reference is not None:
         sources.ensure(ref, progress=sys.stderr.isatty())  # the demo, generated if absent
         reference = reference if reference.is_file() else None
     relations = ref.relations if ref.relations is not None and ref.relations.is_file() else None
-    return relations, reference
+    if relations is None and reference is None:
+        expected = sources.GROUND_TRUTH_FILE if ref.reference is not None else "relations file"
+        why = f"{where}: dataset {name!r} ({ref.kind}) has no ground truth (no {expected}); {usage}"
+        return name, None, None, why
+    return name, relations, reference, None
 
 
 def _reference(trajectory: Trajectory, path: Path, args: argparse.Namespace) -> dict[str, Any]:

@@ -83,10 +83,11 @@ def poses_at_scans(
 def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -> DatasetRef:
     """The log ``run_dir`` was made from, resolved by :func:`slam.io.sources.resolve`.
 
-    ``dataset`` (a registry name, ``demo`` or a path) wins; else the ``dataset`` of the run's
-    ``config.toml`` when it is ``demo`` or a registry name; else the ``log_source`` path the run
-    recorded in ``metrics.json`` (a run made from a path records only the file's stem as its
-    dataset); else that stem as a path. A log that is no longer there is a :class:`DataError`.
+    ``dataset`` (a registry name, ``demo`` or a path) wins; else the ``log_source`` path the run
+    recorded in ``metrics.json`` (exactly what it read; a run made from a path records only the
+    file's stem as its ``dataset``); else the ``dataset`` of its ``config.toml``. A recorded log
+    that is no longer there is a :class:`DataError`, unless that ``dataset`` is ``demo`` or a
+    registry name (the data directory moved).
     """
     from slam.io import registry, sources
 
@@ -96,16 +97,15 @@ def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -
         return sources.resolve(dataset, data_dir, where="--dataset")
     name = config.dataset
     where = f"{run_dir / 'config.toml'}: dataset"
-    if name == "demo" or name in registry.load_registry():
-        return sources.resolve(name, data_dir, where=where)
-    recorded = _recorded_source(run_dir)
-    if recorded is not None:
-        if not recorded.exists():
-            raise DataError(
-                f"{run_dir / 'metrics.json'}: log_source {recorded} no longer exists (the log this "
-                "run was made from); give the log with --dataset PATH"
-            )
+    known = name == "demo" or name in registry.load_registry()
+    recorded = recorded_source(run_dir)
+    if recorded is not None and recorded.exists():
         return sources.resolve(str(recorded), data_dir, where=f"{run_dir / 'metrics.json'}")
+    if recorded is not None and not known:
+        raise DataError(
+            f"{run_dir / 'metrics.json'}: log_source {recorded} no longer exists (the log this "
+            "run was made from); give the log with --dataset PATH"
+        )
     return sources.resolve(
         name, data_dir, where=where, hint="the run recorded no log_source; give --dataset PATH"
     )
@@ -121,7 +121,8 @@ def _run_config(run_dir: Path) -> Config:
     return load_config("", path)
 
 
-def _recorded_source(run_dir: Path) -> Path | None:
+def recorded_source(run_dir: Path) -> Path | None:
+    """The ``log_source`` a run recorded in its ``metrics.json`` (``None`` when absent)."""
     path = run_dir / "metrics.json"
     if not path.is_file():
         return None
