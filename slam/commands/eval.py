@@ -157,11 +157,14 @@ def run_eval(args: argparse.Namespace) -> int:
             picture = render_quality(scored)
             result["quality"]["picture"] = str(run_dir / PICTURE)
 
-    try:
-        if picture is not None:
-            from slam.eval.quality_run import write_picture
+    if picture is not None:
+        from slam.io.atomic import write_png
 
-            write_picture(run_dir / PICTURE, picture)
+        try:
+            write_png(run_dir / PICTURE, picture)
+        except OSError as exc:
+            raise DataError(f"{run_dir / PICTURE}: cannot write ({exc.strerror or exc})") from None
+    try:
         write_eval_json(run_dir, result)
     except OSError as exc:
         raise DataError(f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})") from None

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from slam.config import Config, load_config
 from slam.errors import DataError
 from slam.eval.quality import QualityResult, Rays, map_quality, scan_rays, select_scans, summary
+from slam.io.atomic import write_png
 from slam.io.log import Log, ScanStream
 
 if TYPE_CHECKING:
@@ -184,7 +185,7 @@ def quality_stage(log: Log, trajectory: Trajectory, config: Config, out_dir: Pat
         return metrics
     report = summary(result)
     report.pop("per_stretch")  # metrics.json stays small; `slam eval` lists every stretch
-    write_picture(out_dir / PICTURE, render_quality(result))
+    write_png(out_dir / PICTURE, render_quality(result))
     report["picture"] = PICTURE
     metrics["quality"] = report
     return metrics
@@ -200,21 +201,6 @@ def as_written(trajectory: Trajectory) -> Trajectory:
     data = np.loadtxt(io.StringIO(format_tum(trajectory)), comments="#", ndmin=2)
     poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], 1)
     return Trajectory(data[:, 0], poses)
-
-
-def write_picture(path: Path, image: NDArray[np.uint8]) -> None:
-    """Write a BGR image as PNG atomically."""
-    import cv2
-
-    from slam.io.atomic import write_bytes
-
-    ok, data = cv2.imencode(".png", image)
-    if not ok:
-        raise DataError(f"{path}: PNG encoding failed")
-    try:
-        write_bytes(path, data.tobytes())
-    except OSError as exc:
-        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def score_colour(score: float) -> tuple[int, int, int]:
