@@ -78,11 +78,12 @@ def _log_bench(name: str) -> dict:
 
     from slam.config import load_config
     from slam.eval.quality import rank_correlation, stretch_relation_errors
-    from slam.eval.quality_run import evaluate_run
+    from slam.eval.quality_run import evaluate_run, resolve_run_log
     from slam.eval.relations import relation_errors
     from slam.io.registry import get_dataset
     from slam.io.relations import read_relations
     from slam.pipeline import RunRequest, run
+    from slam.trajectory import Trajectory
 
     root = data_dir()
     dataset = get_dataset(name)
@@ -94,7 +95,7 @@ def _log_bench(name: str) -> dict:
         folder = run(RunRequest(name=name, config=config, data_dir=root, out=Path(tmp) / "run"))
         run_wall = time.perf_counter() - start
         metrics = json.loads((folder / "metrics.json").read_text())
-        report, result = evaluate_run(folder, root)
+        report, result = evaluate_run(folder, resolve_run_log(folder, root))
     q = metrics["quality"]
     out: dict = {
         "scans": metrics["scans"],
@@ -123,7 +124,7 @@ def _log_bench(name: str) -> dict:
     # mit-killian's shared copy has synthetic times: its relations match no scan.
     if path is not None and path.is_file() and name != "mit-killian":
         relations = read_relations(path)
-        errors = relation_errors(result.times, result.poses, relations)
+        errors = relation_errors(Trajectory(result.times, result.poses), relations)
         per = stretch_relation_errors(result, relations)
         judged = {s.index for s in result.judged()}
         scores = np.array([s.score if s.index in judged else np.nan for s in result.stretches])
