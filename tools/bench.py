@@ -13,7 +13,8 @@ Usage::
     uv run python tools/bench.py --list
     uv run python tools/bench.py --out bench.json
 
-The README's performance figures are copied from this output.
+The README's tables and figures are generated from this output as saved in ``docs/bench/``
+(``--out docs/bench/<group>.json``) by ``tools/readme_tables.py``.
 """
 
 from __future__ import annotations

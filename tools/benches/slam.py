@@ -103,6 +103,7 @@ def _accuracy(name: str, method: str = "rbpf", extra: list[str] | None = None) -
                     real_time_factor=m["real_time_factor"],
                     peak_rss_mb=m["peak_rss_mb"],
                     particles=m["particles"],
+                    scans=m["scans"],
                 )
     return out
 

@@ -1,0 +1,168 @@
+"""README.md's bench tables and figures agree with docs/bench/*.json (tools/readme_tables.py).
+
+The first tests fail when someone edits a figure by hand or re-runs a bench without regenerating
+the README (fix: ``uv run python tools/readme_tables.py``); the claims the README's prose makes
+about those figures are checked against the JSON too. The rest test the generator itself on
+copies of the JSON: stale parts named, a missing key one line and exit 2, an extended slam.json
+(per-seed figures, median, share > 0.2 m, more logs) and a texture.json filled in.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+BENCH = ROOT / "docs" / "bench"
+
+_spec = importlib.util.spec_from_file_location("readme_tables", ROOT / "tools" / "readme_tables.py")
+assert _spec and _spec.loader
+tables = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tables)
+
+
+def slam_benches() -> dict:
+    """The benches of docs/bench/slam.json."""
+    return json.loads((BENCH / "slam.json").read_text())["benches"]
+
+
+def section_of(text: str, title: str) -> str:
+    """The ``## title`` section of a README text."""
+    (body,) = re.findall(rf"^## {title}\n(.*?)(?=^## )", text, flags=re.M | re.S)
+    return body
+
+
+def section(title: str) -> str:
+    """The README's ``## title`` section."""
+    return section_of(README.read_text(), title)
+
+
+def write_bench(folder: Path, name: str, benches: dict) -> None:
+    """A docs/bench-style JSON file in ``folder``."""
+    (folder / f"{name}.json").write_text(json.dumps({"machine": {}, "benches": benches}))
+
+
+def test_readme_matches_bench_json(capsys):
+    assert tables.main(["--check"]) == 0, capsys.readouterr().out
+
+
+def test_every_table_of_the_bench_sections_is_generated():
+    for title in ("Accuracy", "Performance"):
+        body = section(title)
+        outside = re.sub(r"<!-- table:[\w.-]+ -->\n.*?<!-- /table -->", "", body, flags=re.S)
+        assert "|" not in outside, f"a hand-written table in README section {title}"
+        assert "<!-- table:" in body
+
+
+def test_readme_tables_show_the_json_figures():
+    benches = slam_benches()
+    accuracy, performance = section("Accuracy"), section("Performance")
+    intel = benches["slam.intel"]["rbpf"]
+    assert f"| intel | **slam rbpf** | **{tables.fixed(intel['trans_mean'], 3)} ± " in accuracy
+    assert "| fr079 | GMapping, published / measured here | 0.061 / diverges | | |" in accuracy
+    classic = benches["slam.demo_classic_100"]
+    assert f"| demo, classic, 100 particles | {tables.fixed(classic['wall_s'], 1)} |" in performance
+    assert "| fr079 (4 934 scans), rbpf, 30 particles |" in performance  # its FLASER lines
+
+
+def test_prose_claims_hold_for_the_json():
+    """What the Accuracy section says of the figures: below GMapping, except aces measured."""
+    benches = slam_benches()
+    ours = {log: benches[f"slam.{log}"]["rbpf"]["trans_mean"] for log in ("intel", "aces", "fr079")}
+    for log, error in ours.items():
+        assert error < benches[f"slam.{log}"]["gmapping_published"], log
+    measured = {log: tables.gmapping(benches[f"slam.{log}"])[0] for log in ours}
+    assert ours["intel"] < float(measured["intel"].split(" ")[0])
+    assert measured["fr079"] == "diverges"
+    assert float(measured["aces"].split(" ")[0]) < ours["aces"]  # "GMapping is still more accurate"
+    assert benches["slam.intel_classic"]["classic"]["trans_mean"] > 1.0  # "does not hold together"
+    text = section("Accuracy")
+    assert "below GMapping's\npublished figures on all three logs" in text
+    assert "on aces GMapping is still more accurate" in text
+
+
+def test_a_hand_edited_figure_is_named(tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    text = README.read_text()
+    wall = tables.fixed(slam_benches()["slam.demo_100"]["wall_s"], 1)
+    row = f"| demo, rbpf, 100 particles | {wall} |"
+    assert row in text
+    readme.write_text(text.replace(row, "| demo, rbpf, 100 particles | 1.0 |"))
+    assert tables.main(["--check", "--readme", str(readme)]) == 1
+    assert "'performance' differs" in capsys.readouterr().out
+    assert tables.main(["--readme", str(readme)]) == 0
+    assert readme.read_text() == text
+
+
+def test_a_missing_key_is_one_line_and_exit_2(tmp_path, capsys):
+    benches = slam_benches()
+    del benches["slam.aces"]["rbpf"]["trans_std"]
+    write_bench(tmp_path, "slam", benches)
+    assert tables.main(["--check", "--bench-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["readme_tables: bench JSON: slam.aces.trans_std is missing"]
+
+
+def test_an_unknown_marker_is_named(tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text("x <!-- fig:slam.nothing -->1<!-- /fig -->\n")
+    assert tables.main(["--readme", str(readme)]) == 2
+    assert "unknown fig marker 'slam.nothing'" in capsys.readouterr().err
+
+
+def test_extended_slam_json_adds_columns_and_logs():
+    """A sweep's slam.json: per-seed figures, median, share > 0.2 m and a log more."""
+    benches = slam_benches()
+    seeds = [0.0263, 0.0205, 0.021, 0.0211]
+    intel = benches["slam.intel"]["rbpf"]
+    intel["per_seed"] = [{"seed": s, "trans_mean": e} for s, e in enumerate(seeds)]
+    intel.update(trans_median=0.0195, **{"share_over_0.2m": 0.0123})
+    clinic = copy.deepcopy(benches["slam.aces"])
+    clinic["rbpf"].update(trans_mean=1.037, scans=6917)
+    benches["slam.fr-clinic"] = clinic
+    accuracy = tables.slam_table(benches).splitlines()
+    assert accuracy[0].endswith("| over seeds (m) | median (m) | > 0.2 m |")
+    intel_row = next(r for r in accuracy if r.startswith("| intel | **slam rbpf**"))
+    assert intel_row.endswith("| 0.021–0.026 (seeds 0–3) | 0.020 | 1.2 % |")
+    odometry_row = next(r for r in accuracy if r.startswith("| intel | odometry only"))
+    assert odometry_row.endswith("| 3.5 | | | |")
+    assert [r.split(" | ")[0] for r in accuracy[2:]].count("| fr-clinic") == 3
+    assert accuracy[-3].startswith("| fr-clinic | odometry only")  # after fr079, the known logs
+    assert tables.seed_range("intel")(benches) == "0.021–0.026"
+    assert tables.seed_range("aces")(benches) is None
+    performance = tables.performance_table(benches)
+    assert "| fr-clinic (6 917 scans), rbpf, 30 particles |" in performance
+
+
+def test_texture_figures_wait_for_texture_json_then_fill_in(tmp_path):
+    write_bench(tmp_path, "slam", slam_benches())
+    text = README.read_text()
+    rendered, waiting = tables.render(text, tmp_path)
+    assert rendered == text
+    assert "fig texture.colour_mae (docs/bench/texture.json absent)" in waiting
+    figures = {"colour_mae": 4.2051, "coverage": 0.9987, "frames_per_s": 96.4}
+    write_bench(tmp_path, "texture", {tables.TEXTURE: figures})
+    rendered, waiting = tables.render(text, tmp_path)
+    assert not any(w.startswith("fig texture.") for w in waiting)
+    floor = section_of(rendered, "Floor texture")
+    assert "by <!-- fig:texture.colour_mae -->4.21<!-- /fig -->/255" in floor
+    assert "floor to <!-- fig:texture.coverage -->100<!-- /fig --> %" in floor
+    assert "about <!-- fig:texture.frames_per_s -->96<!-- /fig --> frames/s" in floor
+
+
+@pytest.mark.parametrize(
+    ("value", "digits", "expected"), [(27.15, 1, "27.2"), (0.0323, 3, "0.032"), (641.4, 0, "641")]
+)
+def test_fixed_rounds_halves_up_as_printed(value, digits, expected):
+    assert tables.fixed(value, digits) == expected
+
+
+def test_no_line_starts_with_an_inline_marker():
+    """A line starting with ``<!--`` would begin an HTML block and break its paragraph."""
+    assert not [line for line in README.read_text().splitlines() if line.startswith("<!-- fig:")]

@@ -1,0 +1,352 @@
+#!/usr/bin/env python3
+"""The README's bench tables and figures, generated from ``docs/bench/*.json``.
+
+README.md marks each generated part with comments; everything between them is rewritten::
+
+    <!-- table:slam -->            a whole table (the lines up to the closing marker)
+    | log | method | ... |
+    <!-- /table -->
+    <!-- fig:slam.gmapping_speedup -->2.5–2.6<!-- /fig -->   inline: the text between the markers
+
+Usage::
+
+    uv run python tools/readme_tables.py           # rewrite README.md from the JSON
+    uv run python tools/readme_tables.py --check   # exit 1 and name each part that differs
+
+A part whose JSON file is absent (``docs/bench/texture.json`` before its bench has been run), or
+whose optional keys are (the per-seed figures before a sweep), is left as it is and reported as
+waiting; a required key missing from a present file is an error (exit 2).
+
+What the generators read from ``docs/bench/slam.json`` (``benches`` of ``tools/bench.py slam``):
+
+* ``slam.<log>`` / ``slam.<log>_<method>`` with an ``odometry`` block: an accuracy bench. Its
+  ``method`` names the block with the filter's figures (``trans_mean``, ``trans_std``,
+  ``rot_mean_deg``, ``rot_std_deg``, ``wall_s``; for the performance table also ``scans_per_s``,
+  ``real_time_factor``, ``peak_rss_mb``, ``particles`` and ``scans`` (older files lack
+  ``scans``: it is then ``scans_per_s × estimate_wall_s``, rounded)); ``gmapping_published``
+  and ``gmapping_measured`` ("MEAN ± STD m in SECONDS s" or a word such as "diverges") give the
+  GMapping row. Every log present gets its rows (known logs in ``LOG_ORDER`` first).
+* ``slam.demo_*`` with ``ate_rmse``: a performance row of the simulated demo.
+* Optional keys of a method block, shown as extra accuracy columns only when some log has them
+  (a sweep over seeds writes them; see ``OPTIONAL_COLUMNS``): ``per_seed`` (a list of blocks
+  with ``seed`` and ``trans_mean``), ``trans_median``, ``share_over_0.2m`` (fraction of
+  relations). Unknown keys are ignored; a log the sweep adds gets rows in both tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections.abc import Callable
+from decimal import ROUND_HALF_UP, Decimal
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+BENCH_DIR = ROOT / "docs" / "bench"
+LOG_ORDER = ("intel", "aces", "fr079", "fr-clinic", "mit-csail", "mit-killian")
+BLOCK = re.compile(r"(<!-- table:([\w.-]+) -->\n)(.*?)(<!-- /table -->)", re.S)
+INLINE = re.compile(r"(<!-- fig:([\w.-]+) -->)(.*?)(<!-- /fig -->)")
+
+Benches = dict[str, dict]
+
+
+class BenchError(Exception):
+    """A bench file or key the README needs is malformed or missing (one line, exit 2)."""
+
+
+def load_benches(name: str, bench_dir: Path = BENCH_DIR) -> Benches | None:
+    """The ``benches`` of ``docs/bench/<name>.json``, or None when that file is absent."""
+    path = bench_dir / f"{name}.json"
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())["benches"]
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise BenchError(f"{path}: expected JSON with a 'benches' object ({exc})") from None
+
+
+def get(benches: Benches, bench: str, *keys: str):
+    """``benches[bench][key]...``, or a BenchError naming the missing key."""
+    value = benches
+    for key in (bench, *keys):
+        if not isinstance(value, dict) or key not in value:
+            raise BenchError(f"bench JSON: {'.'.join((bench, *keys))} is missing")
+        value = value[key]
+    return value
+
+
+def table(header: list[str], rows: list[list[str]]) -> str:
+    """A markdown table in the README's style (``|---|`` rules, ``| |`` for an empty cell)."""
+    lines = [
+        "|" + "|".join(f" {c} " if c else " " for c in cells) + "|" for cells in [header, *rows]
+    ]
+    lines.insert(1, "|" + "|".join("---" for _ in header) + "|")
+    return "\n".join(lines) + "\n"
+
+
+def fixed(value: float, digits: int) -> str:
+    """``value`` with ``digits`` decimals, halves rounded up as a reader of the JSON would."""
+    step = Decimal(1).scaleb(-digits)
+    return str(Decimal(str(value)).quantize(step, rounding=ROUND_HALF_UP))
+
+
+def thousands(n: int) -> str:
+    """``13631`` as ``13 631`` (the README's digit grouping)."""
+    return f"{n:,}".replace(",", " ")
+
+
+# ---------------------------------------------------------------- slam.json
+
+
+def accuracy_benches(benches: Benches) -> dict[str, list[tuple[str, dict]]]:
+    """Per log (README order), its accuracy benches as (name, bench), ``slam.<log>`` first."""
+    found: dict[str, list[tuple[str, dict]]] = {}
+    for name, bench in sorted(benches.items()):
+        if name.startswith("slam.") and isinstance(bench, dict) and "odometry" in bench:
+            log = name.removeprefix("slam.").removesuffix(f"_{bench.get('method', 'rbpf')}")
+            found.setdefault(log, []).append((name, bench))
+    for log, runs in found.items():
+        runs.sort(key=lambda run, log=log: run[0] != f"slam.{log}")
+
+    def order(log: str) -> tuple[int, str]:
+        return (LOG_ORDER.index(log) if log in LOG_ORDER else len(LOG_ORDER), log)
+
+    return {log: found[log] for log in sorted(found, key=order)}
+
+
+def _per_seed(block: dict) -> str:
+    """``0.020–0.026 (seeds 0–3)``: the range of the per-seed mean translation errors."""
+    seeds = sorted(block["per_seed"], key=lambda s: s["seed"])
+    low, high = (fixed(f(s["trans_mean"] for s in seeds), 3) for f in (min, max))
+    return f"{low}–{high} (seeds {seeds[0]['seed']}–{seeds[-1]['seed']})"
+
+
+OPTIONAL_COLUMNS: tuple[tuple[str, str, Callable[[dict], str]], ...] = (
+    ("per_seed", "over seeds (m)", _per_seed),
+    ("trans_median", "median (m)", lambda b: fixed(b["trans_median"], 3)),
+    ("share_over_0.2m", "> 0.2 m", lambda b: f"{fixed(100 * b['share_over_0.2m'], 1)} %"),
+)
+
+
+def _figures(block: dict, where: str) -> list[str]:
+    """Translation, rotation and wall-time cells of a method block."""
+    try:
+        return [
+            f"{fixed(block['trans_mean'], 3)} ± {fixed(block['trans_std'], 3)}",
+            f"{fixed(block['rot_mean_deg'], 2)} ± {fixed(block['rot_std_deg'], 2)}",
+            fixed(block["wall_s"], 1),
+        ]
+    except KeyError as exc:
+        raise BenchError(f"bench JSON: {where}.{exc.args[0]} is missing") from None
+
+
+def gmapping(bench: dict) -> tuple[str, str]:
+    """GMapping's measured (error, wall seconds) from ``"0.029 ± 0.022 m in 70 s"``."""
+    measured = str(bench.get("gmapping_measured", ""))
+    found = re.fullmatch(r"(.+?) m in ([\d.]+) s", measured)
+    return (found[1], found[2]) if found else (measured, "")
+
+
+def slam_table(benches: Benches) -> str:
+    """The Accuracy table: per log odometry, the default filter (bold), other runs, GMapping."""
+    rows: list[list[str]] = []
+    blocks: list[dict] = []  # the method block behind each row, for the optional columns
+    for log, runs in accuracy_benches(benches).items():
+        for name, bench in runs:
+            method = bench.get("method", "rbpf")
+            block = get(benches, name, method)
+            if name == f"slam.{log}":
+                rows.append(
+                    [log, "odometry only", *_figures(bench["odometry"], f"{name}.odometry")]
+                )
+                bold = [f"**{c}**" for c in [f"slam {method}", *_figures(block, name)]]
+                rows.append([log, *bold])
+                blocks += [{}, block]
+            else:
+                particles = block.get("particles", "?")
+                rows.append([log, f"slam {method} ({particles} particles)", *_figures(block, name)])
+                blocks.append(block)
+        default = dict(runs).get(f"slam.{log}", {})
+        if "gmapping_published" in default:
+            error, wall = gmapping(default)
+            figure = f"{fixed(default['gmapping_published'], 3)} / {error}"
+            rows.append(
+                [log, "GMapping, published / measured here", figure, "", wall and f"— / {wall}"]
+            )
+            blocks.append({})
+    header = ["log", "method", "translation (m)", "rotation (°)", "wall (s)"]
+    for key, title, cell in OPTIONAL_COLUMNS:
+        if any(key in b for b in blocks):
+            header.append(title)
+            for row, b in zip(rows, blocks, strict=True):
+                row.append(cell(b) if key in b else "")
+    return table(header, rows)
+
+
+def _scans(block: dict) -> int:
+    if "scans" in block:
+        return int(block["scans"])
+    return round(block["scans_per_s"] * block["estimate_wall_s"])
+
+
+def performance_table(benches: Benches) -> str:
+    """The Performance table: the demo benches, then the default filter on every log."""
+    rows = []
+    demos = [(n, b) for n, b in benches.items() if n.startswith("slam.demo") and "ate_rmse" in b]
+    demos.sort(key=lambda nb: (nb[1]["method"] != "rbpf", nb[1]["method"], nb[1]["particles"]))
+    for name, b in demos:
+        run = f"demo, {b['method']}, {b['particles']} particles"
+        rows.append([run, *_speed(b, name), fixed(b["ate_rmse"], 3)])
+    for log, runs in accuracy_benches(benches).items():
+        for name, bench in runs:
+            method = bench.get("method", "rbpf")
+            if name == f"slam.{log}":
+                b = get(benches, name, method)
+                run = f"{log} ({thousands(_scans(b))} scans), {method}, {b['particles']} particles"
+                rows.append([run, *_speed(b, f"{name}.{method}"), "—"])
+    header = ["run", "wall (s)", "scans/s", "real time ×", "peak RSS (MB)", "ATE RMSE (m)"]
+    return table(header, rows)
+
+
+def _speed(b: dict, where: str) -> list[str]:
+    try:
+        keys = (("wall_s", 1), ("scans_per_s", 0), ("real_time_factor", 1), ("peak_rss_mb", 0))
+        return [fixed(b[key], digits) for key, digits in keys]
+    except KeyError as exc:
+        raise BenchError(f"bench JSON: {where}.{exc.args[0]} is missing") from None
+
+
+def gmapping_speedup(benches: Benches) -> str:
+    """How many times faster than GMapping as measured here, over the logs: ``2.5–2.6``."""
+    ratios = []
+    for log, runs in accuracy_benches(benches).items():
+        default = dict(runs).get(f"slam.{log}", {})
+        if wall := gmapping(default)[1]:
+            method = default.get("method", "rbpf")
+            ratios.append(float(wall) / get(benches, f"slam.{log}", method, "wall_s"))
+    if not ratios:
+        raise BenchError("bench JSON: no slam.<log> bench has a GMapping wall time")
+    low, high = fixed(min(ratios), 1), fixed(max(ratios), 1)
+    return low if low == high else f"{low}–{high}"
+
+
+def seed_range(log: str) -> Callable[[Benches], str | None]:
+    """``0.020–0.026``: the per-seed mean translation errors of a log (None before a sweep)."""
+
+    def figure(benches: Benches) -> str | None:
+        block = get(benches, f"slam.{log}", "rbpf")
+        return _per_seed(block).split(" ")[0] if "per_seed" in block else None
+
+    return figure
+
+
+def _figure(*keys: str, digits: int | None = None) -> Callable[[Benches], str]:
+    """The figure at ``benches[keys[0]][keys[1]]...``, with ``digits`` decimals (None: as is)."""
+
+    def figure(benches: Benches) -> str:
+        value = get(benches, *keys)
+        return str(value) if digits is None else fixed(value, digits)
+
+    return figure
+
+
+TEXTURE = (
+    "texture.demo_ground_truth_path"  # the demo along its true path (tools/benches/texture.py)
+)
+
+
+def _percent(*keys: str) -> Callable[[Benches], str]:
+    return lambda benches: fixed(100 * get(benches, *keys), 0)
+
+
+# name -> (JSON file stem, generator)
+TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
+    "slam": ("slam", slam_table),
+    "performance": ("slam", performance_table),
+}
+FIGURES: dict[str, tuple[str, Callable[[Benches], str | None]]] = {
+    "slam.particles": ("slam", _figure("slam.intel", "rbpf", "particles")),
+    "slam.gmapping_speedup": ("slam", gmapping_speedup),
+    "slam.aces_gmapping": ("slam", lambda b: gmapping(get(b, "slam.aces"))[0].split(" ")[0]),
+    "slam.aces_rbpf": ("slam", _figure("slam.aces", "rbpf", "trans_mean", digits=3)),
+    "slam.seeds_intel": ("slam", seed_range("intel")),
+    "slam.seeds_aces": ("slam", seed_range("aces")),
+    "slam.seeds_fr079": ("slam", seed_range("fr079")),
+    "slam.demo_scans": ("slam", _figure("slam.demo_100", "scans")),
+    "slam.classic_path": ("slam", _figure("slam.demo_classic_100", "path_length_m", digits=1)),
+    "slam.true_path": ("slam", _figure("slam.demo_classic_100", "true_path_length_m", digits=1)),
+    "texture.colour_mae": ("texture", _figure(TEXTURE, "colour_mae", digits=2)),
+    "texture.coverage": ("texture", _percent(TEXTURE, "coverage")),
+    "texture.frames_per_s": ("texture", _figure(TEXTURE, "frames_per_s", digits=0)),
+}
+
+
+def render(text: str, bench_dir: Path = BENCH_DIR) -> tuple[str, list[str]]:
+    """``text`` with every marked part regenerated, and the parts waiting for an absent JSON."""
+    cache: dict[str, Benches | None] = {}
+    waiting: list[str] = []
+
+    def generate(kind: str, registry: dict, match: re.Match) -> str:
+        name = match[2]
+        if name not in registry:
+            raise BenchError(
+                f"README.md: unknown {kind} marker '{name}' (known: {sorted(registry)})"
+            )
+        source, generator = registry[name]
+        if source not in cache:
+            cache[source] = load_benches(source, bench_dir)
+        if cache[source] is None:
+            waiting.append(f"{kind} {name} (docs/bench/{source}.json absent)")
+            return match[0]
+        generated = generator(cache[source])
+        if generated is None:
+            waiting.append(f"{kind} {name} (its keys are not in docs/bench/{source}.json yet)")
+            return match[0]
+        return match[1] + generated + match[4]
+
+    text = BLOCK.sub(lambda m: generate("table", TABLES, m), text)
+    text = INLINE.sub(lambda m: generate("fig", FIGURES, m), text)
+    return text, waiting
+
+
+def differences(old: str, new: str) -> list[str]:
+    """The names of the marked parts whose content differs between two versions of the README."""
+    parts = [BLOCK, INLINE]
+    before = {(p.pattern, m[2], i): m[3] for p in parts for i, m in enumerate(p.finditer(old))}
+    after = {(p.pattern, m[2], i): m[3] for p in parts for i, m in enumerate(p.finditer(new))}
+    return sorted({key[1] for key in before if before[key] != after.get(key)})
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Rewrite README.md's generated parts, or with ``--check`` report those that are stale."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--check", action="store_true", help="only report stale parts (exit 1)")
+    parser.add_argument("--readme", type=Path, default=README, help=argparse.SUPPRESS)
+    parser.add_argument("--bench-dir", type=Path, default=BENCH_DIR, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    old = args.readme.read_text()
+    try:
+        new, waiting = render(old, args.bench_dir)
+    except BenchError as exc:
+        print(f"readme_tables: {exc}", file=sys.stderr)
+        return 2
+    for part in waiting:
+        print(f"waiting: {part}", file=sys.stderr)
+    stale = differences(old, new)
+    if args.check:
+        for name in stale:
+            print(
+                f"{args.readme.name}: '{name}' differs from docs/bench (run tools/readme_tables.py)"
+            )
+        return 1 if stale else 0
+    if stale:
+        args.readme.write_text(new)
+    print(f"{args.readme.name}: {len(stale)} part(s) rewritten: {', '.join(stale) or 'none'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
