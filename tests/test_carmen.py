@@ -51,7 +51,7 @@ def test_intel_counts_rates_and_order(intel: Log):
 
 
 def test_intel_odometry_follows_file_order(intel: Log):
-    # data-formats.md §2: the odometry path is 508 m in file order, 661 m sorted by time.
+    # docs/data-formats.md §2: the odometry path is 508 m in file order, 661 m sorted by time.
     odom = intel.scans.odometry
     in_file_order = np.hypot(*np.diff(odom[:, :2], axis=0).T).sum()
     by_time = odom[np.argsort(intel.scans.time, kind="stable")]

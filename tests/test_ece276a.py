@@ -18,7 +18,7 @@ ANGLE_MAX = 2.356194490192345
 ANGLE_INCREMENT = (ANGLE_MAX - ANGLE_MIN) / 1080
 
 
-# --- synthetic files in the documented format (data-formats.md §1) -------------------------
+# --- synthetic files in the documented format (docs/data-formats.md §1.1) -----------------
 
 
 def write_encoders(folder: Path, nn: int = 20, n: int = 200, rate: float = 40.0, **keys) -> Path:
@@ -112,7 +112,8 @@ def test_real_logs_counts_rates_durations(
     assert summary["imu"]["duration_s"] == pytest.approx(imu_duration, abs=1e-3)
     assert summary["encoders"]["rate_hz"] == pytest.approx(40.0, rel=0.005)
     assert summary["imu"]["rate_hz"] == pytest.approx(100.0, rel=0.002)
-    # The IMU stops 1.4-1.8 s before the encoders (data-formats.md: never extrapolate silently).
+    # The IMU stops 1.4-1.8 s before the encoders (docs/data-formats.md §1.1): never extrapolated
+    # silently.
     assert 1.4 < log.meta["imu_ends_early_s"] < 1.8
     assert log.meta["encoders_non_monotonic"] == 0 and log.meta["imu_non_monotonic"] == 0
     assert log.scans is None  # Hokuyo files are absent from the shared data

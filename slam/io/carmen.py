@@ -1,8 +1,8 @@
 """CARMEN log loader: ``.clf`` / ``.log`` text, optionally gzip-compressed, into a :class:`Log`.
 
-This module owns the CARMEN text format (``docs/data-formats.md`` §2): which messages become which
-stream, the beam geometry of ``FLASER`` lines, the "no return" semantics of their ranges and the
-errors a malformed file produces.
+This module owns the CARMEN text format (``docs/data-formats.md`` §2, "CARMEN logs"): which
+messages become which stream, the beam geometry of ``FLASER`` lines, the "no return" semantics of
+their ranges and the errors a malformed file produces.
 
 Messages
 --------

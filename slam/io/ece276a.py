@@ -1,9 +1,9 @@
 """Loader of the UCSD ECE276A robot logs (``EncodersNN.npz``, ``ImuNN.npz``, ``HokuyoNN.npz``,
 ``KinectNN.npz`` and the ``dataRGBD/`` image folders) into a :class:`~slam.io.log.Log`.
 
-This module owns the file format of these logs (see ``docs/data.md`` and the shared
-``data-formats.md`` §1): which keys each file holds, their shapes, dtypes and units, and every check
-that a file really is what its name says. Files are read with ``allow_pickle=False``; anything a
+This module owns the file format of these logs (``docs/data-formats.md`` §1, "ECE276A robot
+logs"; where they go: ``docs/data.md``): which keys each file holds, their shapes, dtypes and
+units, and every check that a file really is what its name says. Files are read with ``allow_pickle=False``; anything a
 user can get wrong (missing, empty, truncated or pickled file, missing key, wrong shape or dtype,
 non-finite or implausibly spaced timestamps, inconsistent beam geometry) raises one
 :class:`~slam.errors.DataError` that names the file and key, what was expected and what was found.
@@ -139,7 +139,7 @@ SPECS: dict[str, StreamSpec] = {
         (1.0, 100.0),
     ),
 }
-"""The file of every stream (data-formats.md §1)."""
+"""The file of every stream (``docs/data-formats.md`` §1.1)."""
 
 
 def stream_file(folder: Path, number: int | str, stream: str) -> Path:
