@@ -1,4 +1,5 @@
-"""README.md's bench tables and figures agree with docs/bench/*.json (tools/readme_tables.py).
+"""The bench tables and figures of README.md, docs/localize.md and docs/evaluation.md agree with
+docs/bench/*.json (tools/readme_tables.py).
 
 The first tests fail when someone edits a figure by hand or re-runs a bench without regenerating
 the README (fix: ``uv run python tools/readme_tables.py``); the claims the README's prose makes
@@ -48,7 +49,7 @@ def write_bench(folder: Path, name: str, benches: dict) -> None:
     (folder / f"{name}.json").write_text(json.dumps({"machine": {}, "benches": benches}))
 
 
-def test_readme_matches_bench_json(capsys):
+def test_pages_match_bench_json(capsys):
     assert tables.main(["--check"]) == 0, capsys.readouterr().out
 
 
@@ -94,9 +95,9 @@ def test_a_hand_edited_figure_is_named(tmp_path, capsys):
     row = f"| demo, rbpf, 100 particles | {wall} |"
     assert row in text
     readme.write_text(text.replace(row, "| demo, rbpf, 100 particles | 1.0 |"))
-    assert tables.main(["--check", "--readme", str(readme)]) == 1
+    assert tables.main(["--check", str(readme)]) == 1
     assert "'performance' differs" in capsys.readouterr().out
-    assert tables.main(["--readme", str(readme)]) == 0
+    assert tables.main([str(readme)]) == 0
     assert readme.read_text() == text
 
 
@@ -106,13 +107,26 @@ def test_a_missing_key_is_one_line_and_exit_2(tmp_path, capsys):
     write_bench(tmp_path, "slam", benches)
     assert tables.main(["--check", "--bench-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["readme_tables: bench JSON: slam.aces.trans_std is missing"]
+    assert err == ["readme_tables: README.md: bench JSON: slam.aces.trans_std is missing"]
+
+
+def test_a_missing_localize_key_names_the_file_and_table(tmp_path, capsys):
+    benches = json.loads((BENCH / "localize.json").read_text())["benches"]
+    del benches["localize.global_fr079"]["histogram_states"]
+    write_bench(tmp_path, "localize", benches)
+    page = ROOT / "docs" / "localize.md"
+    assert tables.main(["--check", str(page), "--bench-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "readme_tables: docs/localize.md: docs/bench/localize.json: table localize.global needs "
+        "the missing key 'histogram_states'"
+    ]
 
 
 def test_an_unknown_marker_is_named(tmp_path, capsys):
     readme = tmp_path / "README.md"
     readme.write_text("x <!-- fig:slam.nothing -->1<!-- /fig -->\n")
-    assert tables.main(["--readme", str(readme)]) == 2
+    assert tables.main([str(readme)]) == 2
     assert "unknown fig marker 'slam.nothing'" in capsys.readouterr().err
 
 
@@ -165,4 +179,22 @@ def test_fixed_rounds_halves_up_as_printed(value, digits, expected):
 
 def test_no_line_starts_with_an_inline_marker():
     """A line starting with ``<!--`` would begin an HTML block and break its paragraph."""
-    assert not [line for line in README.read_text().splitlines() if line.startswith("<!-- fig:")]
+    for page in tables.PAGES:
+        lines = (ROOT / page).read_text().splitlines()
+        assert not [line for line in lines if line.startswith("<!-- fig:")], page
+
+
+def test_localize_and_quality_tables_show_the_json_figures():
+    localize = json.loads((BENCH / "localize.json").read_text())["benches"]
+    quality = json.loads((BENCH / "quality.json").read_text())["benches"]
+    page = (ROOT / "docs" / "localize.md").read_text()
+    aces = localize["localize.global_aces"]
+    assert f"| aces | **{aces['success']}/{aces['starts']}** |" in page
+    assert f"{tables.thousands(aces['histogram_states'])} | 106 MB | 126 / 72 ms |" in page
+    evaluation = (ROOT / "docs" / "evaluation.md").read_text()
+    assert "@@" not in evaluation
+    clinic = quality["quality.fr_clinic"]
+    row = next(r for r in evaluation.splitlines() if r.startswith("| fr-clinic | 6 917 |"))
+    assert f"| **{tables.fixed(clinic['score'], 3)}** |" in row
+    assert "| 45 (29 / 26) |" in row  # bad stretches: all, ranked, flagged
+    assert "| mit-killian | 17 480 |" in evaluation and "| — | — | — |" in evaluation

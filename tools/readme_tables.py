@@ -1,21 +1,26 @@
-#!/usr/bin/env python3
-"""The README's bench tables and figures, generated from ``docs/bench/*.json``.
+"""The bench tables and figures of README.md, docs/localize.md and docs/evaluation.md (``PAGES``),
+generated from ``docs/bench/*.json``.
 
-README.md marks each generated part with comments; everything between them is rewritten::
+Each generated part is marked with comments; everything between them is rewritten::
 
     <!-- table:slam -->            a whole table (the lines up to the closing marker)
     | log | method | ... |
     <!-- /table -->
     <!-- fig:slam.gmapping_speedup -->2.5–2.6<!-- /fig -->   inline: the text between the markers
 
+(An inline marker must not start a line: ``<!--`` there would begin an HTML block.)
+
 Usage::
 
-    uv run python tools/readme_tables.py           # rewrite README.md from the JSON
+    uv run python tools/readme_tables.py           # rewrite the pages from the JSON
     uv run python tools/readme_tables.py --check   # exit 1 and name each part that differs
 
 A part whose JSON file is absent (``docs/bench/texture.json`` before its bench has been run), or
 whose optional keys are (the per-seed figures before a sweep), is left as it is and reported as
-waiting; a required key missing from a present file is an error (exit 2).
+waiting; a required key missing from a present file is an error (exit 2). ``TABLES`` and
+``FIGURES`` list every marker name with its JSON file; ``docs/bench/localize.json`` and
+``quality.json`` give one row per ``localize.tracking_<log>``, ``localize.global_<log>`` and
+``quality.<log>`` bench.
 
 What the generators read from ``docs/bench/slam.json`` (``benches`` of ``tools/bench.py slam``):
 
@@ -44,7 +49,8 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-README = ROOT / "README.md"
+PAGES = ("README.md", "docs/localize.md", "docs/evaluation.md")
+"""The pages with generated parts, relative to the repository."""
 BENCH_DIR = ROOT / "docs" / "bench"
 LOG_ORDER = ("intel", "aces", "fr079", "fr-clinic", "mit-csail", "mit-killian")
 BLOCK = re.compile(r"(<!-- table:([\w.-]+) -->\n)(.*?)(<!-- /table -->)", re.S)
@@ -54,7 +60,7 @@ Benches = dict[str, dict]
 
 
 class BenchError(Exception):
-    """A bench file or key the README needs is malformed or missing (one line, exit 2)."""
+    """A bench file or key a page needs is malformed or missing (one line, exit 2)."""
 
 
 def load_benches(name: str, bench_dir: Path = BENCH_DIR) -> Benches | None:
@@ -253,19 +259,137 @@ def _figure(*keys: str, digits: int | None = None) -> Callable[[Benches], str]:
     return figure
 
 
-TEXTURE = (
-    "texture.demo_ground_truth_path"  # the demo along its true path (tools/benches/texture.py)
-)
+TEXTURE = "texture.demo_ground_truth_path"
+"""The texture bench of the README: the demo along its true path (tools/benches/texture.py)."""
 
 
 def _percent(*keys: str) -> Callable[[Benches], str]:
     return lambda benches: fixed(100 * get(benches, *keys), 0)
 
 
+# ---------------------------------------------------------------- localize.json, quality.json
+
+
+def _log_benches(benches: Benches, prefix: str) -> list[tuple[str, dict]]:
+    """(log, bench) of the benches ``<prefix><log>`` (``fr_clinic`` → ``fr-clinic``), README order."""
+    found = [
+        (name.removeprefix(prefix).replace("_", "-"), bench)
+        for name, bench in benches.items()
+        if name.startswith(prefix)
+    ]
+    return sorted(found, key=lambda lb: (LOG_ORDER.index(lb[0]) if lb[0] in LOG_ORDER else 99, lb))
+
+
+def _relation_cell(r: dict, digits: int, bold: bool = False) -> str:
+    """``0.0253 ± 0.0229, 0.30``: translation mean ± std (m), rotation mean (°)."""
+    mean = fixed(r["trans_mean"], digits)
+    mean = f"**{mean}**" if bold else mean
+    return f"{mean} ± {fixed(r['trans_std'], digits)}, {fixed(r['rot_mean_deg'], 2)}"
+
+
+def tracking_table(benches: Benches) -> str:
+    """docs/localize.md: tracking from the true start pose, per log."""
+    rows = []
+    for log, b in _log_benches(benches, "localize.tracking_"):
+        pose = b["pose_vs_slam"]
+        rows.append([
+            log, _relation_cell(b["slam"], 4), _relation_cell(b["localize"], 4, bold=True),
+            fixed(b["trans_ratio_to_slam"], 2),
+            f"{fixed(100 * pose['median_m'], 1)} cm, {fixed(pose['median_deg'], 2)}°",
+            f"{fixed(100 * b['localized_share'], 2)} %", fixed(b["estimate_wall_s"], 1),
+            fixed(b["estimate_cpu_s"], 1),
+            f"{fixed(b['real_time_factor'], 0)} / {fixed(b['real_time_factor_cpu'], 0)}",
+        ])  # fmt: skip
+    header = ["log", "SLAM run (m, °)", "`slam localize` (m, °)", "ratio", "pose vs SLAM, median",
+              "localized", "wall (s)", "CPU (s)", "real time × (wall / CPU)"]  # fmt: skip
+    return table(header, rows)
+
+
+def global_table(benches: Benches) -> str:
+    """docs/localize.md: global localization from seeded start times, per log."""
+    rows = []
+    for log, b in _log_benches(benches, "localize.global_"):
+        n = b["starts"]
+        rows.append([
+            log, f"**{b['success']}/{n}**", f"{b['first_convergence_correct']}/{n}",
+            str(b["wrong_and_stayed"]), f"{b['median_driven_m']} m",
+            f"{fixed(b['median_time_s'], 1)} s / {fixed(b['max_time_s'], 1)} s",
+            thousands(b["histogram_states"]), f"{fixed(b['histogram_memory_mb'], 0)} MB",
+            f"{fixed(b['median_step_wall_ms'], 0)} / {fixed(b['median_step_cpu_ms'], 0)} ms",
+        ])  # fmt: skip
+    header = ["log", "success", "first convergence correct", "wrong and stayed", "median driven",
+              "median / longest time", "states", "histogram memory",
+              "step wall / CPU (median)"]  # fmt: skip
+    return table(header, rows)
+
+
+def quality_table(benches: Benches) -> str:
+    """docs/evaluation.md: the map score of ``slam run LOG`` beside its relation errors."""
+    rows = []
+    for log, b in _log_benches(benches, "quality."):
+        if "score" not in b:
+            continue  # the synthetic bench: quality_synthetic_table
+        r = b.get("relations") or {}
+        relations = [
+            f"{fixed(r['trans_mean'], 3)} / {fixed(r['trans_max'], 2)}",
+            f"{fixed(100 * r['share_over_0.2m'], 1)} %",
+            f"{r['bad_stretches']} ({r['bad_stretches_judged']} / {r['bad_stretches_flagged']})",
+        ] if r else ["—", "—", "—"]  # fmt: skip
+        rows.append([
+            log, thousands(b["scans"]), fixed(b["path_length_m"], 0), f"**{fixed(b['score'], 3)}**",
+            f"{fixed(100 * b['coverage'], 0)} %", f"{b['judged_stretches']} / {b['stretches']}",
+            f"{fixed(b['median_stretch_score'], 3)} / {fixed(b['worst_score'], 3)}",
+            str(b["flagged"]), *relations,
+            f"{fixed(b['quality_wall_s'], 1)} ({fixed(100 * b['quality_share_of_run'], 1)} %)",
+        ])  # fmt: skip
+    header = ["log", "scans", "path (m)", "score", "coverage", "ranked / stretches",
+              "median / worst stretch", "flagged", "relation error mean / max (m)", "> 0.2 m",
+              "bad stretches (ranked / flagged)", "score time (s, share of run)"]  # fmt: skip
+    return table(header, rows)
+
+
+def quality_synthetic_table(benches: Benches) -> str:
+    """docs/evaluation.md: the demo building's true trajectory and the same with its loop opened."""
+    rows = []
+    for key, label in (("truth", "true trajectory"), ("opened_loop", "loop opened")):
+        b = get(benches, "quality.synthetic", key)
+        rows.append([label, f"**{fixed(b['score'], 3)}**", fixed(b["worst_score"], 3),
+                     str(b["flagged"]), str(b["judged_stretches"])])  # fmt: skip
+    return table(["demo", "score", "worst stretch", "flagged", "ranked stretches"], rows)
+
+
+def _same(*values: Callable[[Benches], float], digits: int) -> Callable[[Benches], str]:
+    """One figure for several benches: ``0.99``, or ``0.92–0.94`` when they differ."""
+
+    def figure(benches: Benches) -> str:
+        shown = sorted({fixed(v(benches), digits) for v in values}, key=float)
+        return shown[0] if len(shown) == 1 else f"{shown[0]}–{shown[-1]}"
+
+    return figure
+
+
+def _per_log(prefix: str, key: str, digits: int, last: str = ", ") -> Callable[[Benches], str]:
+    """``310, 376 and 242``: one figure per log of the ``<prefix><log>`` benches, README order."""
+
+    def figure(benches: Benches) -> str:
+        shown = [fixed(b[key], digits) for _, b in _log_benches(benches, prefix)]
+        return ", ".join(shown[:-1]) + last + shown[-1] if len(shown) > 1 else "".join(shown)
+
+    return figure
+
+
+def _at(*keys: str) -> Callable[[Benches], float]:
+    return lambda benches: get(benches, *keys)
+
+
 # name -> (JSON file stem, generator)
 TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
     "slam": ("slam", slam_table),
     "performance": ("slam", performance_table),
+    "localize.tracking": ("localize", tracking_table),
+    "localize.global": ("localize", global_table),
+    "quality": ("quality", quality_table),
+    "quality.synthetic": ("quality", quality_synthetic_table),
 }
 FIGURES: dict[str, tuple[str, Callable[[Benches], str | None]]] = {
     "slam.particles": ("slam", _figure("slam.intel", "rbpf", "particles")),
@@ -278,6 +402,51 @@ FIGURES: dict[str, tuple[str, Callable[[Benches], str | None]]] = {
     "slam.demo_scans": ("slam", _figure("slam.demo_100", "scans")),
     "slam.classic_path": ("slam", _figure("slam.demo_classic_100", "path_length_m", digits=1)),
     "slam.true_path": ("slam", _figure("slam.demo_classic_100", "true_path_length_m", digits=1)),
+    "quality.good_score": (
+        "quality",
+        _same(_at("quality.intel", "score"), _at("quality.fr079", "score"), digits=2),
+    ),
+    "quality.good_worst": (
+        "quality",
+        _same(_at("quality.intel", "worst_score"), _at("quality.fr079", "worst_score"), digits=2),
+    ),
+    "localize.particles": (
+        "localize",
+        _per_log("localize.tracking_", "particles_mean", 0, " and "),
+    ),
+    "localize.match_quality": ("localize", _per_log("localize.tracking_", "mean_match_quality", 2)),
+    "localize.peak_rss_intel": (
+        "localize",
+        _figure("localize.tracking_intel", "peak_rss_mb", digits=0),
+    ),
+    "localize.map_memory_intel": (
+        "localize",
+        _figure("localize.tracking_intel", "map_memory_mb", digits=1),
+    ),
+    "localize.cross_run_mean": (
+        "localize",
+        _figure("localize.cross_run_intel", "localize", "trans_mean", digits=3),
+    ),
+    "localize.cross_run_std": (
+        "localize",
+        _figure("localize.cross_run_intel", "localize", "trans_std", digits=3),
+    ),
+    "localize.kidnap_noticed": (
+        "localize",
+        _figure("localize.kidnap_intel", "noticed_after_s", digits=1),
+    ),
+    "localize.kidnap_recovered": (
+        "localize",
+        _figure("localize.kidnap_intel", "recovered_after_s", digits=1),
+    ),
+    "localize.step_median_ms": (
+        "localize",
+        _figure("localize.histogram_step_intel", "step_wall_ms_median", digits=1),
+    ),
+    "localize.step_least_ms": (
+        "localize",
+        _figure("localize.histogram_step_intel", "step_wall_ms_min", digits=1),
+    ),
     "texture.colour_mae": ("texture", _figure(TEXTURE, "colour_mae", digits=2)),
     "texture.coverage": ("texture", _percent(TEXTURE, "coverage")),
     "texture.frames_per_s": ("texture", _figure(TEXTURE, "frames_per_s", digits=0)),
@@ -293,7 +462,7 @@ def render(text: str, bench_dir: Path = BENCH_DIR) -> tuple[str, list[str]]:
         name = match[2]
         if name not in registry:
             raise BenchError(
-                f"README.md: unknown {kind} marker '{name}' (known: {sorted(registry)})"
+                f"unknown {kind} marker '{name}' (known: {', '.join(sorted(registry))})"
             )
         source, generator = registry[name]
         if source not in cache:
@@ -301,7 +470,12 @@ def render(text: str, bench_dir: Path = BENCH_DIR) -> tuple[str, list[str]]:
         if cache[source] is None:
             waiting.append(f"{kind} {name} (docs/bench/{source}.json absent)")
             return match[0]
-        generated = generator(cache[source])
+        try:
+            generated = generator(cache[source])
+        except (KeyError, TypeError) as exc:
+            raise BenchError(
+                f"docs/bench/{source}.json: {kind} {name} needs the missing key {exc}"
+            ) from None
         if generated is None:
             waiting.append(f"{kind} {name} (its keys are not in docs/bench/{source}.json yet)")
             return match[0]
@@ -313,7 +487,7 @@ def render(text: str, bench_dir: Path = BENCH_DIR) -> tuple[str, list[str]]:
 
 
 def differences(old: str, new: str) -> list[str]:
-    """The names of the marked parts whose content differs between two versions of the README."""
+    """The names of the marked parts whose content differs between two versions of a page."""
     parts = [BLOCK, INLINE]
     before = {(p.pattern, m[2], i): m[3] for p in parts for i, m in enumerate(p.finditer(old))}
     after = {(p.pattern, m[2], i): m[3] for p in parts for i, m in enumerate(p.finditer(new))}
@@ -321,31 +495,33 @@ def differences(old: str, new: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Rewrite README.md's generated parts, or with ``--check`` report those that are stale."""
+    """Rewrite the pages' generated parts, or with ``--check`` report those that are stale."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("pages", nargs="*", type=Path, help="markdown files (default: PAGES)")
     parser.add_argument("--check", action="store_true", help="only report stale parts (exit 1)")
-    parser.add_argument("--readme", type=Path, default=README, help=argparse.SUPPRESS)
     parser.add_argument("--bench-dir", type=Path, default=BENCH_DIR, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    old = args.readme.read_text()
-    try:
-        new, waiting = render(old, args.bench_dir)
-    except BenchError as exc:
-        print(f"readme_tables: {exc}", file=sys.stderr)
-        return 2
-    for part in waiting:
-        print(f"waiting: {part}", file=sys.stderr)
-    stale = differences(old, new)
-    if args.check:
-        for name in stale:
-            print(
-                f"{args.readme.name}: '{name}' differs from docs/bench (run tools/readme_tables.py)"
-            )
-        return 1 if stale else 0
-    if stale:
-        args.readme.write_text(new)
-    print(f"{args.readme.name}: {len(stale)} part(s) rewritten: {', '.join(stale) or 'none'}")
-    return 0
+    stale_pages = 0
+    for page in args.pages or [ROOT / name for name in PAGES]:
+        page = page.resolve()
+        old = page.read_text()
+        shown = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+        try:
+            new, waiting = render(old, args.bench_dir)
+        except BenchError as exc:
+            print(f"readme_tables: {shown}: {exc}", file=sys.stderr)
+            return 2
+        for part in waiting:
+            print(f"{shown}: waiting: {part}", file=sys.stderr)
+        stale = differences(old, new)
+        stale_pages += bool(stale)
+        if args.check:
+            for name in stale:
+                print(f"{shown}: '{name}' differs from docs/bench (run tools/readme_tables.py)")
+        elif stale:
+            page.write_text(new)
+            print(f"{shown}: rewritten: {', '.join(stale)}")
+    return 1 if args.check and stale_pages else 0
 
 
 if __name__ == "__main__":
