@@ -119,7 +119,7 @@ def run_memory(
         tile_m = rc.tile * (rc.resolution or m.resolution)
         tiles = (side_x / tile_m + 1) * (side_y / tile_m + 1)
         per_update = min(tiles, min(rc.insert_beams, beams))
-        tile_bytes = 2 * 4 * rc.tile * rc.tile  # distance and plane layers, float32
+        tile_bytes = 2 * 4 * rc.tile * rc.tile  # distance and surface layers, float32
         particles = config.filter.particles
         out["particle-map tables"] = 2.0 * particles * tiles * 4
         out["particle-map tiles"] = (tiles + particles * per_update) * tile_bytes

@@ -119,29 +119,28 @@ def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         if ex.size < lc.min_beams:
             continue
-        args = maps.field(0)
+        view = maps.field(0)
         start = poses[i]
-        _, close = fit_counts(*args, start, ex, ey, lc.fit_distance)
+        _, close = fit_counts(view, start, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size:
             thin = slice(None, None, max(1, ex.size // 60))
             start = correlative_search(
-                *args, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
+                view, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
                 lc.search_xy, lc.search_step, lc.search_th, lc.search_th_step,
             )[:3].copy()  # fmt: skip
         refined, _, _ = match_one(
-            *args, start, ex, ey, luts, step_inv, rc.max_iterations * 2, rc.tolerance, 1
+            view, start, ex, ey, luts, step_inv, rc.max_iterations * 2, rc.tolerance, 1
         )
         shift = refined - poses[i]
         if np.hypot(shift[0], shift[1]) > lc.search_xy or abs(wrap_angle(shift[2])) > lc.search_th:
             continue  # slid out of the searched window (along a corridor): unverified
-        _, close = fit_counts(*args, refined, ex, ey, lc.fit_distance)
+        _, close = fit_counts(view, refined, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size or close < lc.min_beams:
             continue
         hessian, gradient = np.zeros((3, 3)), np.zeros(3)
         normal_equations(
-            *args, refined[0], refined[1], refined[2], ex, ey, luts[-1, 0], luts[-1, 1],
-            step_inv, hessian, gradient,
-        )  # fmt: skip
+            view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
+        )
         edges.append(
             (j, i, relative(poses[j], refined), _edge_information(hessian, refined, lc, rc))
         )

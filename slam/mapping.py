@@ -7,8 +7,9 @@ that +y points up on screen.
 * :class:`OccupancyGrid`: what a run outputs (``map.npz``, ``map.png``); Bresenham log-odds
   updates (hit ``+log 4``, miss along the ray, clamped) through :mod:`slam.kernels.grid`; grows
   on demand.
-* :class:`ParticleMaps`: one truncated signed (point-to-plane) distance field per particle, stored
-  as copy-on-write tiles (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
+* :class:`ParticleMaps`: one truncated distance field per particle (unsigned, or signed
+  point-to-plane with ``rbpf.field = "plane"``), stored as copy-on-write tiles
+  (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
 
 Both refuse (one :class:`~slam.errors.UsageError` line) to grow an array past the memory budget of
 :mod:`slam.budget`: a diverged trajectory must not take the machine down.
@@ -26,6 +27,7 @@ from slam.budget import check_memory
 from slam.config import MapConfig
 from slam.io.atomic import atomic_path
 from slam.kernels.field import (
+    FieldView,
     claim_tiles,
     match_particles,
     match_scans,
@@ -227,7 +229,12 @@ def likelihood_tables(
 
 
 class ParticleMaps:
-    """One truncated signed distance-field map per particle, as shared copy-on-write tiles."""
+    """One truncated distance-field map per particle, as shared copy-on-write tiles.
+
+    Two layers per tile (:mod:`slam.kernels.field`): ``dist``, the Euclidean distance to the
+    nearest hit, and ``surface``, what the matcher reads: the signed point-to-plane distance with
+    ``signed``, else the Euclidean distance again.
+    """
 
     def __init__(
         self,
@@ -257,7 +264,7 @@ class ParticleMaps:
         self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
         self.tables = np.full((particles, n, n), -1, dtype=np.int32)
         self.dist = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
-        self.plane = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
+        self.surface = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
         self.refcount = np.zeros(capacity, dtype=np.int32)
         self.free_stack = np.arange(capacity - 1, -1, -1, dtype=np.int32)
         self.free_top = np.array([capacity], dtype=np.int64)
@@ -276,7 +283,7 @@ class ParticleMaps:
         """Bytes held by the pool, the tables and the bookkeeping arrays."""
         return int(
             self.dist.nbytes
-            + self.plane.nbytes
+            + self.surface.nbytes
             + self.tables.nbytes
             + self.refcount.nbytes
             + self.free_stack.nbytes
@@ -293,7 +300,7 @@ class ParticleMaps:
             ntx * tile_m,
             nty * tile_m,
         )
-        for name in ("dist", "plane"):
+        for name in ("dist", "surface"):
             layer = np.empty((new, self.tile, self.tile), dtype=np.float32)
             layer[:old] = getattr(self, name)
             setattr(self, name, layer)
@@ -352,7 +359,7 @@ class ParticleMaps:
         start = 0
         while True:
             stopped = claim_tiles(
-                self.dist, self.plane, self.refcount, self.free_stack, self.free_top,
+                self.dist, self.surface, self.refcount, self.free_stack, self.free_top,
                 self.tables, self.shift, ox, oy, self.resolution, self.dmax, poses, hx, hy,
                 keep, start,
             )  # fmt: skip
@@ -361,7 +368,7 @@ class ParticleMaps:
             self._grow_pool()
             start = stopped
         splat_hits(
-            self.dist, self.plane, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
+            self.dist, self.surface, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
             poses, hx, hy, nx, ny, keep, self.signed,
         )  # fmt: skip
 
@@ -375,14 +382,20 @@ class ParticleMaps:
         self.tables = np.ascontiguousarray(self.tables[indices])
         self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
 
-    def field(self, particle: int | None = None) -> tuple:
-        """The map as the field kernels take it: ``(plane, tables, shift, ox, oy, 1/resolution)``.
+    def field(self, particle: int | None = None) -> FieldView:
+        """The map as the matching kernels read it (:class:`~slam.kernels.field.FieldView`).
 
-        ``tables`` holds every particle's tile tables, or only ``particle``'s when given.
+        Its table holds every particle's tile tables, or only ``particle``'s when given.
         """
         tables = self.tables if particle is None else self.tables[particle]
-        return (self.plane, tables, self.shift, float(self.origin[0]), float(self.origin[1]),
-                1.0 / self.resolution)  # fmt: skip
+        return FieldView(
+            self.surface,
+            tables,
+            self.shift,
+            float(self.origin[0]),
+            float(self.origin[1]),
+            1.0 / self.resolution,
+        )
 
     def match(
         self,
@@ -402,7 +415,7 @@ class ParticleMaps:
         n = poses.shape[0]
         out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
         match_particles(
-            *self.field(),
+            self.field(),
             np.ascontiguousarray(poses),
             ex,
             ey,
@@ -438,7 +451,7 @@ class ParticleMaps:
         """
         out = np.empty_like(poses)
         match_scans(
-            *self.field(particle),
+            self.field(particle),
             np.ascontiguousarray(poses),
             ex,
             ey,
@@ -451,20 +464,4 @@ class ParticleMaps:
             min_inliers,
             out,
         )
-        return out
-
-    def layer_image(self, particle: int, layer: str = "dist") -> NDArray[np.float32]:
-        """Dense ``(H, W)`` copy of one particle's ``"dist"`` or ``"plane"`` layer.
-
-        Unknown cells hold ``dmax`` (``dist``) or NaN (``plane``).
-        """
-        table = self.tables[particle]
-        source = self.dist if layer == "dist" else self.plane
-        nty, ntx = table.shape
-        t = self.tile
-        fill = self.dmax if layer == "dist" else np.nan
-        out = np.full((nty * t, ntx * t), fill, dtype=np.float32)
-        ys, xs = np.nonzero(table >= 0)
-        for ty, tx in zip(ys, xs, strict=True):
-            out[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t] = source[table[ty, tx]]
         return out

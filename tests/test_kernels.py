@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from slam.kernels.field import plane_distance_at, recount_tiles
+from slam.kernels.field import recount_tiles, surface_at
 from slam.kernels.grid import bresenham, integrate_rays
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
@@ -174,24 +174,24 @@ def _wall_maps(particles=3, signed=True):
 
 def test_unsigned_field_is_the_distance_to_the_nearest_hit():
     maps, _, _ = _wall_maps(signed=False)
-    args = (maps.plane, maps.tables[0], maps.shift, *maps.origin, 1.0 / maps.resolution)
+    view = maps.field(0)
     # a cell centre 12.5 cm from the wall; one hit per cell is kept, so the nearest kept hit may
     # lie up to half a cell (2.5 cm) along the wall: d in [0.125, hypot(0.125, 0.025)]
     upper = np.hypot(0.125, 0.025) + 1e-6
-    d, gx, _ = plane_distance_at(*args, 1.875, 0.0)
+    d, gx, _ = surface_at(view, 1.875, 0.0)
     assert 0.125 - 1e-6 <= d <= upper and gx == pytest.approx(-1.0, abs=0.05)
-    d, gx, _ = plane_distance_at(*args, 2.125, 0.0)
+    d, gx, _ = surface_at(view, 2.125, 0.0)
     assert 0.125 - 1e-6 <= d <= upper and gx == pytest.approx(1.0, abs=0.05)
 
 
 def test_signed_field_is_exact_across_a_wall():
     maps, _, _ = _wall_maps()
-    args = (maps.plane, maps.tables[0], maps.shift, *maps.origin, 1.0 / maps.resolution)
+    view = maps.field(0)
     for x in (1.8, 1.9, 1.987, 2.0, 2.013, 2.1, 2.2):
-        d, gx, gy = plane_distance_at(*args, x, 0.013)
+        d, gx, gy = surface_at(view, x, 0.013)
         assert d == pytest.approx(2.0 - x, abs=1e-5)  # sensor side positive, zero on the wall
         assert gx == pytest.approx(-1.0, abs=1e-5) and abs(gy) < 1e-5
-    assert np.isnan(plane_distance_at(*args, 0.5, 0.0)[0])  # beyond dmax: unknown
+    assert np.isnan(surface_at(view, 0.5, 0.0)[0])  # beyond dmax: unknown
 
 
 def test_tiles_are_shared_until_written():

@@ -10,7 +10,7 @@ import pytest
 
 from slam.config import LocalizeConfig
 from slam.localize.histogram import LEVELS, QUANTUM, PoseHistogram, cell_weights
-from slam.localize.kernels import particle_loglik
+from slam.localize.kernels import DistanceView, particle_loglik
 from slam.localize.kld import KldCounter, kld_bound, normal_quantile
 from slam.localize.maps import LikelihoodMap
 from slam.localize.mcl import MotionModel, weighted_mean_pose
@@ -100,7 +100,7 @@ def test_beam_model_mixture_integrates_to_one(sigma):
     for i, length in enumerate(z):
         out = np.empty(1)
         particle_loglik(
-            lmap.distance, 0.0, -6.0, 1.0 / lmap.resolution, poses[i : i + 1],
+            DistanceView(lmap.distance, 0.0, -6.0, 1.0 / lmap.resolution), poses[i : i + 1],
             np.array([length]), np.array([0.0]), table[0], table[1], out,
         )  # fmt: skip
         loglik[i] = out[0]
@@ -124,7 +124,13 @@ def test_particle_loglik_is_the_sum_of_beam_log_densities():
     ey = np.array([0.025, 0.025, 0.025])
     out = np.empty(1)
     particle_loglik(
-        lmap.distance, 0.0, -6.0, 20.0, np.zeros((1, 3)), ex, ey, table[0], table[1], out
+        DistanceView(lmap.distance, 0.0, -6.0, 20.0),
+        np.zeros((1, 3)),
+        ex,
+        ey,
+        table[0],
+        table[1],
+        out,
     )
     expected = model.log_density(np.array([0.025, 0.125, 0.525])).sum()
     assert out[0] == pytest.approx(expected, abs=1e-4)

@@ -1,38 +1,68 @@
 """Distance-field kernels for per-particle maps stored as shared, copy-on-write tiles.
 
-Each particle's map is a truncated *signed point-to-plane* distance field. For every cell within
-``dmax`` of a laser hit, the hit ``h`` nearest to the cell centre ``c`` (Euclidean distance, kept in
-``dist``) is selected and the cell stores ``(c − h)·n`` in ``plane``, where ``n`` is the surface
-normal at the hit (estimated from the neighbouring beams, pointing towards the sensor). Cells with
-no hit within ``dmax`` hold NaN: unknown. A cell more than one cell size away from its hit along
-the surface (past the end of a wall, beside an isolated return) gets the offset beyond that
-blended in, ``sign(p)·sqrt(p² + (|t| − res)²)`` with ``p`` the plane and ``t`` the tangential
-offset, so a return never stands for a wall it did not see.
+Each particle's map is a truncated distance field with two layers. For every cell within ``dmax``
+of a laser hit, the hit ``h`` nearest to the cell centre ``c`` is selected; ``dist`` keeps the
+Euclidean distance ``|c − h|`` (which hit is nearest, and whether a new hit adds anything) and
+``surface`` the distance the scan matcher reads. Cells with no hit within ``dmax`` hold ``dmax``
+in ``dist`` and NaN (unknown) in ``surface``. What ``surface`` holds is ``rbpf.field``:
 
-Why signed and planar: the plane distance is a linear function of position across a straight
-wall, so bilinear interpolation reproduces it exactly and its zero crossing lies on the wall, to
-sub-cell precision. An unsigned distance field, interpolated, has its minimum at the cell centre
-nearest the wall instead, which biases scan matching by up to half a cell. The gradient of the
-plane distance is the surface normal, so the Gauss-Newton matcher behaves like point-to-plane ICP.
+* ``"distance"`` (the default): the Euclidean distance again, an unsigned field;
+* ``"plane"``: the signed point-to-plane distance ``(c − h)·n``, with ``n`` the surface normal at
+  the hit (estimated from the neighbouring beams, pointing towards the sensor). A cell more than
+  one cell size away from its hit along the surface (past the end of a wall, beside an isolated
+  return) gets the offset beyond that blended in, ``sign(p)·sqrt(p² + (|t| − res)²)`` with ``p``
+  the plane distance and ``t`` the tangential offset, so a return never stands for a wall it did
+  not see.
+
+Why the signed, planar option: the plane distance is a linear function of position across a
+straight wall, so bilinear interpolation reproduces it exactly and its zero crossing lies on the
+wall, to sub-cell precision. An unsigned distance field, interpolated, has its minimum at the cell
+centre nearest the wall instead, which biases scan matching by up to half a cell. The gradient of
+the plane distance is the surface normal, so the Gauss-Newton matcher behaves like point-to-plane
+ICP.
 
 Storage (the layout GMapping uses for its particle maps, made flat for numba):
 
-* ``dist[t]`` and ``plane[t]`` are the two ``T × T`` layers of tile ``t``; ``refcount[t]`` counts
-  the particles using it;
-  free tiles are on the stack ``free_stack[:free_top[0]]``;
+* ``dist[t]`` and ``surface[t]`` are the two ``T × T`` layers of tile ``t``; ``refcount[t]``
+  counts the particles using it; free tiles are on the stack ``free_stack[:free_top[0]]``;
 * ``tables[p, ty, tx]`` is the tile of particle ``p`` at tile coordinates ``(tx, ty)``, or -1
   for unknown space;
 * resampling copies only the small tables (children share their parent's tiles); a particle that
   writes to a shared tile copies it first (copy on write), so maps diverge only where particles
   learned something different.
 
-Cell ``(ix, iy)`` has its lower-left corner at ``(ox + ix·res, oy + iy·res)``.
+The matching kernels read a map through one :class:`FieldView` (the ``surface`` layer, the tile
+table(s), the tile shift and the grid's origin and inverse resolution). Cell ``(ix, iy)`` has its
+lower-left corner at ``(ox + ix·res, oy + iy·res)``.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
+
+
+class FieldView(NamedTuple):
+    """A tiled distance field as the matching kernels read it (numba takes it as one argument).
+
+    ``table`` is one particle's ``(n_tiles_y, n_tiles_x)`` tile table, or for
+    :func:`match_particles` the ``(P, n_tiles_y, n_tiles_x)`` tables of every particle.
+    """
+
+    surface: np.ndarray
+    """``(tiles, T, T)`` float32: the ``surface`` layer of the tile pool (NaN: unknown)."""
+    table: np.ndarray
+    """int32 tile indices (-1: no tile, unknown space)."""
+    shift: int
+    """``log2(T)``: tiles are ``2**shift`` cells wide."""
+    ox: float
+    """World x of the lower-left corner of cell (0, 0) (m)."""
+    oy: float
+    """World y of the lower-left corner of cell (0, 0) (m)."""
+    inv_res: float
+    """``1 / resolution`` (cells per metre)."""
 
 
 @njit(cache=True, inline="always")
@@ -57,29 +87,24 @@ def cell_distance(
 
 
 @njit(cache=True, inline="always")
-def plane_distance_at(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
-    x: float,
-    y: float,
-) -> tuple[float, float, float]:
-    """Bilinearly interpolated signed plane distance at ``(x, y)`` and its gradient.
+def surface_at(view: FieldView, x: float, y: float) -> tuple[float, float, float]:
+    """Bilinearly interpolated ``surface`` distance at ``(x, y)`` and its gradient.
 
-    Returns NaN (and a zero gradient) where any of the four cells around the point is unknown.
-    ``inv_res`` is ``1 / resolution``; tiles are ``2**shift`` cells wide.
+    ``view.table`` is one particle's tile table. Returns NaN (and a zero gradient) where any of
+    the four cells around the point is unknown.
     """
-    gx = (x - ox) * inv_res - 0.5
-    gy = (y - oy) * inv_res - 0.5
+    inv_res = view.inv_res
+    gx = (x - view.ox) * inv_res - 0.5
+    gy = (y - view.oy) * inv_res - 0.5
     if gx < 0.0 or gy < 0.0:
         return np.nan, 0.0, 0.0
     ix = int(gx)  # truncation is the floor for non-negative values, and much cheaper
     iy = int(gy)
     fx = gx - ix
     fy = gy - iy
+    shift = view.shift
+    table = view.table
+    surface = view.surface
     mask = (1 << shift) - 1
     tx = ix >> shift
     ty = iy >> shift
@@ -93,15 +118,15 @@ def plane_distance_at(
         t = table[ty, tx]
         if t < 0:
             return np.nan, 0.0, 0.0
-        d00 = plane[t, ly, lx]
-        d10 = plane[t, ly, lx + 1]
-        d01 = plane[t, ly + 1, lx]
-        d11 = plane[t, ly + 1, lx + 1]
+        d00 = surface[t, ly, lx]
+        d10 = surface[t, ly, lx + 1]
+        d01 = surface[t, ly + 1, lx]
+        d11 = surface[t, ly + 1, lx + 1]
     else:
-        d00 = _cell(plane, table, shift, ix, iy)
-        d10 = _cell(plane, table, shift, ix + 1, iy)
-        d01 = _cell(plane, table, shift, ix, iy + 1)
-        d11 = _cell(plane, table, shift, ix + 1, iy + 1)
+        d00 = _cell(surface, table, shift, ix, iy)
+        d10 = _cell(surface, table, shift, ix + 1, iy)
+        d01 = _cell(surface, table, shift, ix, iy + 1)
+        d11 = _cell(surface, table, shift, ix + 1, iy + 1)
     d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
     if np.isnan(d):
         return np.nan, 0.0, 0.0
@@ -124,9 +149,10 @@ def _cell(layer: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int) ->
 
 
 @njit(cache=True, inline="always")
-def _lookup(row: np.ndarray, step_inv: float, d: float) -> float:
-    """Linear interpolation in a table sampled at ``|d| = 0, 1/step_inv, 2/step_inv, ...``."""
-    u = abs(d) * step_inv
+def table_lookup(row: np.ndarray, step_inv: float, d: float) -> float:
+    """Linear interpolation in a table sampled at ``d = 0, 1/step_inv, 2/step_inv, ...``
+    (``d ≥ 0``; the last entry beyond the table)."""
+    u = d * step_inv
     last = row.shape[0] - 1
     if u >= last:
         return row[last]
@@ -137,12 +163,7 @@ def _lookup(row: np.ndarray, step_inv: float, d: float) -> float:
 
 @njit(cache=True)
 def normal_equations(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     x: float,
     y: float,
     th: float,
@@ -177,13 +198,13 @@ def normal_equations(
     for b in range(0, ex.shape[0], stride):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
-        d, gx, gy = plane_distance_at(plane, table, shift, ox, oy, inv_res, x + rx, y + ry)
+        d, gx, gy = surface_at(view, x + rx, y + ry)
         if np.isnan(d):
             cost += unknown
             continue
-        cost += _lookup(cost_row, step_inv, d)
+        cost += table_lookup(cost_row, step_inv, abs(d))
         inliers += 1
-        wgt = _lookup(weight_row, step_inv, d)
+        wgt = table_lookup(weight_row, step_inv, abs(d))
         j2 = -gx * ry + gy * rx
         wgx = wgt * gx
         wgy = wgt * gy
@@ -235,12 +256,7 @@ def _solve3(h: np.ndarray, g: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def match_one(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -274,9 +290,8 @@ def match_one(
         weight_row = luts[level, 1]
         stride = 1 if level == last else coarse_stride
         cost, inliers = normal_equations(
-            plane, table, shift, ox, oy, inv_res, x, y, th, ex, ey, cost_row, weight_row, step_inv,
-            h, g, stride,
-        )  # fmt: skip
+            view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, stride
+        )
         lam = 1e-3
         for _ in range(max_iter):
             hd[:, :] = h
@@ -287,9 +302,8 @@ def match_one(
             ny = y - step[1]
             nth = th - step[2]
             new_cost, new_inliers = normal_equations(
-                plane, table, shift, ox, oy, inv_res, nx, ny, nth, ex, ey, cost_row, weight_row,
-                step_inv, hc, gc, stride,
-            )  # fmt: skip
+                view, nx, ny, nth, ex, ey, cost_row, weight_row, step_inv, hc, gc, stride
+            )
             if new_cost < cost:
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
                 h[:, :] = hc
@@ -314,12 +328,7 @@ def match_one(
 
 @njit(cache=True, parallel=True)
 def match_particles(
-    plane: np.ndarray,
-    tables: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -336,9 +345,9 @@ def match_particles(
 ) -> None:
     """Scan-match every particle against its own map (the proposal), then score it.
 
-    For each particle: refine its predicted pose with :func:`match_one`; if fewer than
-    ``min_inliers`` of the beams then fall on known cells the match is not trusted and the
-    predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at the final pose
+    ``view.table`` holds every particle's tile table. For each particle: refine its predicted
+    pose with :func:`match_one`; if fewer than ``min_inliers`` of the beams then fall on known
+    cells the match is not trusted and the predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at the final pose
     under the last (narrowest) table; ``out_inliers`` the fraction of beams on known cells;
     ``out_hessian`` the Gauss-Newton Hessian of the negative log-likelihood there (its inverse is
     the covariance of the match, the spread of the proposal).
@@ -346,32 +355,19 @@ def match_particles(
     last = luts.shape[0] - 1
     nbeams = max(ex.shape[0], 1)
     for p in prange(poses.shape[0]):
-        table = tables[p]
+        own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
         refined, cost, inliers = match_one(
-            plane,
-            table,
-            shift,
-            ox,
-            oy,
-            inv_res,
-            poses[p],
-            ex,
-            ey,
-            luts,
-            step_inv,
-            max_iter,
-            tolerance,
-            coarse_stride,
+            own, poses[p], ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride
         )
         frac = inliers / nbeams
         if frac < min_inliers:
             refined = poses[p].copy()
         h = np.zeros((3, 3))
         g = np.zeros(3)
+        fine = luts[last]
         cost, inliers = normal_equations(
-            plane, table, shift, ox, oy, inv_res, refined[0], refined[1], refined[2],
-            ex, ey, luts[last, 0], luts[last, 1], step_inv, h, g,
-        )  # fmt: skip
+            own, refined[0], refined[1], refined[2], ex, ey, fine[0], fine[1], step_inv, h, g
+        )
         for a in range(3):
             for b in range(3):
                 out_hessian[p, a, b] = h[a, b]
@@ -426,7 +422,7 @@ def select_new_hits(
 @njit(cache=True)
 def claim_tiles(
     dist: np.ndarray,
-    plane: np.ndarray,
+    surface: np.ndarray,
     refcount: np.ndarray,
     free_stack: np.ndarray,
     free_top: np.ndarray,
@@ -444,7 +440,7 @@ def claim_tiles(
 ) -> int:
     """Give each particle exclusive tiles under the footprint of its kept hits (serial).
 
-    A missing tile is allocated (distance ``dmax``, plane unknown); a shared one is copied and
+    A missing tile is allocated (distance ``dmax``, surface unknown); a shared one is copied and
     the particle's reference moved to the copy (copy on write). Particles from ``start`` on are
     processed. Returns -1 when done, or the index of the particle that ran out of free tiles (the
     caller grows the pool and calls again from there).
@@ -478,10 +474,10 @@ def claim_tiles(
                     new = free_stack[free_top[0]]
                     if t < 0:
                         dist[new, :, :] = dmax
-                        plane[new, :, :] = np.nan
+                        surface[new, :, :] = np.nan
                     else:
                         dist[new, :, :] = dist[t, :, :]
-                        plane[new, :, :] = plane[t, :, :]
+                        surface[new, :, :] = surface[t, :, :]
                         refcount[t] -= 1
                     refcount[new] = 1
                     table[ty, tx] = new
@@ -491,7 +487,7 @@ def claim_tiles(
 @njit(cache=True, parallel=True)
 def splat_hits(
     dist: np.ndarray,
-    plane: np.ndarray,
+    surface: np.ndarray,
     tables: np.ndarray,
     shift: int,
     ox: float,
@@ -509,7 +505,7 @@ def splat_hits(
     """Write the kept hits into the particles' (exclusively owned) tiles, in parallel.
 
     Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
-    Euclidean distance (``dist``) and, in ``plane``, its signed plane distance when ``signed``
+    Euclidean distance (``dist``) and, in ``surface``, its signed plane distance when ``signed``
     (else the Euclidean distance again: the unsigned field). Must follow :func:`claim_tiles`.
     """
     radius = int(np.ceil(dmax / res))
@@ -543,13 +539,13 @@ def splat_hits(
                     if d < dist[t, ly, lx]:
                         dist[t, ly, lx] = d
                         if not signed:
-                            plane[t, ly, lx] = d
+                            surface[t, ly, lx] = d
                             continue
                         normal = ccx * wnx + ccy * wny
                         beyond = abs(ccy * wnx - ccx * wny) - res
                         if beyond > 0.0:
                             normal = np.copysign(np.sqrt(normal * normal + beyond * beyond), normal)
-                        plane[t, ly, lx] = normal
+                        surface[t, ly, lx] = normal
 
 
 @njit(cache=True)
@@ -574,12 +570,7 @@ def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarr
 
 @njit(cache=True, parallel=True)
 def match_scans(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -603,9 +594,8 @@ def match_scans(
             out_poses[k] = poses[k]
             continue
         refined, _, inliers = match_one(
-            plane, table, shift, ox, oy, inv_res, poses[k], ex[k, :n], ey[k, :n], luts, step_inv,
-            max_iter, tolerance, coarse_stride,
-        )  # fmt: skip
+            view, poses[k], ex[k, :n], ey[k, :n], luts, step_inv, max_iter, tolerance, coarse_stride
+        )
         if inliers < min_inliers * n:
             out_poses[k] = poses[k]
         else:

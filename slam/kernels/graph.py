@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from slam.kernels.field import _lookup, plane_distance_at
+from slam.kernels.field import FieldView, surface_at, table_lookup
 
 
 @njit(cache=True, inline="always")
@@ -81,12 +81,7 @@ def _inv(m: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def scan_cost(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     x: float,
     y: float,
     th: float,
@@ -101,28 +96,14 @@ def scan_cost(
     unknown = cost_row[cost_row.shape[0] - 1]
     total = 0.0
     for b in range(ex.shape[0]):
-        d, _, _ = plane_distance_at(
-            plane,
-            table,
-            shift,
-            ox,
-            oy,
-            inv_res,
-            x + c * ex[b] - s * ey[b],
-            y + s * ex[b] + c * ey[b],
-        )
-        total += unknown if np.isnan(d) else _lookup(cost_row, step_inv, d)
+        d, _, _ = surface_at(view, x + c * ex[b] - s * ey[b], y + s * ex[b] + c * ey[b])
+        total += unknown if np.isnan(d) else table_lookup(cost_row, step_inv, abs(d))
     return total
 
 
 @njit(cache=True)
 def correlative_search(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -148,9 +129,7 @@ def correlative_search(
             x = pose[0] + i * xy_step
             for j in range(-nxy, nxy + 1):
                 y = pose[1] + j * xy_step
-                cost = scan_cost(
-                    plane, table, shift, ox, oy, inv_res, x, y, th, ex, ey, cost_row, step_inv
-                )
+                cost = scan_cost(view, x, y, th, ex, ey, cost_row, step_inv)
                 if cost < best[3]:
                     best[0] = x
                     best[1] = y
@@ -363,12 +342,7 @@ def solve_system(
 
 @njit(cache=True)
 def fit_counts(
-    plane: np.ndarray,
-    table: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: FieldView,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -380,10 +354,7 @@ def fit_counts(
     known = 0
     close = 0
     for b in range(ex.shape[0]):
-        d, _, _ = plane_distance_at(
-            plane, table, shift, ox, oy, inv_res,
-            pose[0] + c * ex[b] - s * ey[b], pose[1] + s * ex[b] + c * ey[b],
-        )  # fmt: skip
+        d, _, _ = surface_at(view, pose[0] + c * ex[b] - s * ey[b], pose[1] + s * ex[b] + c * ey[b])
         if not np.isnan(d):
             known += 1
             if abs(d) < distance:

@@ -18,34 +18,37 @@ numbers are drawn by the caller.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+
+from slam.kernels.field import table_lookup
 
 FAR = 1.0e9
 """Distance returned for points outside the map (the tables saturate there)."""
 
 
-@njit(cache=True, inline="always")
-def table_lookup(table: np.ndarray, step_inv: float, d: float) -> float:
-    """Linear interpolation in ``table`` sampled at ``d = 0, 1/step_inv, ...`` (saturating)."""
-    u = d * step_inv
-    last = table.shape[0] - 1
-    if u >= last:
-        return table[last]
-    i = int(u)
-    f = u - i
-    return table[i] + f * (table[i + 1] - table[i])
+class DistanceView(NamedTuple):
+    """A dense distance field as the kernels read it (numba takes it as one argument)."""
+
+    distance: np.ndarray
+    """``(H, W)`` float32 distance (m) from each cell centre to the nearest occupied cell."""
+    ox: float
+    """World x of the lower-left corner of cell (0, 0) (m)."""
+    oy: float
+    """World y of the lower-left corner of cell (0, 0) (m)."""
+    inv_res: float
+    """``1 / resolution`` (cells per metre)."""
 
 
 @njit(cache=True, inline="always")
-def distance_bilinear(
-    dist: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float
-) -> float:
+def distance_bilinear(view: DistanceView, x: float, y: float) -> float:
     """Bilinearly interpolated distance field at world ``(x, y)`` (between cell centres);
     :data:`FAR` outside the map."""
-    gx = (x - ox) * inv_res - 0.5
-    gy = (y - oy) * inv_res - 0.5
+    dist = view.distance
+    gx = (x - view.ox) * view.inv_res - 0.5
+    gy = (y - view.oy) * view.inv_res - 0.5
     rows = dist.shape[0]
     cols = dist.shape[1]
     if gx < 0.0 or gy < 0.0 or gx >= cols - 1 or gy >= rows - 1:
@@ -61,10 +64,7 @@ def distance_bilinear(
 
 @njit(cache=True, parallel=True)
 def particle_loglik(
-    dist: np.ndarray,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: DistanceView,
     poses: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -89,7 +89,7 @@ def particle_loglik(
         for b in range(beams):
             wx = x + c * ex[b] - s * ey[b]
             wy = y + s * ex[b] + c * ey[b]
-            d = distance_bilinear(dist, ox, oy, inv_res, wx, wy)
+            d = distance_bilinear(view, wx, wy)
             acc += table_lookup(table, step_inv, d)
         out[i] = acc
 
@@ -320,12 +320,12 @@ def shift_rows(
 
 
 @njit(cache=True, inline="always")
-def distance_gradient(
-    dist: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float
-) -> tuple[float, float, float]:
+def distance_gradient(view: DistanceView, x: float, y: float) -> tuple[float, float, float]:
     """Bilinear distance at ``(x, y)`` and its gradient; :data:`FAR` (zero gradient) outside."""
-    gx = (x - ox) * inv_res - 0.5
-    gy = (y - oy) * inv_res - 0.5
+    dist = view.distance
+    inv_res = view.inv_res
+    gx = (x - view.ox) * inv_res - 0.5
+    gy = (y - view.oy) * inv_res - 0.5
     rows = dist.shape[0]
     cols = dist.shape[1]
     if gx < 0.0 or gy < 0.0 or gx >= cols - 1 or gy >= rows - 1:
@@ -346,10 +346,7 @@ def distance_gradient(
 
 @njit(cache=True)
 def _refine_system(
-    dist: np.ndarray,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: DistanceView,
     x: float,
     y: float,
     th: float,
@@ -370,7 +367,7 @@ def _refine_system(
     for b in range(ex.shape[0]):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
-        d, gx, gy = distance_gradient(dist, ox, oy, inv_res, x + rx, y + ry)
+        d, gx, gy = distance_gradient(view, x + rx, y + ry)
         if d >= FAR:
             cost += far
             continue
@@ -432,10 +429,7 @@ def _solve3(hg: np.ndarray, damping: float) -> tuple[float, float, float, bool]:
 
 @njit(cache=True)
 def refine_pose(
-    dist: np.ndarray,
-    ox: float,
-    oy: float,
-    inv_res: float,
+    view: DistanceView,
     pose: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
@@ -461,15 +455,13 @@ def refine_pose(
     inv_var = 1.0 / (sigma * sigma)
     hg = np.empty(9)
     trial = np.empty(9)
-    cost = _refine_system(dist, ox, oy, inv_res, x, y, th, ex, ey, inv_var, outlier, hg)
+    cost = _refine_system(view, x, y, th, ex, ey, inv_var, outlier, hg)
     damping = 1e-3
     for _ in range(iterations):
         dx, dy, dt, ok = _solve3(hg, damping)
         if not ok:
             break
-        new_cost = _refine_system(
-            dist, ox, oy, inv_res, x + dx, y + dy, th + dt, ex, ey, inv_var, outlier, trial
-        )
+        new_cost = _refine_system(view, x + dx, y + dy, th + dt, ex, ey, inv_var, outlier, trial)
         if new_cost < cost:
             x += dx
             y += dy

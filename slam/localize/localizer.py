@@ -346,8 +346,7 @@ class Localizer:
         lmap = self.map
         peak = model.z_hit / (model.sigma * math.sqrt(2.0 * math.pi))
         cost = refine_pose(
-            lmap.distance, float(lmap.origin[0]), float(lmap.origin[1]), 1.0 / lmap.resolution,
-            np.ascontiguousarray(start, dtype=np.float64), ex, ey, model.sigma,
+            lmap.view(), np.ascontiguousarray(start, dtype=np.float64), ex, ey, model.sigma,
             model.z_rand / model.z_range / peak, cfg.refine_iterations, 1e-4, out,
         )  # fmt: skip
         return out, float(cost)

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from slam.config import MapConfig
 from slam.errors import DataError
+from slam.localize.kernels import DistanceView
 from slam.mapping import OccupancyGrid
 
 F64 = NDArray[np.float64]
@@ -90,9 +91,11 @@ class LikelihoodMap:
         )
         return cls.from_grid(grid)
 
-    def world_to_cell(self, xy: F64) -> NDArray[np.int64]:
-        """Cell indices ``(..., 2)`` as ``(ix, iy)`` of world points ``(..., 2)``."""
-        return self.grid.world_to_cell(xy)
+    def view(self) -> DistanceView:
+        """The distance field as the likelihood kernels read it."""
+        return DistanceView(
+            self.distance, float(self.origin[0]), float(self.origin[1]), 1.0 / self.resolution
+        )
 
     def memory_bytes(self) -> int:
         """Bytes held by the masks, the distance field and the grid."""

@@ -144,10 +144,9 @@ class ParticleSet:
     def likelihood_at(self, poses: F64, ex: F64, ey: F64, table: tuple[F64, float]) -> F64:
         """``log p(z | x)`` of the returns at the given ``poses`` (not the particles)."""
         out = np.empty(poses.shape[0])
-        lmap = self.map
         particle_loglik(
-            lmap.distance, float(lmap.origin[0]), float(lmap.origin[1]), 1.0 / lmap.resolution,
-            np.ascontiguousarray(poses, dtype=np.float64), ex, ey, table[0], table[1], out,
+            self.map.view(), np.ascontiguousarray(poses, dtype=np.float64), ex, ey, table[0],
+            table[1], out,
         )  # fmt: skip
         return out
 
