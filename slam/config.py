@@ -285,6 +285,19 @@ class LoopConfig(Validated):
     """Correlative search step in heading (rad)."""
     search_sigma: float = bounded(0.15, gt=0.0, le=10.0)
     """Sensor sigma of the correlative search (m): wide, to rank coarse offsets smoothly."""
+    search_beams: int = bounded(60, ge=1, le=100000)
+    """The correlative search scores about this many of the scan's beams (every
+    ``⌊n / search_beams⌋``-th of its ``n``; all of them when ``n < 2·search_beams``)."""
+    match_iteration_factor: int = bounded(2, ge=1, le=100)
+    """Levenberg-Marquardt iterations of a loop match per level, in multiples of
+    ``rbpf.max_iterations`` (a loop match starts further from its optimum than a filter match)."""
+    submap_size: float = bounded(20.0, gt=0.0, le=10000.0)
+    """Side of a loop submap when created (m), centred on node ``j``; it grows to hold its
+    nodes' scans ..."""
+    submap_grow_margin: float = bounded(10.0, ge=0.0, le=10000.0)
+    """... by at least this much (m) each time."""
+    submap_tiles: int = bounded(1024, ge=1, le=65536)
+    """Tiles a loop submap's pool holds when created (it doubles when full)."""
     fit_distance: float = bounded(0.1, gt=0.0, le=10.0)
     """A beam fits when it lands within this distance (m) of a submap surface."""
     min_fit: float = bounded(0.5, ge=0.0, le=1.0)
@@ -309,9 +322,15 @@ class LoopConfig(Validated):
     loop edges are only about as precise as the filter's own relative poses, so they are used to
     repair gross inconsistencies (decimetres to metres), not to re-shape a closed map."""
     iterations: int = bounded(10, ge=1, le=1000)
-    """Gauss-Newton iterations (at most; they stop when the poses stop moving)."""
+    """Gauss-Newton iterations (at most; they stop when the poses stop moving) ..."""
+    converged_xy: float = bounded(1e-3, gt=0.0, le=100.0)
+    """... that is when no node's x or y moves more than this (m) in an iteration ..."""
+    converged_th: float = bounded(1e-4, gt=0.0, le=math.pi)
+    """... and no node's heading more than this (rad)."""
     solver_iterations: int = bounded(300, ge=1, le=100000)
-    """Conjugate-gradient iterations per Gauss-Newton step (at most)."""
+    """Conjugate-gradient iterations per Gauss-Newton step (at most) ..."""
+    solver_tolerance: float = bounded(1e-8, gt=0.0, le=1.0)
+    """... stopping when the residual is this fraction of the right-hand side's norm."""
     rounds: int = bounded(2, ge=1, le=100)
     """Detection + optimisation rounds."""
 

@@ -54,16 +54,17 @@ class LoopResult:
 
 
 def _empty_map(center: F64, config: Config) -> ParticleMaps:
-    rc = config.rbpf
+    """A one-particle map for a loop submap around ``center`` (the filter's field settings)."""
+    rc, lc = config.rbpf, config.loops
     return ParticleMaps(
         1,
         rc.resolution or config.map.resolution,
         rc.dmax,
         tile=rc.tile,
         center=(float(center[0]), float(center[1])),
-        size_m=20.0,
-        grow_margin_m=10.0,
-        capacity=1024,
+        size_m=lc.submap_size,
+        grow_margin_m=lc.submap_grow_margin,
+        capacity=lc.submap_tiles,
     )
 
 
@@ -104,6 +105,7 @@ def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
     coarse, coarse_inv = likelihood_tables(
         np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
     )
+    iterations = rc.max_iterations * lc.match_iteration_factor
     candidates = _candidates(poses, path, lc)
     edges = []
     maps, window = None, (-1, -1)
@@ -123,14 +125,12 @@ def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
         start = poses[i]
         _, close = fit_counts(view, start, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size:
-            thin = slice(None, None, max(1, ex.size // 60))
+            thin = slice(None, None, max(1, ex.size // lc.search_beams))
             start = correlative_search(
                 view, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
                 lc.search_xy, lc.search_step, lc.search_th, lc.search_th_step,
             )[:3].copy()  # fmt: skip
-        refined, _, _ = match_one(
-            view, start, ex, ey, luts, step_inv, rc.max_iterations * 2, rc.tolerance, 1
-        )
+        refined, _, _ = match_one(view, start, ex, ey, luts, step_inv, iterations, rc.tolerance, 1)
         shift = refined - poses[i]
         if np.hypot(shift[0], shift[1]) > lc.search_xy or abs(wrap_angle(shift[2])) > lc.search_th:
             continue  # slid out of the searched window (along a corridor): unverified
@@ -204,10 +204,15 @@ def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
     for _ in range(lc.iterations):
         linearize(x, edge_i, edge_j, z, info, robust, diag, band, far, grad)
         diag[0] += np.eye(3) * 1e9  # node 0 fixed
-        delta, _ = solve_system(diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, 1e-8)
+        delta, _ = solve_system(
+            diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, lc.solver_tolerance
+        )
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])
-        if np.abs(delta[:, :2]).max() < 1e-3 and np.abs(delta[:, 2]).max() < 1e-4:
+        if (
+            np.abs(delta[:, :2]).max() < lc.converged_xy
+            and np.abs(delta[:, 2]).max() < lc.converged_th
+        ):
             break
     return x
 
