@@ -43,6 +43,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from slam.kernels.linalg import solve_sym3
+
 
 class FieldView(NamedTuple):
     """A tiled distance field as the matching kernels read it (numba takes it as one argument).
@@ -234,27 +236,6 @@ def normal_equations(
 
 
 @njit(cache=True)
-def _solve3(h: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Solve the symmetric 3×3 system ``h x = g`` by Cramer's rule (zeros if singular)."""
-    a, b, c = h[0, 0], h[0, 1], h[0, 2]
-    d, e, f = h[1, 1], h[1, 2], h[2, 2]
-    det = a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - c * d)
-    out = np.zeros(3)
-    if abs(det) < 1e-18:
-        return out
-    i00 = d * f - e * e
-    i01 = c * e - b * f
-    i02 = b * e - c * d
-    i11 = a * f - c * c
-    i12 = b * c - a * e
-    i22 = a * d - b * b
-    out[0] = (i00 * g[0] + i01 * g[1] + i02 * g[2]) / det
-    out[1] = (i01 * g[0] + i11 * g[1] + i12 * g[2]) / det
-    out[2] = (i02 * g[0] + i12 * g[1] + i22 * g[2]) / det
-    return out
-
-
-@njit(cache=True)
 def match_one(
     view: FieldView,
     pose: np.ndarray,
@@ -297,10 +278,12 @@ def match_one(
             hd[:, :] = h
             for k in range(3):
                 hd[k, k] += lam * h[k, k] + 1e-9
-            step = _solve3(hd, g)
-            nx = x - step[0]
-            ny = y - step[1]
-            nth = th - step[2]
+            s0, s1, s2, _ = solve_sym3(
+                hd[0, 0], hd[0, 1], hd[0, 2], hd[1, 1], hd[1, 2], hd[2, 2], g[0], g[1], g[2], 1e-18
+            )  # a singular system gives a zero step, which does not lower the cost
+            nx = x - s0
+            ny = y - s1
+            nth = th - s2
             new_cost, new_inliers = normal_equations(
                 view, nx, ny, nth, ex, ey, cost_row, weight_row, step_inv, hc, gc, stride
             )
@@ -309,11 +292,7 @@ def match_one(
                 h[:, :] = hc
                 g[:] = gc
                 lam = max(lam * 0.3, 1e-7)
-                if (
-                    abs(step[0]) < tolerance
-                    and abs(step[1]) < tolerance
-                    and abs(step[2]) < tolerance
-                ):
+                if abs(s0) < tolerance and abs(s1) < tolerance and abs(s2) < tolerance:
                     break
             else:
                 lam *= 10.0

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from slam.kernels.field import table_lookup
+from slam.kernels.linalg import solve_sym3
 
 FAR = 1.0e9
 """Distance returned for points outside the map (the tables saturate there)."""
@@ -397,37 +398,6 @@ def _refine_system(
 
 
 @njit(cache=True)
-def _solve3(hg: np.ndarray, damping: float) -> tuple[float, float, float, bool]:
-    """``(H + λ·diag(H))·δ = −g`` for the packed system ``hg`` (Cramer's rule)."""
-    a00 = hg[0] * (1.0 + damping) + 1e-12
-    a01 = hg[1]
-    a02 = hg[2]
-    a11 = hg[3] * (1.0 + damping) + 1e-12
-    a12 = hg[4]
-    a22 = hg[5] * (1.0 + damping) + 1e-12
-    b0 = -hg[6]
-    b1 = -hg[7]
-    b2 = -hg[8]
-    det = (
-        a00 * (a11 * a22 - a12 * a12)
-        - a01 * (a01 * a22 - a12 * a02)
-        + a02 * (a01 * a12 - a11 * a02)
-    )
-    if abs(det) < 1e-30:
-        return 0.0, 0.0, 0.0, False
-    dx = (
-        b0 * (a11 * a22 - a12 * a12) - a01 * (b1 * a22 - a12 * b2) + a02 * (b1 * a12 - a11 * b2)
-    ) / det
-    dy = (
-        a00 * (b1 * a22 - a12 * b2) - b0 * (a01 * a22 - a12 * a02) + a02 * (a01 * b2 - b1 * a02)
-    ) / det
-    dt = (
-        a00 * (a11 * b2 - b1 * a12) - a01 * (a01 * b2 - b1 * a02) + b0 * (a01 * a12 - a11 * a02)
-    ) / det
-    return dx, dy, dt, True
-
-
-@njit(cache=True)
 def refine_pose(
     view: DistanceView,
     pose: np.ndarray,
@@ -458,7 +428,12 @@ def refine_pose(
     cost = _refine_system(view, x, y, th, ex, ey, inv_var, outlier, hg)
     damping = 1e-3
     for _ in range(iterations):
-        dx, dy, dt, ok = _solve3(hg, damping)
+        # (H + λ·diag(H))·δ = −g for the packed system hg
+        scale = 1.0 + damping
+        dx, dy, dt, ok = solve_sym3(
+            hg[0] * scale + 1e-12, hg[1], hg[2], hg[3] * scale + 1e-12, hg[4],
+            hg[5] * scale + 1e-12, -hg[6], -hg[7], -hg[8], 1e-30,
+        )  # fmt: skip
         if not ok:
             break
         new_cost = _refine_system(view, x + dx, y + dy, th + dt, ex, ey, inv_var, outlier, trial)
