@@ -1,8 +1,8 @@
 """Maps: the dense log-odds occupancy grid and the per-particle tiled distance-field maps.
 
-Both share one cell convention: ``grid[iy, ix]`` is the cell whose lower-left corner is
-``(origin_x + ix·res, origin_y + iy·res)``, rows going up in y. Images for people are flipped so
-that +y points up on screen.
+Both share one cell convention (:class:`~slam.grid_geometry.GridGeometry`, their ``geometry``):
+``grid[iy, ix]`` is the cell whose lower-left corner is ``(origin_x + ix·res, origin_y + iy·res)``,
+rows going up in y. Images for people are flipped so that +y points up on screen.
 
 * :class:`OccupancyGrid`: what a run outputs (``map.npz``, ``map.png``); Bresenham log-odds
   updates (hit ``+log 4``, miss along the ray, clamped) through :mod:`slam.kernels.grid`; grows
@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from slam.budget import check_memory
 from slam.config import MapConfig
+from slam.grid_geometry import GridGeometry
 from slam.io.atomic import atomic_path
 from slam.kernels.field import (
     FieldView,
@@ -90,15 +91,14 @@ class OccupancyGrid:
         return self.log_odds.shape  # type: ignore[return-value]
 
     @property
+    def geometry(self) -> GridGeometry:
+        """Where the grid lies (origin, resolution, shape; world↔cell)."""
+        return GridGeometry.of(self.origin, self.resolution, self.shape)
+
+    @property
     def extent(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)`` covered by the grid (m)."""
-        h, w = self.shape
-        return (
-            float(self.origin[0]),
-            float(self.origin[1]),
-            float(self.origin[0] + w * self.resolution),
-            float(self.origin[1] + h * self.resolution),
-        )
+        return self.geometry.extent
 
     def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
         """Grow the grid (by at least ``grow_margin_m``) so the box lies inside it."""
@@ -118,10 +118,6 @@ class OccupancyGrid:
         self.log_odds = np.pad(self.log_odds, ((bottom, top), (left, right)))
         self.origin = self.origin - np.array([left * res, bottom * res])
 
-    def world_to_cell(self, xy: NDArray[np.float64]) -> NDArray[np.int64]:
-        """Cell indices ``(..., 2)`` as ``(ix, iy)`` of world points ``(..., 2)``."""
-        return np.floor((np.asarray(xy) - self.origin) / self.resolution).astype(np.int64)
-
     def integrate(self, sensor_xy: F64, endpoints: F64, hit: NDArray[np.bool_]) -> None:
         """Integrate rays from ``sensor_xy`` to world ``endpoints (K, 2)``; ``hit`` marks returns."""
         if endpoints.shape[0] == 0:
@@ -130,11 +126,11 @@ class OccupancyGrid:
         hi = np.maximum(endpoints.max(axis=0), sensor_xy)
         self.ensure_contains(lo[0], lo[1], hi[0], hi[1])
         c = self.config
+        g = self.geometry
         integrate_rays(
             self.log_odds,
-            float(self.origin[0]),
-            float(self.origin[1]),
-            self.resolution,
+            *g.origin,
+            g.resolution,
             float(sensor_xy[0]),
             float(sensor_xy[1]),
             np.ascontiguousarray(endpoints[:, 0]),
@@ -181,9 +177,7 @@ class OccupancyGrid:
 
     def world_to_pixel(self, xy: F64) -> NDArray[np.int64]:
         """Pixel ``(column, row)`` in :meth:`to_image` of world points ``(..., 2)``."""
-        h, _ = self.shape
-        cells = np.floor((np.asarray(xy) - self.origin) / self.resolution).astype(np.int64)
-        return np.stack([cells[..., 0], h - 1 - cells[..., 1]], axis=-1)
+        return self.geometry.world_to_pixel(xy)
 
     def save_npz(self, path: Path) -> None:
         """Write ``log_odds``, ``resolution`` and ``origin`` to ``path`` atomically."""
@@ -270,6 +264,12 @@ class ParticleMaps:
         self.free_top = np.array([capacity], dtype=np.int64)
 
     @property
+    def geometry(self) -> GridGeometry:
+        """Where the maps lie: every particle's table covers the same cells."""
+        _, nty, ntx = self.tables.shape
+        return GridGeometry.of(self.origin, self.resolution, (nty << self.shift, ntx << self.shift))
+
+    @property
     def capacity(self) -> int:
         """Tiles allocated in the pool (used or free)."""
         return int(self.dist.shape[0])
@@ -350,17 +350,17 @@ class ParticleMaps:
         if hx.shape[0] == 0:
             return
         poses = np.ascontiguousarray(poses)
-        ox, oy = float(self.origin[0]), float(self.origin[1])
+        (ox, oy), res = self.geometry.origin, self.resolution
         keep = np.empty((poses.shape[0], hx.shape[0]), dtype=np.bool_)
         select_new_hits(
-            self.dist, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
+            self.dist, self.tables, self.shift, ox, oy, res, self.dmax,
             poses, hx, hy, skip_below, keep,
         )  # fmt: skip
         start = 0
         while True:
             stopped = claim_tiles(
                 self.dist, self.surface, self.refcount, self.free_stack, self.free_top,
-                self.tables, self.shift, ox, oy, self.resolution, self.dmax, poses, hx, hy,
+                self.tables, self.shift, ox, oy, res, self.dmax, poses, hx, hy,
                 keep, start,
             )  # fmt: skip
             if stopped < 0:
@@ -368,7 +368,7 @@ class ParticleMaps:
             self._grow_pool()
             start = stopped
         splat_hits(
-            self.dist, self.surface, self.tables, self.shift, ox, oy, self.resolution, self.dmax,
+            self.dist, self.surface, self.tables, self.shift, ox, oy, res, self.dmax,
             poses, hx, hy, nx, ny, keep, self.signed,
         )  # fmt: skip
 
@@ -388,14 +388,8 @@ class ParticleMaps:
         Its table holds every particle's tile tables, or only ``particle``'s when given.
         """
         tables = self.tables if particle is None else self.tables[particle]
-        return FieldView(
-            self.surface,
-            tables,
-            self.shift,
-            float(self.origin[0]),
-            float(self.origin[1]),
-            1.0 / self.resolution,
-        )
+        g = self.geometry
+        return FieldView(self.surface, tables, self.shift, *g.origin, 1.0 / g.resolution)
 
     def match(
         self,

@@ -14,7 +14,6 @@ from slam.sim.world import (
     FREE,
     LABEL_COLORS,
     WALL,
-    GridFrame,
     path_distance,
     world_around_path,
 )
@@ -204,7 +203,7 @@ def test_building_grown_around_a_looping_path():
     t = np.linspace(0, 2 * np.pi, 400)
     path = np.stack([8 * np.cos(t), 5 * np.sin(t)], axis=1)
     world = world_around_path(np.random.default_rng(0), path)
-    frame = GridFrame(world.origin, world.resolution, world.labels.shape)
+    frame = world.geometry
     # The path stays at least 0.6 m from every obstacle cell centre.
     dist = world.obstacle_distance()
     rows, cols = world.cell_of(path[:, 0], path[:, 1])

@@ -7,6 +7,7 @@ import pytest
 
 from slam.config import MapConfig, TextureConfig
 from slam.errors import ConfigError
+from slam.grid_geometry import GridGeometry
 from slam.kinect import KinectModel
 from slam.mapping import OccupancyGrid
 from slam.texture import (
@@ -67,7 +68,7 @@ def test_known_floor_point_projects_to_the_hand_computed_pixel_and_back():
     ri, rj = m.rgb_coordinates(234, 151, m.disparity_to_dd(770))
     assert (round(float(ri)), round(float(rj))) == (230, 164)
     rgb[230, 164] = (10, 200, 30)
-    acc = TextureAccumulator((40, 40), 0.05, np.zeros(2), _config(camera_yaw=0.0))
+    acc = TextureAccumulator(GridGeometry.of(np.zeros(2), 0.05, (40, 40)), _config(camera_yaw=0.0))
     assert acc.add_frame(disparity, rgb, np.zeros(3), np.zeros(3)) == 1
     iy, ix = np.argwhere(acc.counts > 0)[0]
     back = m.pixel_to_world(234, 151, m.disparity_to_depth(770), np.zeros(3))
@@ -115,14 +116,16 @@ def test_kernel_matches_the_vectorised_camera_model_with_motion_compensation():
     pose_d = np.array([1.0, -0.5, 0.4])
     pose_r = np.array([1.012, -0.497, 0.409])  # 12 ms later, moving and turning
     origin, res, shape = np.array([-2.0, -3.0]), 0.05, (120, 140)
-    acc = TextureAccumulator(shape, res, origin, config)
+    acc = TextureAccumulator(GridGeometry.of(origin, res, shape), config)
     added = acc.add_frame(disparity, rgb, pose_d, pose_r)
     sums, counts = _reference(model, config, disparity, rgb, pose_d, pose_r, shape, res, origin)
     assert added == counts.sum() > 150_000  # the floor fills most of the image
     np.testing.assert_array_equal(acc.counts, counts)
     np.testing.assert_allclose(acc.sums, sums)
     # Without compensation the colours come from the disparity pose: same cells, other colours.
-    flat = TextureAccumulator(shape, res, origin, TextureConfig(motion_compensation=False))
+    flat = TextureAccumulator(
+        GridGeometry.of(origin, res, shape), TextureConfig(motion_compensation=False)
+    )
     flat.add_frame(disparity, rgb, pose_d, pose_r)
     np.testing.assert_array_equal(flat.counts, counts)
     assert not np.allclose(flat.sums, sums)
@@ -134,9 +137,9 @@ def test_height_threshold_depth_range_and_pixel_stride():
     model = KinectModel()
     disparity, rgb = _floor_frame(model)
     shape, res, origin = (120, 140), 0.05, np.array([-1.0, -3.5])
-    full = TextureAccumulator(shape, res, origin, TextureConfig())
+    full = TextureAccumulator(GridGeometry.of(origin, res, shape), TextureConfig())
     n_full = full.add_frame(disparity, rgb, np.zeros(3), np.zeros(3))
-    near = TextureAccumulator(shape, res, origin, TextureConfig(max_depth=2.0))
+    near = TextureAccumulator(GridGeometry.of(origin, res, shape), TextureConfig(max_depth=2.0))
     n_near = near.add_frame(disparity, rgb, np.zeros(3), np.zeros(3))
     assert 0 < n_near < n_full
 
@@ -152,9 +155,9 @@ def test_height_threshold_depth_range_and_pixel_stride():
     # The box face at 0.6 m is not floor: nothing is added in front of it from its pixels.
     box = np.full_like(disparity, 2047)
     box[200:260, 300:360] = disparity[200:260, 300:360]
-    only_box = TextureAccumulator(shape, res, origin, TextureConfig())
+    only_box = TextureAccumulator(GridGeometry.of(origin, res, shape), TextureConfig())
     assert only_box.add_frame(box, rgb, np.zeros(3), np.zeros(3)) == 0
-    stride = TextureAccumulator(shape, res, origin, TextureConfig(pixel_stride=2))
+    stride = TextureAccumulator(GridGeometry.of(origin, res, shape), TextureConfig(pixel_stride=2))
     n_stride = stride.add_frame(disparity, rgb, np.zeros(3), np.zeros(3))
     assert n_stride == pytest.approx(n_full / 4, rel=0.01)
 
@@ -169,7 +172,7 @@ def test_mean_and_latest_modes():
     shape, res, origin = (120, 140), 0.05, np.array([-1.0, -3.5])
     textures = {}
     for mode in ("mean", "latest"):
-        acc = TextureAccumulator(shape, res, origin, TextureConfig(mode=mode))
+        acc = TextureAccumulator(GridGeometry.of(origin, res, shape), TextureConfig(mode=mode))
         acc.add_frame(disparity, red, np.zeros(3), np.zeros(3))
         acc.add_frame(disparity, blue, np.zeros(3), np.zeros(3))
         textures[mode] = acc.texture()
@@ -307,7 +310,7 @@ def test_evaluate_texture_counts_error_and_coverage():
     config = TextureConfig(camera_yaw=0.0)
     _, floor_cells = TrueTexture(gt).on_grid(grid_shape, res, origin)
     swept = swept_cells(gt, floor_cells, res, origin, np.array([0.0]), config)
-    acc = TextureAccumulator(grid_shape, res, origin, config)
+    acc = TextureAccumulator(GridGeometry.of(origin, res, grid_shape), config)
     texture = acc.texture()
     iy, ix = np.nonzero(swept)
     half = iy.size // 2
@@ -329,7 +332,7 @@ def test_pictures_have_the_size_of_map_png():
     grid = OccupancyGrid(MapConfig(initial_size_m=12.0))
     grid.log_odds[100:110, 50:60] = 5.0  # an obstacle
     trajectory = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.0]])
-    acc = TextureAccumulator(grid.shape, grid.resolution, grid.origin, TextureConfig())
+    acc = TextureAccumulator(grid.geometry, TextureConfig())
     texture = acc.texture()
     texture.count[10, 20] = 1
     texture.rgb[10, 20] = (255, 0, 0)  # a red cell near the bottom left

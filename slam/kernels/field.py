@@ -43,6 +43,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from slam.kernels.cells import cell_index
 from slam.kernels.linalg import solve_sym3
 
 
@@ -387,8 +388,8 @@ def select_new_hits(
         for k in range(hx.shape[0]):
             wx = poses[p, 0] + c * hx[k] - s * hy[k]
             wy = poses[p, 1] + s * hx[k] + c * hy[k]
-            cx = int(np.floor((wx - ox) / res))
-            cy = int(np.floor((wy - oy) / res))
+            cx = cell_index(wx, ox, res)
+            cy = cell_index(wy, oy, res)
             if cx == last_x and cy == last_y:
                 keep[p, k] = False
                 continue
@@ -436,8 +437,8 @@ def claim_tiles(
                 continue
             wx = poses[p, 0] + c * hx[k] - s * hy[k]
             wy = poses[p, 1] + s * hx[k] + c * hy[k]
-            cx = int(np.floor((wx - ox) / res))
-            cy = int(np.floor((wy - oy) / res))
+            cx = cell_index(wx, ox, res)
+            cy = cell_index(wy, oy, res)
             ty0 = max(cy - radius, 0) >> shift
             ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
             tx0 = max(cx - radius, 0) >> shift
@@ -502,8 +503,8 @@ def splat_hits(
             wy = poses[p, 1] + s * hx[k] + c * hy[k]
             wnx = c * nx[k] - s * ny[k]
             wny = s * nx[k] + c * ny[k]
-            cx = int(np.floor((wx - ox) / res))
-            cy = int(np.floor((wy - oy) / res))
+            cx = cell_index(wx, ox, res)
+            cy = cell_index(wy, oy, res)
             for iy in range(max(cy - radius, 0), min(cy + radius + 1, ny_cells)):
                 ccy = oy + (iy + 0.5) * res - wy
                 ty = iy >> shift

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from slam.kernels.cells import cell_index
+
 
 @njit(cache=True)
 def bresenham(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
@@ -81,12 +83,12 @@ def integrate_rays(
     first). Returns the number of cells updated.
     """
     h, w = log_odds.shape
-    x0 = int(np.floor((sx - ox) / res))
-    y0 = int(np.floor((sy - oy) / res))
+    x0 = cell_index(sx, ox, res)
+    y0 = cell_index(sy, oy, res)
     count = 0
     for k in range(ex.shape[0]):
-        x1 = int(np.floor((ex[k] - ox) / res))
-        y1 = int(np.floor((ey[k] - oy) / res))
+        x1 = cell_index(ex[k], ox, res)
+        y1 = cell_index(ey[k], oy, res)
         dx = abs(x1 - x0)
         dy = abs(y1 - y0)
         stepx = 1 if x1 >= x0 else -1

@@ -29,6 +29,8 @@ import math
 import numpy as np
 from numba import njit
 
+from slam.kernels.cells import cell_index
+
 TILE = 16
 """Side of a tile of the count layout (cells)."""
 SHIFT = 4
@@ -121,15 +123,15 @@ def touched_tiles(
         s = math.sin(poses[k, 2])
         sx = poses[k, 0] + c * lx - s * ly
         sy = poses[k, 1] + s * lx + c * ly
-        x0 = int(math.floor((sx - ox) / res))
-        y0 = int(math.floor((sy - oy) / res))
+        x0 = cell_index(sx, ox, res)
+        y0 = cell_index(sy, oy, res)
         for j in range(kind.shape[1]):
             if kind[k, j] == NO_RAY:
                 continue
             wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
             wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
-            x1 = int(math.floor((wx - ox) / res))
-            y1 = int(math.floor((wy - oy) / res))
+            x1 = cell_index(wx, ox, res)
+            y1 = cell_index(wy, oy, res)
             dx = abs(x1 - x0)
             dy = abs(y1 - y0)
             stepx = 1 if x1 >= x0 else -1
@@ -185,16 +187,16 @@ def count_rays(
         s = math.sin(poses[k, 2])
         sx = poses[k, 0] + c * lx - s * ly
         sy = poses[k, 1] + s * lx + c * ly
-        x0 = int(math.floor((sx - ox) / res))
-        y0 = int(math.floor((sy - oy) / res))
+        x0 = cell_index(sx, ox, res)
+        y0 = cell_index(sy, oy, res)
         for j in range(kind.shape[1]):
             what = kind[k, j]
             if what == NO_RAY:
                 continue
             wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
             wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
-            x1 = int(math.floor((wx - ox) / res))
-            y1 = int(math.floor((wy - oy) / res))
+            x1 = cell_index(wx, ox, res)
+            y1 = cell_index(wy, oy, res)
             dx = abs(x1 - x0)
             dy = abs(y1 - y0)
             stepx = 1 if x1 >= x0 else -1
@@ -397,8 +399,8 @@ def classify_beams(
         py = poses[k, 1]
         sx = px + c * lx - s * ly
         sy = py + s * lx + c * ly
-        x0 = int(math.floor((sx - ox) / res))
-        y0 = int(math.floor((sy - oy) / res))
+        x0 = cell_index(sx, ox, res)
+        y0 = cell_index(sy, oy, res)
         for j in range(nb):
             offset[k, j] = np.nan
             if kind[k, j] != HIT:
@@ -406,8 +408,8 @@ def classify_beams(
                 continue
             wx = px + c * ex[k, j] - s * ey[k, j]
             wy = py + s * ex[k, j] + c * ey[k, j]
-            x1 = int(math.floor((wx - ox) / res))
-            y1 = int(math.floor((wy - oy) / res))
+            x1 = cell_index(wx, ox, res)
+            y1 = cell_index(wy, oy, res)
             if not (0 <= x1 < w and 0 <= y1 < h):
                 verdict[k, j] = UNKNOWN
                 continue
@@ -431,8 +433,8 @@ def classify_beams(
                     verdict[k, j] = CONFLICT_THROUGH
                     offset[k, j] = r - through
                     continue
-            bx = int(math.floor((wx + ux * tolerance - ox) / res))
-            by = int(math.floor((wy + uy * tolerance - oy) / res))
+            bx = cell_index(wx + ux * tolerance, ox, res)
+            by = cell_index(wy + uy * tolerance, oy, res)
             if not (
                 _free(table, pool, x1, y1, l_hit, l_miss, min_free_rays)
                 and not _near_hit(table, pool, x1, y1, disc, w, h)
@@ -448,8 +450,8 @@ def classify_beams(
             # How far in front of the others' surface: march on along the beam in half cells.
             step = 0.5 * res
             for i in range(1, int(max_offset / step) + 1):
-                qx = int(math.floor((wx + ux * step * i - ox) / res))
-                qy = int(math.floor((wy + uy * step * i - oy) / res))
+                qx = cell_index(wx + ux * step * i, ox, res)
+                qy = cell_index(wy + uy * step * i, oy, res)
                 if not (0 <= qx < w and 0 <= qy < h):
                     break
                 if _occupied(table, pool, qx, qy, l_hit, l_miss, occupied_above):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from slam.kernels.cells import cell_index
+
 
 @njit(cache=True)
 def correlation(
@@ -22,8 +24,8 @@ def correlation(
     s = np.sin(pose[2])
     count = 0
     for b in range(ex.shape[0]):
-        ix = int(np.floor((pose[0] + c * ex[b] - s * ey[b] - ox) / res))
-        iy = int(np.floor((pose[1] + s * ex[b] + c * ey[b] - oy) / res))
+        ix = cell_index(pose[0] + c * ex[b] - s * ey[b], ox, res)
+        iy = cell_index(pose[1] + s * ex[b] + c * ey[b], oy, res)
         if 0 <= ix < w and 0 <= iy < h and occupied[iy, ix]:
             count += 1
     return count
@@ -66,8 +68,8 @@ def correlation_search(
             s = np.sin(th)
             counts[:, :] = 0
             for b in range(ex.shape[0]):
-                ix = int(np.floor((poses[p, 0] + c * ex[b] - s * ey[b] - ox) / res))
-                iy = int(np.floor((poses[p, 1] + s * ex[b] + c * ey[b] - oy) / res))
+                ix = cell_index(poses[p, 0] + c * ex[b] - s * ey[b], ox, res)
+                iy = cell_index(poses[p, 1] + s * ex[b] + c * ey[b], oy, res)
                 for j in range(side):
                     yy = iy + j - xy_radius
                     if yy < 0 or yy >= h:

@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.grid_geometry import GridGeometry, Rect, covering
+
 FREE = 0
 WALL = 1
 FURNITURE = 2
@@ -35,9 +37,6 @@ LABEL_COLORS = np.array(
 
 OUTSIDE_COLOR = np.array([20.0, 20.0, 24.0])
 """RGB colour of camera rays that hit nothing."""
-
-Rect = tuple[float, float, float, float]
-"""``(x0, y0, x1, y1)`` in metres."""
 
 
 @dataclass(frozen=True)
@@ -70,27 +69,23 @@ class World:
         """``(H, W)`` uint8: 1 where an obstacle is, else 0."""
         return (self.labels != FREE).astype(np.uint8)
 
+    @property
+    def geometry(self) -> GridGeometry:
+        """Where the obstacle grid ``labels`` lies."""
+        return GridGeometry.of(self.origin, self.resolution, self.labels.shape)
+
+    @property
+    def texture_geometry(self) -> GridGeometry:
+        """Where the floor texture lies."""
+        return GridGeometry.of(self.texture_origin, self.texture_resolution, self.texture.shape)
+
     def cell_of(self, x: NDArray, y: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Row and column of the cells containing world points (may fall outside the grid)."""
-        col = np.floor((np.asarray(x) - self.origin[0]) / self.resolution).astype(np.int64)
-        row = np.floor((np.asarray(y) - self.origin[1]) / self.resolution).astype(np.int64)
-        return row, col
-
-    def label_at(self, x: NDArray, y: NDArray) -> NDArray[np.int64]:
-        """Label of the cell at world points; -1 outside the grid."""
-        row, col = self.cell_of(x, y)
-        inside = (
-            (row >= 0) & (col >= 0) & (row < self.labels.shape[0]) & (col < self.labels.shape[1])
-        )
-        out = np.full(np.shape(row), -1, dtype=np.int64)
-        out[inside] = self.labels[row[inside], col[inside]]
-        return out
+        return self.geometry.cell_of(x, y)
 
     def texel_of(self, x: NDArray, y: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Row and column of the texels containing world points (may fall outside)."""
-        col = np.floor((np.asarray(x) - self.texture_origin[0]) / self.texture_resolution)
-        row = np.floor((np.asarray(y) - self.texture_origin[1]) / self.texture_resolution)
-        return row.astype(np.int64), col.astype(np.int64)
+        return self.texture_geometry.cell_of(x, y)
 
     def obstacle_distance(self) -> NDArray[np.float32]:
         """``(H, W)`` distance (m) from each cell centre to the nearest obstacle cell."""
@@ -99,46 +94,6 @@ class World:
 
 
 # ------------------------------------------------------------------------------------- grids
-
-
-@dataclass(frozen=True)
-class GridFrame:
-    """Geometry of a grid: origin (lower-left corner), resolution and shape ``(rows, cols)``."""
-
-    origin: tuple[float, float]
-    resolution: float
-    shape: tuple[int, int]
-
-    def slices(self, rect: Rect) -> tuple[slice, slice]:
-        """Row and column slices of the cells whose centres lie inside ``rect``."""
-        x0, y0, x1, y1 = rect
-        ox, oy = self.origin
-        r = self.resolution
-        c0 = max(0, math.ceil((x0 - ox) / r - 0.5))
-        c1 = min(self.shape[1], math.floor((x1 - ox) / r - 0.5) + 1)
-        r0 = max(0, math.ceil((y0 - oy) / r - 0.5))
-        r1 = min(self.shape[0], math.floor((y1 - oy) / r - 0.5) + 1)
-        return slice(r0, max(r0, r1)), slice(c0, max(c0, c1))
-
-    def centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """World x of column centres ``(W,)`` and y of row centres ``(H,)``."""
-        xs = self.origin[0] + (np.arange(self.shape[1]) + 0.5) * self.resolution
-        ys = self.origin[1] + (np.arange(self.shape[0]) + 0.5) * self.resolution
-        return xs, ys
-
-    def to_pixels(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
-        """World points ``(N, 2)`` → continuous (column, row) coordinates of cell centres."""
-        return (np.asarray(xy) - np.asarray(self.origin)) / self.resolution - 0.5
-
-
-def frame_for(bounds: Rect, resolution: float, margin: float) -> GridFrame:
-    """A grid covering ``bounds`` plus ``margin``, its origin on a multiple of ``resolution``."""
-    x0, y0, x1, y1 = bounds
-    ox = math.floor((x0 - margin) / resolution) * resolution
-    oy = math.floor((y0 - margin) / resolution) * resolution
-    cols = math.ceil((x1 + margin - ox) / resolution)
-    rows = math.ceil((y1 + margin - oy) / resolution)
-    return GridFrame((round(ox, 9), round(oy, 9)), resolution, (rows, cols))
 
 
 # ------------------------------------------------------------------------------------ layout
@@ -323,7 +278,7 @@ def room_inset(rect: Rect) -> float:
 
 
 def rasterise_layout(
-    layout: Layout, frame: GridFrame
+    layout: Layout, frame: GridGeometry
 ) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
     """Labels and interior mask of a layout: free areas carved, walls around them."""
     free = np.zeros(frame.shape, dtype=bool)
@@ -350,7 +305,7 @@ def _walls_around(
 # ------------------------------------------------------------------------------------ clutter
 
 
-def path_distance(frame: GridFrame, path_xy: NDArray[np.float64]) -> NDArray[np.float32]:
+def path_distance(frame: GridGeometry, path_xy: NDArray[np.float64]) -> NDArray[np.float32]:
     """``(H, W)`` distance (m) from each cell centre to the polyline ``path_xy (N, 2)``."""
     mask = np.full(frame.shape, 255, dtype=np.uint8)
     pts = np.round(frame.to_pixels(path_xy) * 16).astype(np.int32)
@@ -363,7 +318,7 @@ def path_distance(frame: GridFrame, path_xy: NDArray[np.float64]) -> NDArray[np.
 def place_clutter(
     rng: np.random.Generator,
     labels: NDArray[np.uint8],
-    frame: GridFrame,
+    frame: GridGeometry,
     path_xy: NDArray[np.float64],
     areas: list[tuple[Rect, str]],
     clearance: float = 0.75,
@@ -440,7 +395,7 @@ def _against_wall(rng: np.random.Generator, rect: Rect, length: float, depth: fl
     return (bx, by, bx + depth, by + length)
 
 
-def _object_mask(frame: GridFrame, obj: tuple[str, Rect]) -> tuple[NDArray, NDArray] | None:
+def _object_mask(frame: GridGeometry, obj: tuple[str, Rect]) -> tuple[NDArray, NDArray] | None:
     """Cells (rows, cols) covered by a box or a round pillar; ``None`` if none."""
     kind, rect = obj
     rs, cs = frame.slices(rect)
@@ -477,7 +432,7 @@ FLOOR_PALETTES = {
 class FloorPainter:
     """Paints floor materials into a texture grid (vectorised per rectangle)."""
 
-    def __init__(self, frame: GridFrame, rng: np.random.Generator) -> None:
+    def __init__(self, frame: GridGeometry, rng: np.random.Generator) -> None:
         self.frame = frame
         self.rng = rng
         self.rgb = np.zeros((*frame.shape, 3), dtype=np.uint8)
@@ -557,7 +512,7 @@ class FloorPainter:
         self.fill((x0 - width / 2, y0 - width / 2, x1 + width / 2, y1 + width / 2), color)
 
 
-def paint_floor(rng: np.random.Generator, layout: Layout, frame: GridFrame) -> NDArray[np.uint8]:
+def paint_floor(rng: np.random.Generator, layout: Layout, frame: GridGeometry) -> NDArray[np.uint8]:
     """The floor texture of a layout: tiled corridors with painted lines, a material per room,
     rugs and coloured patches."""
     painter = FloorPainter(frame, rng)
@@ -620,12 +575,11 @@ def _edge_lines(painter: FloorPainter, a, b, h: float, color) -> None:
 
 
 def floor_mask(
-    labels: NDArray[np.uint8], interior: NDArray[np.bool_], frame: GridFrame, tex: GridFrame
+    labels: NDArray[np.uint8], interior: NDArray[np.bool_], frame: GridGeometry, tex: GridGeometry
 ) -> NDArray[np.bool_]:
     """Texels whose centre lies on a free interior cell of the obstacle grid."""
     xs, ys = tex.centres()
-    col = np.floor((xs - frame.origin[0]) / frame.resolution).astype(np.int64)
-    row = np.floor((ys - frame.origin[1]) / frame.resolution).astype(np.int64)
+    row, col = frame.cell_of(xs, ys)
     col = np.clip(col, 0, frame.shape[1] - 1)
     row = np.clip(row, 0, frame.shape[0] - 1)
     free = (labels == FREE) & interior
@@ -644,13 +598,13 @@ def build_world(
     wall_height: float = 2.5,
 ) -> World:
     """Rasterise a layout, furnish it away from ``path_xy`` and paint its floor."""
-    frame = frame_for(layout.bounds(), resolution, margin=1.0)
+    frame = covering(layout.bounds(), resolution, margin=1.0)
     labels, interior = rasterise_layout(layout, frame)
     areas = [(room.rect, "room") for room in layout.rooms]
     areas += [(rect, "corridor") for rect in layout.corridors]
     doors = [layout.door_rect(room.door) for room in layout.rooms]
     placed = place_clutter(rng, labels, frame, path_xy, areas, keep_clear=doors)
-    tex = GridFrame(
+    tex = GridGeometry(
         frame.origin,
         texture_resolution,
         (
@@ -700,7 +654,7 @@ def world_around_path(
     lo = path_xy.min(axis=0)
     hi = path_xy.max(axis=0)
     margin = corridor_half_width + 2.5
-    frame = frame_for((lo[0], lo[1], hi[0], hi[1]), resolution, margin=margin)
+    frame = covering((lo[0], lo[1], hi[0], hi[1]), resolution, margin=margin)
     dist = path_distance(frame, path_xy)
     free = dist <= corridor_half_width
     # Halls: wider free discs at a few places along the path.
@@ -733,7 +687,7 @@ def world_around_path(
             if np.any(labels[r, c] != FREE) or np.min(dist[r, c]) < 0.6:
                 continue
             labels[r, c] = PILLAR if obj[0] == "pillar" else FURNITURE
-    tex = GridFrame(
+    tex = GridGeometry(
         frame.origin,
         texture_resolution,
         (

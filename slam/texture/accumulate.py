@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from slam.config import TextureConfig
 from slam.errors import DataError
+from slam.grid_geometry import GridGeometry
 from slam.io.log import RgbdIndex
 from slam.kinect import KinectModel
 from slam.mapping import OccupancyGrid
@@ -45,17 +46,14 @@ class TextureAccumulator:
     """Per-cell colour sums over a map grid, fed one RGB-D frame pair at a time."""
 
     def __init__(
-        self,
-        shape: tuple[int, int],
-        resolution: float,
-        origin: F64,
-        config: TextureConfig,
-        model: KinectModel | None = None,
+        self, geometry: GridGeometry, config: TextureConfig, model: KinectModel | None = None
     ) -> None:
         self.config = config
         self.model = model if model is not None else kinect_model(config)
-        self.resolution = float(resolution)
-        self.origin = np.asarray(origin, dtype=np.float64).copy()
+        self.geometry = geometry
+        self.resolution = geometry.resolution
+        self.origin = np.asarray(geometry.origin, dtype=np.float64)
+        shape = geometry.shape
         self.sums = np.zeros((*shape, 3), dtype=np.float64)
         self.counts = np.zeros(shape, dtype=np.int32)
         self.stamps = np.full(shape, -1, dtype=np.int32)
@@ -101,7 +99,14 @@ class TextureMap:
     count: NDArray[np.int32]
     """``(H, W)`` floor samples averaged into the cell's colour."""
     resolution: float
+    """Cell size (m)."""
     origin: F64
+    """World ``(x, y)`` of the lower-left corner of cell ``(0, 0)``."""
+
+    @property
+    def geometry(self) -> GridGeometry:
+        """Where the texture lies (the map's grid)."""
+        return GridGeometry.of(self.origin, self.resolution, self.count.shape)
 
     @classmethod
     def from_sums(
@@ -138,7 +143,7 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) :func:`accumulate_frame` for the frame types
     :class:`~slam.io.log.RgbdIndex` returns, so that timings measure throughput only."""
     config = TextureConfig()
-    acc = TextureAccumulator((1, 1), 1.0, np.zeros(2), config)
+    acc = TextureAccumulator(GridGeometry((0.0, 0.0), 1.0, (1, 1)), config)
     rgb = np.zeros((1, 1, 3), dtype=np.uint8)[:, :, ::-1]  # load_rgb's BGR→RGB view
     acc.add_frame(np.zeros((1, 1), dtype=np.uint16), rgb, np.zeros(3), np.zeros(3))
 
@@ -199,7 +204,7 @@ def build_texture(
     time_range = (float(times.min()), float(times.max())) if times.size else (0.0, -1.0)
     plan = plan_frames(index, config, time_range)
     model = kinect_model(config)
-    acc = TextureAccumulator(grid.shape, grid.resolution, grid.origin, config, model)
+    acc = TextureAccumulator(grid.geometry, config, model)
     n = plan.rgb.size
     used = np.zeros(n, dtype=bool)
     if n:

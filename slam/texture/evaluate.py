@@ -243,7 +243,7 @@ def _aligned_figures(
     (empty when fewer than two poses of the trajectory lie within the ground truth's time span)."""
     from slam.eval.trajectory import align_se2
 
-    shape, res, coloured = texture.count.shape, texture.resolution, texture.coloured
+    res, coloured = texture.resolution, texture.coloured
     times, poses = trajectory.times, trajectory.poses
     inside = (times >= gt.times[0]) & (times <= gt.times[-1])
     if inside.sum() <= 1:
@@ -259,9 +259,10 @@ def _aligned_figures(
     sy, sx = np.nonzero(swept)
     swept_xy = texture.origin + (np.stack([sx, sy], axis=-1) + 0.5) * res
     back = transform_points(inverse(transform), swept_xy)
-    cells = np.floor((back - texture.origin) / res)
-    cx, cy = cells[:, 0].astype(np.int64), cells[:, 1].astype(np.int64)
-    ok = (cx >= 0) & (cy >= 0) & (cx < shape[1]) & (cy < shape[0])
+    geometry = texture.geometry
+    cells = geometry.world_to_cell(back)
+    cx, cy = cells[:, 0], cells[:, 1]
+    ok = geometry.inside(cy, cx)
     hit = np.zeros(cx.shape, dtype=bool)
     hit[ok] = coloured[cy[ok], cx[ok]]
     return {

@@ -23,6 +23,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from slam.config import TextureConfig
+from slam.kernels.cells import cell_index
 from slam.kinect import KinectModel
 
 F64 = NDArray[np.float64]
@@ -205,8 +206,8 @@ def _line_of_sight(occ, occ_ox, occ_oy, occ_res, x0, y0, x1, y1):
     oh, ow = occ.shape[0], occ.shape[1]
     for s in range(steps + 1):
         t = s / steps
-        cx = int(math.floor((x0 + t * (x1 - x0) - occ_ox) / occ_res))
-        cy = int(math.floor((y0 + t * (y1 - y0) - occ_oy) / occ_res))
+        cx = cell_index(x0 + t * (x1 - x0), occ_ox, occ_res)
+        cy = cell_index(y0 + t * (y1 - y0), occ_oy, occ_res)
         if 0 <= cx < ow and 0 <= cy < oh and occ[cy, cx] != 0:
             return False
     return True
@@ -230,10 +231,10 @@ def mark_swept(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy,
     for f in range(rotations.shape[0]):
         r = rotations[f]
         px, py, pz = positions[f, 0], positions[f, 1], positions[f, 2]
-        x_lo = int(math.floor((px - max_depth - origin_x) / resolution))
-        x_hi = int(math.floor((px + max_depth - origin_x) / resolution))
-        y_lo = int(math.floor((py - max_depth - origin_y) / resolution))
-        y_hi = int(math.floor((py + max_depth - origin_y) / resolution))
+        x_lo = cell_index(px - max_depth, origin_x, resolution)
+        x_hi = cell_index(px + max_depth, origin_x, resolution)
+        y_lo = cell_index(py - max_depth, origin_y, resolution)
+        y_hi = cell_index(py + max_depth, origin_y, resolution)
         for iy in range(max(y_lo, 0), min(y_hi + 1, gh)):
             y = origin_y + (iy + 0.5) * resolution
             for ix in range(max(x_lo, 0), min(x_hi + 1, gw)):

@@ -73,6 +73,7 @@ def demo_ground_truth_path() -> dict:
 def kernel_frame() -> dict:
     """The kernel alone on one analytic floor frame."""
     from slam.config import TextureConfig
+    from slam.grid_geometry import GridGeometry
     from slam.kinect import KinectModel
     from slam.texture import TextureAccumulator
 
@@ -83,7 +84,7 @@ def kernel_frame() -> dict:
         depth = np.where(rays[..., 2] < 0, model.z / -rays[..., 2], np.inf)
     disparity = model.encode_disparity(depth)
     rgb = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)[:, :, ::-1]
-    acc = TextureAccumulator((800, 800), 0.05, np.array([-20.0, -20.0]), TextureConfig())
+    acc = TextureAccumulator(GridGeometry((-20.0, -20.0), 0.05, (800, 800)), TextureConfig())
     pose_d, pose_r = np.array([1.0, 2.0, 0.3]), np.array([1.01, 2.0, 0.31])
     acc.add_frame(disparity, rgb, pose_d, pose_r)  # compile / load from cache
     load = os.getloadavg()[0]
