@@ -94,23 +94,7 @@ def run_eval(args: argparse.Namespace) -> int:
     from slam.eval.report import format_table, to_json, write_eval_json
     from slam.io.tum import read_tum
 
-    if not args.tolerance > 0:
-        raise UsageError(
-            f"--tolerance: expected a positive number of seconds, found {args.tolerance}"
-        )
-    run_dir: Path = args.run_dir
-    if not run_dir.is_dir():
-        raise DataError(
-            f"{run_dir}: run folder not found (expected a folder with {TRAJECTORY_FILE})"
-        )
-    if not (run_dir / TRAJECTORY_FILE).is_file():
-        raise DataError(
-            f"{run_dir / TRAJECTORY_FILE}: trajectory file not found (expected the "
-            f"{TRAJECTORY_FILE} that `slam run` writes to its run folder)"
-        )
-    for option, path in (("--relations", args.relations), ("--reference", args.reference)):
-        if path is not None and path.is_dir():
-            raise DataError(f"{path}: {option} expected a file, found a folder")
+    run_dir = _checked_run_dir(args)
     result: dict[str, Any] = {"trajectory": str(run_dir / TRAJECTORY_FILE)}
     relations, reference = args.relations, args.reference
     implicit = relations is None and reference is None
@@ -170,6 +154,28 @@ def run_eval(args: argparse.Namespace) -> int:
         raise DataError(f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})") from None
     print(to_json(result) if args.json else format_table(result), end="")
     return 0
+
+
+def _checked_run_dir(args: argparse.Namespace) -> Path:
+    """The run folder of ``slam eval``, once the options and the folder passed their checks."""
+    if not args.tolerance > 0:
+        raise UsageError(
+            f"--tolerance: expected a positive number of seconds, found {args.tolerance}"
+        )
+    run_dir: Path = args.run_dir
+    if not run_dir.is_dir():
+        raise DataError(
+            f"{run_dir}: run folder not found (expected a folder with {TRAJECTORY_FILE})"
+        )
+    if not (run_dir / TRAJECTORY_FILE).is_file():
+        raise DataError(
+            f"{run_dir / TRAJECTORY_FILE}: trajectory file not found (expected the "
+            f"{TRAJECTORY_FILE} that `slam run` writes to its run folder)"
+        )
+    for option, path in (("--relations", args.relations), ("--reference", args.reference)):
+        if path is not None and path.is_dir():
+            raise DataError(f"{path}: {option} expected a file, found a folder")
+    return run_dir
 
 
 def _relations(

@@ -563,6 +563,36 @@ def _case_error(path: Path, where: str, message: str) -> DataError:
     return DataError(f"{path}: {where}: {message}")
 
 
+def _check_case(path: Path, where: str, case: Any) -> None:
+    """The shape of one entry of ``cases_2d`` (keys, colour rows, lists, numbers): a
+    :class:`DataError` naming ``path`` and ``where`` otherwise."""
+    if not isinstance(case, dict):
+        raise _case_error(path, where, f"expected an object, found {case!r}")
+    missing = {"name", "colors", "measurements", "motions", "sensor_right", "p_move"} - set(case)
+    if missing:
+        raise _case_error(path, where, f"missing keys {', '.join(sorted(missing))}")
+    colours = case["colors"]
+    if (
+        not isinstance(colours, list)
+        or not colours
+        or not all(
+            isinstance(row, list) and row and all(isinstance(c, str) and len(c) == 1 for c in row)
+            for row in colours
+        )
+    ):
+        raise _case_error(path, f"{where}.colors", "expected rows of one-letter colours")
+    measurements, motions = case["measurements"], case["motions"]
+    if not isinstance(measurements, list) or not isinstance(motions, list):
+        raise _case_error(path, where, "measurements and motions must be lists")
+    if len(measurements) != len(motions):
+        raise _case_error(
+            path, where, f"{len(motions)} motions for {len(measurements)} measurements"
+        )
+    for key in ("sensor_right", "p_move"):
+        if isinstance(case[key], bool) or not isinstance(case[key], int | float):
+            raise _case_error(path, f"{where}.{key}", f"expected a number, found {case[key]!r}")
+
+
 def load_udacity_cases(path: Path) -> list[Scenario]:
     """The 2D cases of ``udacity_cases.json`` as scenarios with their expected posteriors.
 
@@ -585,35 +615,8 @@ def load_udacity_cases(path: Path) -> list[Scenario]:
     scenarios = []
     for i, case in enumerate(cases):
         where = f"cases_2d[{i}]"
-        if not isinstance(case, dict):
-            raise _case_error(path, where, f"expected an object, found {case!r}")
-        missing = {"name", "colors", "measurements", "motions", "sensor_right", "p_move"} - set(
-            case
-        )
-        if missing:
-            raise _case_error(path, where, f"missing keys {', '.join(sorted(missing))}")
-        colours = case["colors"]
-        if (
-            not isinstance(colours, list)
-            or not colours
-            or not all(
-                isinstance(row, list)
-                and row
-                and all(isinstance(c, str) and len(c) == 1 for c in row)
-                for row in colours
-            )
-        ):
-            raise _case_error(path, f"{where}.colors", "expected rows of one-letter colours")
-        measurements, motions = case["measurements"], case["motions"]
-        if not isinstance(measurements, list) or not isinstance(motions, list):
-            raise _case_error(path, where, "measurements and motions must be lists")
-        if len(measurements) != len(motions):
-            raise _case_error(
-                path, where, f"{len(motions)} motions for {len(measurements)} measurements"
-            )
-        for key in ("sensor_right", "p_move"):
-            if isinstance(case[key], bool) or not isinstance(case[key], int | float):
-                raise _case_error(path, f"{where}.{key}", f"expected a number, found {case[key]!r}")
+        _check_case(path, where, case)
+        colours, measurements, motions = case["colors"], case["measurements"], case["motions"]
         source = f"{path}#{case['name']}"
         try:
             world = world_from_rows(["".join(row) for row in colours], cyclic=True)

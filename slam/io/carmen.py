@@ -178,39 +178,7 @@ def load_carmen(
     text = _read_text(path)
     lines = text.split("\n")
 
-    comments: list[str] = []
-    skipped: dict[str, int] = {}
-    odom = _Lines([], [])
-    flaser: dict[int, _Lines] = {}
-    robotlaser: dict[tuple[int, int], _Lines] = {}
-    for lineno, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line[0] == "#":
-            comments.append(line[1:].strip())
-            continue
-        head = line.split(None, 2)
-        kind = head[0]
-        if kind == "FLASER":
-            n = _beam_count(path, lineno, head, 1, "FLASER")
-            group = flaser.setdefault(n, _Lines([], []))
-        elif kind == "ODOM":
-            group = odom
-        elif kind == "ROBOTLASER1":
-            key = _robotlaser_layout(path, lineno, line)
-            group = robotlaser.setdefault(key, _Lines([], []))
-        else:
-            if not _MESSAGE_TYPE.match(kind):
-                raise DataError(
-                    f"{path}:{lineno}: expected a message type such as FLASER or ODOM "
-                    f"or a '#' comment, found {_clip(kind)!r}"
-                )
-            skipped[kind] = skipped.get(kind, 0) + 1
-            continue
-        group.text.append(line)
-        group.lineno.append(lineno)
-
+    comments, skipped, odom, flaser, robotlaser = _group_lines(path, lines)
     groups = [_parse_flaser(path, n, g, lidar) for n, g in flaser.items()]
     groups += [_parse_robotlaser(path, n, nrem, g) for (n, nrem), g in robotlaser.items()]
     if not groups:
@@ -245,6 +213,46 @@ def load_carmen(
         odometry=odometry,
         meta=meta,
     )
+
+
+def _group_lines(
+    path: Path, lines: list[str]
+) -> tuple[list[str], dict[str, int], _Lines, dict[int, _Lines], dict[tuple[int, int], _Lines]]:
+    """Sort a log's lines by message: ``(comments, skipped counts per type, ODOM lines, FLASER
+    lines per beam count, ROBOTLASER1 lines per layout)``, each line kept with its number."""
+    comments: list[str] = []
+    skipped: dict[str, int] = {}
+    odom = _Lines([], [])
+    flaser: dict[int, _Lines] = {}
+    robotlaser: dict[tuple[int, int], _Lines] = {}
+    for lineno, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line[0] == "#":
+            comments.append(line[1:].strip())
+            continue
+        head = line.split(None, 2)
+        kind = head[0]
+        if kind == "FLASER":
+            n = _beam_count(path, lineno, head, 1, "FLASER")
+            group = flaser.setdefault(n, _Lines([], []))
+        elif kind == "ODOM":
+            group = odom
+        elif kind == "ROBOTLASER1":
+            key = _robotlaser_layout(path, lineno, line)
+            group = robotlaser.setdefault(key, _Lines([], []))
+        else:
+            if not _MESSAGE_TYPE.match(kind):
+                raise DataError(
+                    f"{path}:{lineno}: expected a message type such as FLASER or ODOM "
+                    f"or a '#' comment, found {_clip(kind)!r}"
+                )
+            skipped[kind] = skipped.get(kind, 0) + 1
+            continue
+        group.text.append(line)
+        group.lineno.append(lineno)
+    return comments, skipped, odom, flaser, robotlaser
 
 
 def _stem(path: Path) -> str:

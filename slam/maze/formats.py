@@ -207,6 +207,64 @@ def format_udacity(maze: Maze) -> str:
 # --------------------------------------------------------------------------- ASCII format
 
 
+def _read_wall_line(where: str, line: str, width: int, h_open: NDArray[np.bool_]) -> None:
+    """Posts and horizontal walls of one line ``o---o   o``: ``h_open[x]`` true where open."""
+    for col in range(0, len(line), 4):
+        if line[col] != "o":
+            raise DataError(f"{where}:{col + 1}: expected a post 'o', found {line[col]!r}")
+    for x in range(width):
+        seg = line[4 * x + 1 : 4 * x + 4]
+        if seg == "---":
+            h_open[x] = False
+        elif seg == "   ":
+            h_open[x] = True
+        else:
+            raise DataError(
+                f"{where}:{4 * x + 2}: expected a wall '---' or an opening '   ', found {seg!r}"
+            )
+
+
+def _read_cell_line(
+    where: str,
+    line: str,
+    width: int,
+    y: int,
+    v_open: NDArray[np.bool_],
+    goal: list[Cell],
+    start: Cell | None,
+) -> Cell | None:
+    """Vertical walls and cell marks of row ``y``'s line ``|   | S |``: fills ``v_open[:, y]``,
+    appends ``G`` cells to ``goal``; returns the start cell (``start`` unless this row has the
+    ``S``)."""
+    for xl in range(width + 1):
+        ch = line[4 * xl]
+        if ch == "|":
+            v_open[xl, y] = False
+        elif ch == " ":
+            v_open[xl, y] = True
+        else:
+            raise DataError(f"{where}:{4 * xl + 1}: expected a wall '|' or ' ', found {ch!r}")
+    for x in range(width):
+        inner = line[4 * x + 1 : 4 * x + 4]
+        mark = inner.strip()
+        if mark == "":
+            continue
+        if mark not in ("S", "G") or inner[1] != mark:
+            raise DataError(
+                f"{where}:{4 * x + 2}: expected ' ', ' S ' or ' G ' inside cell ({x},{y}), "
+                f"found {inner!r}"
+            )
+        if mark == "G":
+            goal.append((x, y))
+        elif start is not None:
+            raise DataError(
+                f"{where}: a second start cell 'S' at ({x},{y}); the first is at {start}"
+            )
+        else:
+            start = (x, y)
+    return start
+
+
 def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
     """Parse the micromouseonline ASCII format; goal = cells marked ``G``, start = ``S``.
 
@@ -248,56 +306,11 @@ def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
     start: Cell | None = None
     goal: list[Cell] = []
     for k, line in enumerate(lines):
-        lineno = k + 1
-        if k % 2 == 0:
-            wall_y = height - k // 2  # horizontal line k is the south side of row wall_y
-            for col in range(0, len(line), 4):
-                if line[col] != "o":
-                    raise DataError(
-                        f"{source}:{lineno}:{col + 1}: expected a post 'o', found {line[col]!r}"
-                    )
-            for x in range(width):
-                seg = line[4 * x + 1 : 4 * x + 4]
-                if seg == "---":
-                    h_open[x, wall_y] = False
-                elif seg == "   ":
-                    h_open[x, wall_y] = True
-                else:
-                    raise DataError(
-                        f"{source}:{lineno}:{4 * x + 2}: expected a wall '---' or an opening "
-                        f"'   ', found {seg!r}"
-                    )
+        if k % 2 == 0:  # horizontal line k is the south side of row height - k // 2
+            _read_wall_line(f"{source}:{k + 1}", line, width, h_open[:, height - k // 2])
         else:
             y = height - 1 - k // 2
-            for xl in range(width + 1):
-                ch = line[4 * xl]
-                if ch == "|":
-                    v_open[xl, y] = False
-                elif ch == " ":
-                    v_open[xl, y] = True
-                else:
-                    raise DataError(
-                        f"{source}:{lineno}:{4 * xl + 1}: expected a wall '|' or ' ', found {ch!r}"
-                    )
-            for x in range(width):
-                inner = line[4 * x + 1 : 4 * x + 4]
-                mark = inner.strip()
-                if mark == "":
-                    continue
-                if mark not in ("S", "G") or inner[1] != mark:
-                    raise DataError(
-                        f"{source}:{lineno}:{4 * x + 2}: expected ' ', ' S ' or ' G ' inside "
-                        f"cell ({x},{y}), found {inner!r}"
-                    )
-                if mark == "G":
-                    goal.append((x, y))
-                elif start is not None:
-                    raise DataError(
-                        f"{source}:{lineno}: a second start cell 'S' at ({x},{y}); the first is "
-                        f"at {start}"
-                    )
-                else:
-                    start = (x, y)
+            start = _read_cell_line(f"{source}:{k + 1}", line, width, y, v_open, goal, start)
 
     mask = np.zeros((width, height), dtype=np.uint8)
     mask |= h_open[:, 1:].astype(np.uint8) << NORTH

@@ -205,13 +205,7 @@ def run_trial(
             log["run"].append(run)
             log["sensors"].append(sensors)
             if (rotation, movement) == RESET:
-                log["rot"].append(0)
-                log["mov"].append(0)
-                log["reset"].append(True)
-                log["moved"].append(0)
-                log["x"].append(x)
-                log["y"].append(y)
-                log["h"].append(heading)
+                _record(log, 0, 0, True, 0, x, y, heading)
                 if run == 0 and hit_goal:
                     run_steps.append(total)
                     break
@@ -227,22 +221,9 @@ def run_trial(
                 events["movement_clamped"] += 1
             steps = max(min(int(movement), MAX_MOVE), -MAX_MOVE)
             direction = heading if steps > 0 else (heading + 2) % 4
-            moved = 0
-            for _ in range(abs(steps)):
-                if open_mask[x, y] >> direction & 1:
-                    x += DX[direction]
-                    y += DY[direction]
-                    moved += 1
-                else:
-                    events["wall_stop"] += 1
-                    break
-            log["rot"].append(int(rotation) if rotation in (-90, 0, 90) else 0)
-            log["mov"].append(steps)
-            log["reset"].append(False)
-            log["moved"].append(moved if steps >= 0 else -moved)
-            log["x"].append(x)
-            log["y"].append(y)
-            log["h"].append(heading)
+            x, y, moved = _walk(open_mask, x, y, direction, abs(steps), events)
+            rot = int(rotation) if rotation in (-90, 0, 90) else 0
+            _record(log, rot, steps, False, moved if steps >= 0 else -moved, x, y, heading)
             if goal[x, y]:
                 hit_goal = True
                 if run != 0:
@@ -253,10 +234,56 @@ def run_trial(
 
     knowledge = getattr(robot, "knowledge", None)
     walls_known_at = knowledge.known_at_edges() if knowledge is not None else None
+    return _trial_result(
+        maze, robot_name or type(robot).__name__, run_steps, failure, log, events, walls_known_at,
+        exploration_weight,
+    )  # fmt: skip
+
+
+def _walk(
+    open_mask: NDArray[np.uint8], x: int, y: int, direction: int, steps: int, events: dict
+) -> tuple[int, int, int]:
+    """Move up to ``steps`` cells in ``direction``, stopping at a wall (counted in ``events``);
+    returns the new cell and the cells moved."""
+    moved = 0
+    for _ in range(steps):
+        if open_mask[x, y] >> direction & 1:
+            x += DX[direction]
+            y += DY[direction]
+            moved += 1
+        else:
+            events["wall_stop"] += 1
+            break
+    return x, y, moved
+
+
+def _record(
+    log: dict[str, list], rot: int, mov: int, reset: bool, moved: int, x: int, y: int, h: int
+) -> None:
+    """Append one step's command and outcome to the trial log (after its sensors)."""
+    for key, value in zip(
+        ("rot", "mov", "reset", "moved", "x", "y", "h"),
+        (rot, mov, reset, moved, x, y, h),
+        strict=True,
+    ):
+        log[key].append(value)
+
+
+def _trial_result(
+    maze: Maze,
+    robot: str,
+    run_steps: list[int],
+    failure: str | None,
+    log: dict[str, list],
+    events: dict[str, int],
+    walls_known_at: NDArray | None,
+    exploration_weight: float,
+) -> TrialResult:
+    """The :class:`TrialResult` of a finished trial's log."""
     n = len(log["step"])
     return TrialResult(
         maze=maze,
-        robot=robot_name or type(robot).__name__,
+        robot=robot,
         success=len(run_steps) == 2,
         run_steps=run_steps,
         failure=failure,

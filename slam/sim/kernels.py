@@ -355,6 +355,11 @@ def render_rgb(labels, origin_x, origin_y, resolution, rot, cam, intr, align, te
     nearest texel of ``texture``; obstacle faces take ``label_colors[label]``, darker on faces of
     constant y. Colours are multiplied by ``gain`` and get ``noise_sigma · noise[...]`` (standard
     normals read from ``noise_offset`` on; the table must hold ``3·H·W`` values past it).
+
+    Long because it is the per-pixel inner loop of the simulator's camera (about 300 000 pixels a
+    frame): the fixed-point search for ``i``, the ray cast and the shading share the pixel's
+    registers; the pieces that stand alone (:func:`_camera_table`, :func:`_cast_ray`) are
+    already separate kernels.
     """
     fx, fy, cx, cy = intr[0], intr[1], intr[2], intr[3]
     h = int(intr[4])
@@ -462,6 +467,10 @@ def follow_path(path, arc, speed_ref, dt, steps, start_steps, lookahead0, lookah
 
     Returns ``(poses (steps+1, 3) with unwrapped heading, v (steps,), omega (steps,),
     progress (steps+1,) arc length of the closest path point)``.
+
+    Long because it is one numba time loop whose state (pose, filtered and commanded ``v``/``ω``,
+    the closest path index, the look-ahead point) carries from step to step: split into
+    functions, each step would pass a dozen scalars back and forth.
     """
     m = path.shape[0]
     poses = np.zeros((steps + 1, 3))
