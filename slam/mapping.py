@@ -29,6 +29,7 @@ from slam.grid_geometry import GridGeometry
 from slam.io.atomic import atomic_path
 from slam.kernels.field import (
     FieldView,
+    TilePool,
     claim_tiles,
     match_particles,
     match_scans,
@@ -350,27 +351,33 @@ class ParticleMaps:
         if hx.shape[0] == 0:
             return
         poses = np.ascontiguousarray(poses)
-        (ox, oy), res = self.geometry.origin, self.resolution
         keep = np.empty((poses.shape[0], hx.shape[0]), dtype=np.bool_)
-        select_new_hits(
-            self.dist, self.tables, self.shift, ox, oy, res, self.dmax,
-            poses, hx, hy, skip_below, keep,
-        )  # fmt: skip
+        select_new_hits(self._pool(), poses, hx, hy, skip_below, keep)
         start = 0
         while True:
-            stopped = claim_tiles(
-                self.dist, self.surface, self.refcount, self.free_stack, self.free_top,
-                self.tables, self.shift, ox, oy, res, self.dmax, poses, hx, hy,
-                keep, start,
-            )  # fmt: skip
+            stopped = claim_tiles(self._pool(), poses, hx, hy, keep, start)
             if stopped < 0:
                 break
             self._grow_pool()
             start = stopped
-        splat_hits(
-            self.dist, self.surface, self.tables, self.shift, ox, oy, res, self.dmax,
-            poses, hx, hy, nx, ny, keep, self.signed,
-        )  # fmt: skip
+        splat_hits(self._pool(), poses, hx, hy, nx, ny, keep, self.signed)
+
+    def _pool(self) -> TilePool:
+        """The tiles as the insertion kernels write them (built anew: growing replaces arrays)."""
+        (ox, oy), res = self.geometry.origin, self.resolution
+        return TilePool(
+            self.dist,
+            self.surface,
+            self.refcount,
+            self.free_stack,
+            self.free_top,
+            self.tables,
+            self.shift,
+            ox,
+            oy,
+            res,
+            self.dmax,
+        )
 
     def share_from(self, particle: int) -> None:
         """Make every particle's map the map of ``particle`` (shared tiles)."""

@@ -29,6 +29,9 @@ from slam.kernels.quality import (
     ISOLATED,
     UNCHECKED,
     UNKNOWN,
+    CountMap,
+    Judging,
+    ScanRays,
     classify_beams,
     count_rays,
     counts_for,
@@ -57,8 +60,19 @@ def counts_seeing_wall(x_wall: float) -> tuple[np.ndarray, np.ndarray]:
     ex, ey, kind = wall_scan(x_wall, half_width=1.6, beams=401)
     poses = np.zeros((100, 3))
     ex, ey, kind = (np.repeat(a, 100, axis=0) for a in (ex, ey, kind))
-    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, poses, 0.0, 0.0, ex, ey, kind, 0, 100, 1)
+    count_rays(_at(counts), ScanRays(poses, 0.0, 0.0, ex, ey, kind), 0, 100, 1)
     return counts
+
+
+def _at(counts: tuple[np.ndarray, np.ndarray]) -> CountMap:
+    """The test grid's counts placed at ORIGIN with cells of RES."""
+    return CountMap(*counts, ORIGIN[0], ORIGIN[1], RES)
+
+
+def _judging(tolerance: float) -> Judging:
+    mc = MapConfig()
+    return Judging(tolerance, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
+                   math.sin(math.radians(15)), 2.0, 0.1, 0.02)  # fmt: skip
 
 
 def classify(counts: tuple[np.ndarray, np.ndarray], x_wall: float, tolerance: float = 0.15):
@@ -68,12 +82,8 @@ def classify(counts: tuple[np.ndarray, np.ndarray], x_wall: float, tolerance: fl
     offset = np.empty(kind.shape, np.float32)
     disc = np.array([[dx, dy] for dx in range(-3, 4) for dy in range(-3, 4)
                      if (dx * dx + dy * dy) * RES**2 <= tolerance**2 + 1e-12])  # fmt: skip
-    mc = MapConfig()
-    classify_beams(
-        *counts, ORIGIN[0], ORIGIN[1], RES, np.zeros((1, 3)), 0.0, 0.0, ex, ey, kind, 0, 1, disc,
-        tolerance, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
-        math.sin(math.radians(15)), 2.0, 0.1, 0.02, verdict, offset,
-    )  # fmt: skip
+    rays = ScanRays(np.zeros((1, 3)), 0.0, 0.0, ex, ey, kind)
+    classify_beams(_at(counts), rays, 0, 1, disc, _judging(tolerance), verdict, offset)
     return verdict[0], offset[0]
 
 
@@ -85,8 +95,7 @@ def test_counts_add_and_remove_exactly():
     ix, iy = int((1.9 - ORIGIN[0]) / RES), int((0.0 - ORIGIN[1]) / RES)
     assert misses[iy, ix] >= 100 and misses[iy, ix] % 100 == 0 and hits[iy, ix] == 0
     ex, ey, kind = (np.repeat(a, 100, axis=0) for a in wall_scan(2.0, half_width=1.6, beams=401))
-    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, np.zeros((100, 3)), 0.0, 0.0, ex, ey, kind,
-               0, 100, -1)  # fmt: skip
+    count_rays(_at(counts), ScanRays(np.zeros((100, 3)), 0.0, 0.0, ex, ey, kind), 0, 100, -1)
     assert not counts[1].any()
 
 
@@ -101,11 +110,12 @@ def test_tiles_are_allocated_where_rays_pass_and_count_the_same():
     ey = (reach * np.sin(angle)).astype(np.float32)
     kind = rng.choice(np.array([HIT, 2], np.int8), (n, beams))
     full = empty_counts(120, 80)
-    count_rays(*full, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind, 0, n, 1)
-    touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind)
+    rays = ScanRays(poses, 0.1, 0.0, ex, ey, kind)
+    count_rays(_at(full), rays, 0, n, 1)
+    touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, rays)
     assert 0 < touched.sum() < touched.size  # rays of at most 1.6 m miss part of the 4 x 6 m
     sparse = counts_for(touched)
-    count_rays(*sparse, ORIGIN[0], ORIGIN[1], RES, poses, 0.1, 0.0, ex, ey, kind, 0, n, 1)
+    count_rays(_at(sparse), rays, 0, n, 1)
     for a, b in zip(to_rows(*full), to_rows(*sparse), strict=True):
         assert np.array_equal(a, b) and a.sum() > 0
 
@@ -141,7 +151,7 @@ def test_a_wall_face_the_others_only_skimmed_is_not_a_conflict():
     poses = np.zeros((n, 3))
     poses[:, 0] = -0.5
     kind = np.full((n, 1), 2, np.int8)
-    count_rays(*counts, ORIGIN[0], ORIGIN[1], RES, poses, 0.0, 0.0, ex - 0.0, ey, kind, 0, n, 1)
+    count_rays(_at(counts), ScanRays(poses, 0.0, 0.0, ex - 0.0, ey, kind), 0, n, 1)
     # The judged scan: a laser at (1, 0) looking up at the face y = 1.02 (robot frame: x forward).
     verdict = np.empty((1, 9), np.int8)
     offset = np.empty((1, 9), np.float32)
@@ -150,12 +160,8 @@ def test_a_wall_face_the_others_only_skimmed_is_not_a_conflict():
     ey2 = -xs[None, :]
     kind2 = np.full((1, 9), HIT, np.int8)
     disc = np.array([[0, 0]])
-    mc = MapConfig()
-    classify_beams(
-        *counts, ORIGIN[0], ORIGIN[1], RES, np.array([[1.0, 0.0, math.pi / 2]]), 0.0, 0.0, ex2, ey2,
-        kind2, 0, 1, disc, 0.15, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
-        math.sin(math.radians(15)), 2.0, 0.1, 0.02, verdict, offset,
-    )  # fmt: skip
+    rays = ScanRays(np.array([[1.0, 0.0, math.pi / 2]]), 0.0, 0.0, ex2, ey2, kind2)
+    classify_beams(_at(counts), rays, 0, 1, disc, _judging(0.15), verdict, offset)
     assert (verdict == UNKNOWN).all()
 
 

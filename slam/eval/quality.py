@@ -53,6 +53,9 @@ from slam.kernels.quality import (
     NO_RAY,
     TILE,
     UNKNOWN,
+    CountMap,
+    Judging,
+    ScanRays,
     classify_beams,
     count_rays,
     counts_for,
@@ -373,8 +376,10 @@ def map_quality(
     lx, ly = rays.laser_xy
     ox, oy = float(origin[0]), float(origin[1])
     tiles = (-(-shape[0] // TILE), -(-shape[1] // TILE))
-    table, pool = counts_for(touched_tiles(*tiles, ox, oy, res, poses, lx, ly, ex, ey, kind))
-    count_rays(table, pool, ox, oy, res, poses, lx, ly, ex, ey, kind, 0, n, 1)
+    scan_rays = ScanRays(poses, float(lx), float(ly), ex, ey, kind)
+    table, pool = counts_for(touched_tiles(*tiles, ox, oy, res, scan_rays))
+    counts = CountMap(table, pool, ox, oy, res)
+    count_rays(counts, scan_rays, 0, n, 1)
 
     bounds = stretch_bounds(poses, config.stretch_m)
     path = path_along(poses)
@@ -382,6 +387,11 @@ def map_quality(
     offset = np.empty(kind.shape, dtype=np.float32)
     disc = _disc(config.tolerance_m, res)
     min_sin = math.sin(math.radians(config.min_incidence_deg))
+    judging = Judging(
+        config.tolerance_m, map_config.log_odds_hit, map_config.log_odds_miss,
+        map_config.occupied_threshold, config.min_free_rays, min_sin, config.max_offset_m,
+        NEIGHBOUR_GAP_M, NEIGHBOUR_RELATIVE_GAP,
+    )  # fmt: skip
     removed = (0, 0)  # rows currently subtracted from the counts
     stretches: list[StretchScore] = []
     for index in range(bounds.shape[0] - 1):
@@ -390,22 +400,17 @@ def map_quality(
         w1 = int(np.searchsorted(path, path[b - 1] + config.separation_m, side="right"))
         c0, c1 = removed
         # Window ends only move forward: give back what it left, take out what it reached.
-        count_rays(table, pool, ox, oy, res, poses, lx, ly, ex, ey, kind, c0, min(c1, w0), 1)
-        count_rays(table, pool, ox, oy, res, poses, lx, ly, ex, ey, kind, max(c1, w0), w1, -1)
+        count_rays(counts, scan_rays, c0, min(c1, w0), 1)
+        count_rays(counts, scan_rays, max(c1, w0), w1, -1)
         removed = (w0, w1)
-        classify_beams(
-            table, pool, ox, oy, res, poses, lx, ly, ex, ey, kind, a, b, disc,
-            config.tolerance_m, map_config.log_odds_hit, map_config.log_odds_miss,
-            map_config.occupied_threshold, config.min_free_rays, min_sin, config.max_offset_m,
-            NEIGHBOUR_GAP_M, NEIGHBOUR_RELATIVE_GAP, verdict, offset,
-        )  # fmt: skip
+        classify_beams(counts, scan_rays, a, b, disc, judging, verdict, offset)
         stretches.append(_stretch(index, a, b, times, poses, path, verdict, offset, rays))
     c0, c1 = removed
-    count_rays(table, pool, ox, oy, res, poses, lx, ly, ex, ey, kind, c0, c1, 1)
+    count_rays(counts, scan_rays, c0, c1, 1)
     shades = map_shades(
         table, pool, map_config.log_odds_hit, map_config.log_odds_miss, UNSEEN_SHADE
     )
-    del pool
+    del pool, counts
     return QualityResult(
         stretches=stretches,
         verdict=verdict,

@@ -68,6 +68,33 @@ class FieldView(NamedTuple):
     """``1 / resolution`` (cells per metre)."""
 
 
+class TilePool(NamedTuple):
+    """Every particle's map as the insertion kernels write it (numba takes it as one argument)."""
+
+    dist: np.ndarray
+    """``(tiles, T, T)`` float32 Euclidean distance to the nearest hit (``dmax``: none near)."""
+    surface: np.ndarray
+    """``(tiles, T, T)`` float32 distance the matcher reads (NaN: unknown)."""
+    refcount: np.ndarray
+    """``(tiles,)`` int32 particles using each tile."""
+    free_stack: np.ndarray
+    """``(tiles,)`` int32 free tiles, ``free_stack[:free_top[0]]``."""
+    free_top: np.ndarray
+    """``(1,)`` int64 number of free tiles."""
+    tables: np.ndarray
+    """``(P, n_tiles_y, n_tiles_x)`` int32 tile of each particle at each tile position (-1)."""
+    shift: int
+    """``log2(T)``."""
+    ox: float
+    """World x of the lower-left corner of cell (0, 0) (m)."""
+    oy: float
+    """World y of the lower-left corner of cell (0, 0) (m)."""
+    res: float
+    """Cell size (m)."""
+    dmax: float
+    """Distance cap (m): cells farther from every hit are unknown."""
+
+
 @njit(cache=True, inline="always")
 def cell_distance(
     pool: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int, dmax: float
@@ -360,13 +387,7 @@ def match_particles(
 
 @njit(cache=True, parallel=True)
 def select_new_hits(
-    dist: np.ndarray,
-    tables: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    res: float,
-    dmax: float,
+    pool: TilePool,
     poses: np.ndarray,
     hx: np.ndarray,
     hy: np.ndarray,
@@ -379,6 +400,8 @@ def select_new_hits(
     close (within ``skip_below``) as this one, or when the previous hit of the same scan fell in
     the same cell: re-observed walls then neither copy tiles nor move the field.
     """
+    dist, tables, shift, dmax = pool.dist, pool.tables, pool.shift, pool.dmax
+    ox, oy, res = pool.ox, pool.oy, pool.res
     for p in prange(poses.shape[0]):
         table = tables[p]
         c = np.cos(poses[p, 2])
@@ -401,17 +424,7 @@ def select_new_hits(
 
 @njit(cache=True)
 def claim_tiles(
-    dist: np.ndarray,
-    surface: np.ndarray,
-    refcount: np.ndarray,
-    free_stack: np.ndarray,
-    free_top: np.ndarray,
-    tables: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    res: float,
-    dmax: float,
+    pool: TilePool,
     poses: np.ndarray,
     hx: np.ndarray,
     hy: np.ndarray,
@@ -425,6 +438,9 @@ def claim_tiles(
     processed. Returns -1 when done, or the index of the particle that ran out of free tiles (the
     caller grows the pool and calls again from there).
     """
+    dist, surface, refcount = pool.dist, pool.surface, pool.refcount
+    free_stack, free_top, tables, shift = pool.free_stack, pool.free_top, pool.tables, pool.shift
+    ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     radius = int(np.ceil(dmax / res))
     ntile_y = tables.shape[1]
     ntile_x = tables.shape[2]
@@ -466,14 +482,7 @@ def claim_tiles(
 
 @njit(cache=True, parallel=True)
 def splat_hits(
-    dist: np.ndarray,
-    surface: np.ndarray,
-    tables: np.ndarray,
-    shift: int,
-    ox: float,
-    oy: float,
-    res: float,
-    dmax: float,
+    pool: TilePool,
     poses: np.ndarray,
     hx: np.ndarray,
     hy: np.ndarray,
@@ -488,6 +497,8 @@ def splat_hits(
     Euclidean distance (``dist``) and, in ``surface``, its signed plane distance when ``signed``
     (else the Euclidean distance again: the unsigned field). Must follow :func:`claim_tiles`.
     """
+    dist, surface, tables, shift = pool.dist, pool.surface, pool.tables, pool.shift
+    ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     radius = int(np.ceil(dmax / res))
     mask = (1 << shift) - 1
     ny_cells = tables.shape[1] << shift

@@ -25,11 +25,59 @@ laser's position in the robot frame. The robot poses are ``poses[k] = (x, y, θ)
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from slam.kernels.cells import cell_index
+
+
+class CountMap(NamedTuple):
+    """The tiled counts and where they lie, as the kernels read and write them."""
+
+    table: np.ndarray
+    """``(TY, TX)`` int32 tile of each tile position in ``pool`` (-1: no ray came there)."""
+    pool: np.ndarray
+    """``(tiles, T, T, 2)`` int32 hits (layer 0) and misses (layer 1) per cell."""
+    ox: float
+    """World x of the lower-left corner of cell (0, 0) (m)."""
+    oy: float
+    """World y of the lower-left corner of cell (0, 0) (m)."""
+    res: float
+    """Cell size (m)."""
+
+
+class ScanRays(NamedTuple):
+    """Every scan's rays in the robot frame, with the robot poses (the module docstring)."""
+
+    poses: np.ndarray
+    """``(K, 3)`` robot poses."""
+    lx: float
+    """Laser x in the robot frame (m)."""
+    ly: float
+    """Laser y in the robot frame (m)."""
+    ex: np.ndarray
+    """``(K, J)`` ray end x in the robot frame (m)."""
+    ey: np.ndarray
+    """``(K, J)`` ray end y in the robot frame (m)."""
+    kind: np.ndarray
+    """``(K, J)`` int8 :data:`NO_RAY`, :data:`HIT` or :data:`FREE`."""
+
+
+class Judging(NamedTuple):
+    """The thresholds of :func:`classify_beams` (its docstring says how each is used)."""
+
+    tolerance: float
+    l_hit: float
+    l_miss: float
+    occupied_above: float
+    min_free_rays: int
+    min_incidence_sin: float
+    max_offset: float
+    neighbour_gap: float
+    neighbour_relative_gap: float
+
 
 TILE = 16
 """Side of a tile of the count layout (cells)."""
@@ -101,20 +149,11 @@ def _add(table, pool, x, y, layer, value):
 
 @njit(cache=True)
 def touched_tiles(
-    tiles_y: int,
-    tiles_x: int,
-    ox: float,
-    oy: float,
-    res: float,
-    poses: np.ndarray,
-    lx: float,
-    ly: float,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    kind: np.ndarray,
+    tiles_y: int, tiles_x: int, ox: float, oy: float, res: float, rays: ScanRays
 ) -> np.ndarray:
     """``(TY, TX)`` mask of the tiles holding a cell some ray passes through or ends in (the
     cells :func:`count_rays` updates)."""
+    poses, lx, ly, ex, ey, kind = rays
     mask = np.zeros((tiles_y, tiles_x), dtype=np.bool_)
     h = tiles_y * TILE
     w = tiles_x * TILE
@@ -158,28 +197,15 @@ def touched_tiles(
 
 
 @njit(cache=True)
-def count_rays(
-    table: np.ndarray,
-    pool: np.ndarray,
-    ox: float,
-    oy: float,
-    res: float,
-    poses: np.ndarray,
-    lx: float,
-    ly: float,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    kind: np.ndarray,
-    k0: int,
-    k1: int,
-    sign: int,
-) -> None:
+def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) -> None:
     """Add ``sign`` (+1 or −1) to the counts of the rays of scans ``k0 .. k1 − 1``.
 
     Every cell a ray passes through gets a miss (Bresenham, end cell excluded); the end cell gets
     a hit for a :data:`HIT` ray and a miss for a :data:`FREE` ray, as the occupancy map does.
     Cells outside the grid are skipped (the caller sizes the grid to hold every ray).
     """
+    table, pool, ox, oy, res = counts
+    poses, lx, ly, ex, ey, kind = rays
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
     for k in range(k0, k1):
@@ -336,29 +362,12 @@ def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
 
 @njit(cache=True)
 def classify_beams(
-    table: np.ndarray,
-    pool: np.ndarray,
-    ox: float,
-    oy: float,
-    res: float,
-    poses: np.ndarray,
-    lx: float,
-    ly: float,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    kind: np.ndarray,
+    counts: CountMap,
+    rays: ScanRays,
     k0: int,
     k1: int,
     disc: np.ndarray,
-    tolerance: float,
-    l_hit: float,
-    l_miss: float,
-    occupied_above: float,
-    min_free_rays: int,
-    min_incidence_sin: float,
-    max_offset: float,
-    neighbour_gap: float,
-    neighbour_relative_gap: float,
+    judging: Judging,
     verdict: np.ndarray,
     offset: np.ndarray,
 ) -> None:
@@ -387,8 +396,13 @@ def classify_beams(
     A cell is occupied when it has hits and ``hits·l_hit + misses·l_miss > occupied_above``,
     solid when it has hits and ``hits ≥ misses``, free when it has at least ``min_free_rays``
     misses and that sum is negative. Beams that are not
-    returns get :data:`UNCHECKED`. Long because the four tests share the beam's geometry.
+    returns get :data:`UNCHECKED`. The thresholds are the fields of ``judging``. Long because the
+    four tests share the beam's geometry.
     """
+    table, pool, ox, oy, res = counts
+    poses, lx, ly, ex, ey, kind = rays
+    tolerance, l_hit, l_miss, occupied_above, min_free_rays = judging[:5]
+    min_incidence_sin, max_offset, neighbour_gap, neighbour_relative_gap = judging[5:]
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
     nb = kind.shape[1]

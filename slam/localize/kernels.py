@@ -430,10 +430,10 @@ def refine_pose(
     for _ in range(iterations):
         # (H + λ·diag(H))·δ = −g for the packed system hg
         scale = 1.0 + damping
+        a00, a11, a22 = hg[0] * scale + 1e-12, hg[3] * scale + 1e-12, hg[5] * scale + 1e-12
         dx, dy, dt, ok = solve_sym3(
-            hg[0] * scale + 1e-12, hg[1], hg[2], hg[3] * scale + 1e-12, hg[4],
-            hg[5] * scale + 1e-12, -hg[6], -hg[7], -hg[8], 1e-30,
-        )  # fmt: skip
+            a00, hg[1], hg[2], a11, hg[4], a22, -hg[6], -hg[7], -hg[8], 1e-30
+        )
         if not ok:
             break
         new_cost = _refine_system(view, x + dx, y + dy, th + dt, ex, ey, inv_var, outlier, trial)
