@@ -344,6 +344,16 @@ def _disc(tolerance: float, resolution: float) -> NDArray[np.int64]:
     return np.ascontiguousarray(offsets, dtype=np.int64)
 
 
+def _judging(config: QualityConfig, map_config: MapConfig) -> Judging:
+    """The thresholds of :func:`~slam.kernels.quality.classify_beams` from the configuration."""
+    return Judging(
+        config.tolerance_m, map_config.log_odds_hit, map_config.log_odds_miss,
+        map_config.occupied_threshold, config.min_free_rays,
+        math.sin(math.radians(config.min_incidence_deg)), config.max_offset_m, NEIGHBOUR_GAP_M,
+        NEIGHBOUR_RELATIVE_GAP,
+    )  # fmt: skip
+
+
 def map_quality(
     times: F64,
     poses: F64,
@@ -386,12 +396,7 @@ def map_quality(
     verdict = np.empty(kind.shape, dtype=np.int8)
     offset = np.empty(kind.shape, dtype=np.float32)
     disc = _disc(config.tolerance_m, res)
-    min_sin = math.sin(math.radians(config.min_incidence_deg))
-    judging = Judging(
-        config.tolerance_m, map_config.log_odds_hit, map_config.log_odds_miss,
-        map_config.occupied_threshold, config.min_free_rays, min_sin, config.max_offset_m,
-        NEIGHBOUR_GAP_M, NEIGHBOUR_RELATIVE_GAP,
-    )  # fmt: skip
+    judging = _judging(config, map_config)
     removed = (0, 0)  # rows currently subtracted from the counts
     stretches: list[StretchScore] = []
     for index in range(bounds.shape[0] - 1):
