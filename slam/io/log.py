@@ -156,21 +156,22 @@ class RgbdIndex:
         return self.disparity_dir / self.disparity_pattern.format(k + 1)
 
     def load_rgb(self, k: int) -> NDArray[np.uint8]:
-        """RGB frame ``k`` as ``(480, 640, 3)`` uint8 in RGB order; :class:`DataError` if unreadable."""
-        import cv2
+        """RGB frame ``k`` as ``(480, 640, 3)`` uint8 in RGB order (C-contiguous, read by
+        :func:`slam.io.png.read_rgb`); :class:`DataError` if unreadable."""
+        from slam.io.png import read_rgb
 
         path = self.rgb_path(k)
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        image = read_rgb(path)
         if image is None:
             raise DataError(f"{path}: missing or not a readable PNG (RGB frame {k + 1})")
-        return image[:, :, ::-1]
+        return image
 
     def load_disparity(self, k: int) -> NDArray[np.uint16]:
         """Disparity frame ``k`` as ``(480, 640)`` uint16; :class:`DataError` if unreadable."""
-        import cv2
+        from slam.io.png import read_unchanged
 
         path = self.disparity_path(k)
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        image = read_unchanged(path)
         if image is None:
             raise DataError(f"{path}: missing or not a readable PNG (disparity frame {k + 1})")
         if image.dtype != np.uint16 or image.ndim != 2:

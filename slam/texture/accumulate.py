@@ -5,12 +5,14 @@ This module owns the texture itself: :class:`TextureAccumulator` (colour sums pe
 the grid of ``map.npz``), the two accumulation modes (``mean``: the running mean of every floor
 sample; ``latest``: the mean of the most recent frame that saw the cell), the resulting
 :class:`TextureMap`, and :func:`build_texture`, which pairs the frames of a log
-(:mod:`slam.texture.pairing`), decodes their PNGs ``read_threads`` at a time ahead of the kernel
-(:func:`slam.texture.kernels.accumulate_frame`) and counts the unreadable ones.
+(:mod:`slam.texture.pairing`), decodes their PNGs (:mod:`slam.io.png`) and adds them with the
+kernel (:func:`slam.texture.kernels.accumulate_frame`) in ``read_threads`` threads, and counts
+the unreadable ones.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -54,7 +56,7 @@ class TextureAccumulator:
         self.resolution = geometry.resolution
         self.origin = np.asarray(geometry.origin, dtype=np.float64)
         shape = geometry.shape
-        self.sums = np.zeros((*shape, 3), dtype=np.float64)
+        self.sums = np.zeros((*shape, 3), dtype=np.int64)
         self.counts = np.zeros(shape, dtype=np.int32)
         self.stamps = np.full(shape, -1, dtype=np.int32)
         self.frames = 0
@@ -70,6 +72,7 @@ class TextureAccumulator:
         rgb_pose: F64,
     ) -> int:
         """Add one frame pair seen from these robot poses; return the floor samples added."""
+        disparity, rgb = np.ascontiguousarray(disparity), np.ascontiguousarray(rgb)
         rot_d, cam_d = camera_in_world(self.model, disparity_pose)
         pose_r = rgb_pose if self.config.motion_compensation else disparity_pose
         rot_r, cam_r = camera_in_world(self.model, pose_r)
@@ -84,6 +87,14 @@ class TextureAccumulator:
         self.frames += 1
         self.samples += int(added)
         return int(added)
+
+    def merge(self, other: TextureAccumulator) -> None:
+        """Add the sums of ``other`` (mode ``mean``, same grid) into this accumulator: integer
+        sums, so the result is the same whichever frames each accumulator saw."""
+        self.sums += other.sums
+        self.counts += other.counts
+        self.frames += other.frames
+        self.samples += other.samples
 
     def texture(self) -> TextureMap:
         """The texture accumulated so far."""
@@ -110,7 +121,7 @@ class TextureMap:
 
     @classmethod
     def from_sums(
-        cls, sums: F64, counts: NDArray[np.int32], resolution: float, origin: F64
+        cls, sums: NDArray, counts: NDArray[np.int32], resolution: float, origin: F64
     ) -> TextureMap:
         """Mean colours of accumulated sums (rounded to the nearest level)."""
         seen = counts > 0
@@ -144,7 +155,7 @@ def warm_up() -> None:
     :class:`~slam.io.log.RgbdIndex` returns, so that timings measure throughput only."""
     config = TextureConfig()
     acc = TextureAccumulator(GridGeometry((0.0, 0.0), 1.0, (1, 1)), config)
-    rgb = np.zeros((1, 1, 3), dtype=np.uint8)[:, :, ::-1]  # load_rgb's BGR→RGB view
+    rgb = np.zeros((1, 1, 3), dtype=np.uint8)  # load_rgb's C-contiguous RGB image
     acc.add_frame(np.zeros((1, 1), dtype=np.uint16), rgb, np.zeros(3), np.zeros(3))
 
 
@@ -171,7 +182,7 @@ def _read_ahead(
     index: RgbdIndex, model: KinectModel, plan: FramePlan, threads: int
 ) -> Iterator[tuple]:
     """:func:`_read_pair` of every planned pair, in order, decoded by ``threads`` threads that
-    keep at most ``2·threads + 2`` pairs ahead of the consumer (OpenCV releases the GIL)."""
+    keep at most ``2·threads + 2`` pairs ahead of the consumer (decoding releases the GIL)."""
     n = plan.rgb.size
     window = 2 * threads + 2
     with ThreadPoolExecutor(max_workers=threads) as pool:
@@ -185,6 +196,61 @@ def _read_ahead(
             yield pending.popleft().result()
 
 
+def _accumulate_in_order(
+    index: RgbdIndex, plan: FramePlan, acc: TextureAccumulator, poses: tuple, bar, threads: int
+) -> list[tuple]:
+    """Mode ``latest``: frames decoded ahead by ``threads`` threads, added one by one in time
+    order (the most recent frame wins, so the order matters). Returns the skips per frame."""
+    outcomes: list[tuple] = []
+    pose_d, pose_r = poses
+    for k, (rgb, disparity, reason, message) in enumerate(
+        _read_ahead(index, acc.model, plan, threads)
+    ):
+        if reason is None:
+            acc.add_frame(disparity, rgb, pose_d[k], pose_r[k])
+        outcomes.append((reason, message))
+        if bar is not None:
+            bar.update(1)
+    return outcomes
+
+
+def _accumulate_parallel(
+    index: RgbdIndex, plan: FramePlan, acc: TextureAccumulator, poses: tuple, bar, threads: int
+) -> list[tuple]:
+    """Mode ``mean``: ``threads`` workers each decode and add every ``threads``-th frame into an
+    accumulator of their own (PNG decoding and the kernel both release the GIL), merged into
+    ``acc`` at the end: the sums are integers, so the texture is the same as frame by frame.
+    Returns the skips per frame, in frame order."""
+    n = plan.rgb.size
+    pose_d, pose_r = poses
+    outcomes: list[tuple] = [(None, None)] * n
+    parts = [
+        TextureAccumulator(acc.geometry, acc.config, acc.model)
+        for _ in range(threads)
+    ]
+    lock = threading.Lock()
+
+    def work(w: int) -> None:
+        part = parts[w]
+        for k in range(w, n, threads):
+            rgb, disparity, reason, message = _read_pair(
+                index, part.model, int(plan.rgb[k]), int(plan.disparity[k])
+            )
+            if reason is None:
+                part.add_frame(disparity, rgb, pose_d[k], pose_r[k])
+            outcomes[k] = (reason, message)
+            if bar is not None:
+                with lock:
+                    bar.update(1)
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(work, w) for w in range(threads)]:
+            future.result()
+    for part in parts:
+        acc.merge(part)
+    return outcomes
+
+
 def build_texture(
     index: RgbdIndex,
     trajectory: Trajectory,
@@ -194,8 +260,9 @@ def build_texture(
 ) -> TextureResult:
     """Texture of the frames of ``index`` seen along ``trajectory`` on ``grid``.
 
-    Frames are decoded ``config.read_threads`` at a time ahead of the accumulation. Skipped frames
-    are counted in the result's plan and reported as
+    ``config.read_threads`` threads decode the frames; in mode ``mean`` each also accumulates its
+    share of them (:func:`_accumulate_parallel`), in mode ``latest`` the frames are added in time
+    order as they are decoded. Skipped frames are counted in the result's plan and reported as
     :class:`~slam.texture.pairing.TextureWarning` (one per reason).
     """
     times = trajectory.times
@@ -206,26 +273,27 @@ def build_texture(
     model = kinect_model(config)
     acc = TextureAccumulator(grid.geometry, config, model)
     n = plan.rgb.size
-    used = np.zeros(n, dtype=bool)
-    if n:
-        pose_d, pose_r = frame_poses(plan, trajectory)
+    outcomes: list[tuple] = []
     bar = None
     if progress and n:
         from tqdm import tqdm
 
         bar = tqdm(total=n, desc="texture", unit="frame", leave=False)
-    for k, (rgb, disparity, reason, message) in enumerate(
-        _read_ahead(index, model, plan, config.read_threads)
-    ):
-        if reason is not None:
-            plan.skip(reason, 1, message)
+    if n:
+        poses = frame_poses(plan, trajectory)
+        threads = max(1, min(config.read_threads, n))
+        if config.mode == "mean":
+            outcomes = _accumulate_parallel(index, plan, acc, poses, bar, threads)
         else:
-            acc.add_frame(disparity, rgb, pose_d[k], pose_r[k])
-            used[k] = True
-        if bar is not None:
-            bar.update(1)
+            outcomes = _accumulate_in_order(index, plan, acc, poses, bar, threads)
     if bar is not None:
         bar.close()
+    used = np.zeros(n, dtype=bool)
+    for k, (reason, message) in enumerate(outcomes):
+        if reason is None:
+            used[k] = True
+        else:
+            plan.skip(reason, 1, message)
     messages = warn_skips(plan, index)
     return TextureResult(
         texture=acc.texture(),

@@ -122,7 +122,7 @@ def depth_table(model: KinectModel, config: TextureConfig) -> F64:
     return np.ascontiguousarray(table[: last[-1] + 1 if last.size else 0])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def accumulate_frame(disparity, rgb, stride, camera, depth_lut, rot_d, cam_d, rot_rel, t_rel,
                      origin_x, origin_y, resolution, sums, counts, stamps, frame_id,
                      latest):  # fmt: skip
@@ -139,6 +139,13 @@ def accumulate_frame(disparity, rgb, stride, camera, depth_lut, rot_d, cam_d, ro
     colour is added to ``sums[iy, ix]`` and ``counts[iy, ix]`` of the cell holding the world
     point; with ``latest`` a cell first seen in this frame (``stamps != frame_id``) is reset first.
     Returns the samples added.
+
+    Rows whose every ray stays outside the floor band over the whole depth range (those above
+    the horizon and those whose floor lies beyond ``max_depth``) are skipped without reading a
+    pixel: the world height of a ray per metre of depth is linear along a row, so its extremes
+    over the row and the depth range are at the four corners (with a 1 µm margin, far above the
+    rounding of the per-pixel test, so the skip never drops a floor pixel). ``sums`` are
+    integers (int64: exact sums of 8-bit colours, whatever the order). Releases the GIL.
     """
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     numer, floor_h = camera.depth_numerator, camera.floor_height
@@ -150,9 +157,19 @@ def accumulate_frame(disparity, rgb, stride, camera, depth_lut, rot_d, cam_d, ro
     gh, gw = counts.shape[0], counts.shape[1]
     n_lut = depth_lut.shape[0]
     inv_res = 1.0 / resolution
+    d_lo, d_hi, margin = camera.min_depth, camera.max_depth, 1e-6
     added = 0
     for i in range(0, h, stride):
         yn = (i - cy) * inv_fy
+        # world z per metre of depth at the first and last column of the row
+        s0 = rot_d[2, 0] * (0.0 - cx) * inv_fx + rot_d[2, 1] * yn + rot_d[2, 2]
+        s1 = rot_d[2, 0] * (w - 1.0 - cx) * inv_fx + rot_d[2, 1] * yn + rot_d[2, 2]
+        z_a, z_b = cam_d[2] + d_lo * s0, cam_d[2] + d_hi * s0
+        z_c, z_d = cam_d[2] + d_lo * s1, cam_d[2] + d_hi * s1
+        if min(min(z_a, z_b), min(z_c, z_d)) > floor_h + margin:
+            continue
+        if max(max(z_a, z_b), max(z_c, z_d)) < -floor_h - margin:
+            continue
         for j in range(0, w, stride):
             d = disparity[i, j]
             if d >= n_lut:
@@ -186,9 +203,9 @@ def accumulate_frame(disparity, rgb, stride, camera, depth_lut, rot_d, cam_d, ro
                 continue
             if latest and stamps[iy, ix] != frame_id:
                 stamps[iy, ix] = frame_id
-                sums[iy, ix, 0] = 0.0
-                sums[iy, ix, 1] = 0.0
-                sums[iy, ix, 2] = 0.0
+                sums[iy, ix, 0] = 0
+                sums[iy, ix, 1] = 0
+                sums[iy, ix, 2] = 0
                 counts[iy, ix] = 0
             sums[iy, ix, 0] += rgb[ri, rj, 0]
             sums[iy, ix, 1] += rgb[ri, rj, 1]
