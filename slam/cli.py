@@ -38,6 +38,7 @@ from slam.errors import SlamError, Terminated
 
 COMMAND_ORDER: tuple[str, ...] = (
     "run",
+    "warmup",
     "localize",
     "data",
     "sim",

@@ -65,6 +65,10 @@ class Observer(Protocol):
         """Called every ``map_every`` steps (on filter updates) with the current map."""
 
 
+COMPILING = "compiling kernels (first run only)"
+"""The progress bar's label while numba compiles kernels (``slam warmup`` does it ahead)."""
+
+
 class ProgressObserver:
     """A tqdm bar with scans per second and the time left (a no-op when disabled)."""
 
@@ -73,6 +77,7 @@ class ProgressObserver:
 
     def __init__(self, total: int | None, enabled: bool, label: str = "") -> None:
         self._bar = None
+        self._label = label
         if enabled:
             from tqdm import tqdm
 
@@ -87,6 +92,12 @@ class ProgressObserver:
 
     def on_map(self, step: int, time: float, grid: OccupancyGrid) -> None:
         """Maps are not shown in a progress bar."""
+
+    def compiling(self, active: bool) -> None:
+        """Say "compiling kernels (first run only)" while numba compiles (:func:`slam.jit.on_compile`),
+        and the run's label again afterwards."""
+        if self._bar is not None:
+            self._bar.set_description_str(COMPILING if active else self._label, refresh=True)
 
     def close(self) -> None:
         """Finish the bar."""

@@ -1,0 +1,146 @@
+"""numba compilation: how long a process spends compiling kernels, and ``slam warmup``.
+
+This module owns the accounting of compilation. numba compiles a kernel the first time it is
+called with a new type signature, unless its machine code is in numba's cache (``cache=True``,
+``__pycache__`` beside the sources or ``$NUMBA_CACHE_DIR``). On a fresh cache the first
+``slam run demo`` therefore spends tens of seconds compiling inside the filter. A listener on
+numba's ``numba:compile`` event (fired only for real compilations, never for cache loads) adds up
+the seconds spent in outermost compilations (:func:`compile_seconds`), counts the kernels
+(:func:`compiled_kernels`), and tells the progress bar when one starts and ends
+(:func:`on_compile`), so that ``metrics.json`` reports ``compile_s`` apart from
+``estimate_wall_s`` and the bar says "compiling kernels (first run only)".
+
+:func:`warmup` (``slam warmup``) fills the cache with the kernels ``slam run demo`` uses by
+running that pipeline once into a temporary folder: the very calls, so the very signatures,
+whatever the kernels look like.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+_lock = threading.Lock()
+_state: dict[str, Any] = {"seconds": 0.0, "kernels": [], "depth": {}, "installed": False}
+_callbacks: list[Callable[[bool], None]] = []
+
+
+def _kernel_name(data: dict) -> str:
+    dispatcher = data.get("dispatcher")
+    func = getattr(dispatcher, "py_func", None)
+    if func is None:
+        return str(dispatcher)
+    return f"{func.__module__}.{func.__qualname__}"
+
+
+def install() -> None:
+    """Start counting compilations in this process (idempotent; done on import)."""
+    from numba.core import event
+
+    with _lock:
+        if _state["installed"]:
+            return
+        _state["installed"] = True
+
+    class _Listener(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            ident = threading.get_ident()
+            with _lock:
+                depth = _state["depth"].get(ident, (0, 0.0))
+                start = time.perf_counter() if depth[0] == 0 else depth[1]
+                _state["depth"][ident] = (depth[0] + 1, start)
+                outermost = depth[0] == 0
+            if outermost:
+                for callback in list(_callbacks):
+                    callback(True)
+
+        def on_end(self, ev: event.Event) -> None:
+            ident = threading.get_ident()
+            with _lock:
+                level, start = _state["depth"].get(ident, (1, time.perf_counter()))
+                _state["depth"][ident] = (level - 1, start)
+                _state["kernels"].append(_kernel_name(ev.data))
+                outermost = level == 1
+                if outermost:
+                    _state["seconds"] += time.perf_counter() - start
+            if outermost:
+                for callback in list(_callbacks):
+                    callback(False)
+
+    event.register("numba:compile", _Listener())
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels (outermost compilations only)."""
+    with _lock:
+        return float(_state["seconds"])
+
+
+def compiled_kernels() -> list[str]:
+    """Every kernel (``module.name``) compiled so far in this process, in order, callees included."""
+    with _lock:
+        return list(_state["kernels"])
+
+
+@contextmanager
+def on_compile(callback: Callable[[bool], None]) -> Iterator[None]:
+    """Call ``callback(True)`` when an outermost compilation starts and ``callback(False)`` when
+    it ends, while the context is open (the progress bar's "compiling kernels")."""
+    install()
+    _callbacks.append(callback)
+    try:
+        yield
+    finally:
+        _callbacks.remove(callback)
+
+
+@dataclass
+class Warmup:
+    """What :func:`warmup` compiled."""
+
+    compile_s: float
+    """Seconds spent compiling (0 when everything came from the cache)."""
+    wall_s: float
+    """Seconds of the whole warm-up (compilation plus the run that triggers it)."""
+    kernels: list[str] = field(default_factory=list)
+    """Kernels compiled (outermost and callees), in order."""
+
+
+def warmup(data_dir: Path, progress: bool = False) -> Warmup:
+    """Compile into numba's cache every kernel ``slam run demo`` calls, by running that pipeline
+    (default configuration; texture on every 10th RGB frame; no recording) into a temporary
+    folder that is removed afterwards. The demo dataset is generated first when it is not in the
+    cache yet (as the first ``slam run demo`` would). Returns what was compiled and how long it
+    took; later runs load the machine code from the cache.
+    """
+    from slam.config import load_config
+    from slam.io.sources import resolve
+    from slam.pipeline import RunRequest, execute
+
+    install()
+    start, compiled, before = time.perf_counter(), compile_seconds(), len(compiled_kernels())
+    ref = resolve("demo", data_dir, where="slam warmup")
+    config = load_config(
+        ref.config_name if ref.shipped_config else "",
+        None,
+        ["texture.frame_stride=10", "viz.record=false"],
+    )
+    with tempfile.TemporaryDirectory(prefix="slam-warmup-") as tmp:
+        request = RunRequest(
+            name="demo", config=config, data_dir=data_dir, out=Path(tmp) / "run", progress=progress
+        )
+        execute(request)
+    return Warmup(
+        compile_s=compile_seconds() - compiled,
+        wall_s=time.perf_counter() - start,
+        kernels=compiled_kernels()[before:],
+    )
+
+
+install()
