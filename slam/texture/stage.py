@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 import warnings
 from pathlib import Path
 from typing import Any
@@ -70,7 +71,9 @@ def texture_stage(
         message = f"texture: skipped, RGB-D image folders {why}"
         warnings.warn(message, TextureWarning, stacklevel=2)
         return {"skipped": message}
+    cpu = time.process_time()
     result = build_texture(index, trajectory, grid, tc, progress)
+    cpu = time.process_time() - cpu  # every thread of the process, the decoding ones included
     write_outputs(out_dir, result.texture, grid)
     plan = result.plan
     used = int(result.used.sum())
@@ -91,6 +94,7 @@ def texture_stage(
         "coloured_area_m2": round(coloured * grid.resolution**2, 3),
         "wall_s": round(result.wall_s, 3),
         "frames_per_s": round(used / result.wall_s, 1) if result.wall_s > 0 else None,
+        "cpu_s": round(cpu, 3),
     }
     if plan.count_mismatch:
         metrics["count_mismatch"] = plan.count_mismatch

@@ -4,6 +4,9 @@
   from the cache, generated there on first use) along its true path on a 40 m map at 0.05 m:
   frames/s of the stage (PNG decoding in ``texture.read_threads`` threads + the projection
   kernel), CPU milliseconds per frame, and the acceptance figures (colour error, coverage).
+* ``demo_phases`` — the same frames, one thread, split by phase: CPU milliseconds per frame of
+  decoding the RGB PNG, decoding the disparity PNG (:mod:`slam.io.png`) and the projection /
+  accumulation kernel (the stage runs them in ``read_threads`` threads at once).
 * ``kernel_frame`` — the projection/accumulation kernel alone on one in-memory frame pair of a
   flat floor (307 200 pixels), best of 20.
 * ``png_decode`` — reading one RGB and one disparity PNG of the demo (``RgbdIndex.load_*``),
@@ -70,6 +73,50 @@ def demo_ground_truth_path() -> dict:
     }
 
 
+def demo_phases() -> dict:
+    """CPU time per frame of each phase of the stage, one frame pair after the other."""
+    from slam.config import MapConfig, TextureConfig
+    from slam.mapping import OccupancyGrid
+    from slam.texture import (
+        TextureAccumulator,
+        frame_poses,
+        load_ground_truth,
+        plan_frames,
+        warm_up,
+    )
+    from slam.trajectory import Trajectory
+
+    folder, log = _demo_log()
+    gt = load_ground_truth(Path(folder))
+    index, config = log.rgbd, TextureConfig()
+    warm_up()
+    index.load_disparity(0), index.load_rgb(0)  # the decoder's kernel: compiled or loaded
+    plan = plan_frames(index, config, (float(gt.times.min()), float(gt.times.max())))
+    pose_d, pose_r = frame_poses(plan, Trajectory(gt.times, gt.poses))
+    grid = OccupancyGrid(MapConfig())
+    acc = TextureAccumulator(grid.geometry, config)
+    load = os.getloadavg()[0]
+    spent = {"rgb_decode": 0.0, "disparity_decode": 0.0, "kernel": 0.0}
+    n = plan.rgb.size
+    for k in range(n):
+        t0 = time.process_time()
+        rgb = index.load_rgb(int(plan.rgb[k]))
+        t1 = time.process_time()
+        disparity = index.load_disparity(int(plan.disparity[k]))
+        t2 = time.process_time()
+        acc.add_frame(disparity, rgb, pose_d[k], pose_r[k])
+        t3 = time.process_time()
+        spent["rgb_decode"] += t1 - t0
+        spent["disparity_decode"] += t2 - t1
+        spent["kernel"] += t3 - t2
+    out = {f"{name}_cpu_ms_per_frame": round(1000 * s / n, 2) for name, s in spent.items()}
+    out["total_cpu_ms_per_frame"] = round(1000 * sum(spent.values()) / n, 2)
+    out["frames"] = int(n)
+    out["floor_samples_per_frame"] = round(acc.samples / n)
+    out["load_average_at_start"] = round(load, 2)
+    return out
+
+
 def kernel_frame() -> dict:
     """The kernel alone on one analytic floor frame."""
     from slam.config import TextureConfig
@@ -83,7 +130,7 @@ def kernel_frame() -> dict:
     with np.errstate(divide="ignore"):
         depth = np.where(rays[..., 2] < 0, model.z / -rays[..., 2], np.inf)
     disparity = model.encode_disparity(depth)
-    rgb = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)[:, :, ::-1]
+    rgb = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
     acc = TextureAccumulator(GridGeometry((-20.0, -20.0), 0.05, (800, 800)), TextureConfig())
     pose_d, pose_r = np.array([1.0, 2.0, 0.3]), np.array([1.01, 2.0, 0.31])
     acc.add_frame(disparity, rgb, pose_d, pose_r)  # compile / load from cache
@@ -115,6 +162,7 @@ def benches() -> dict:
     """The texture benches."""
     return {
         "demo_ground_truth_path": demo_ground_truth_path,
+        "demo_phases": demo_phases,
         "kernel_frame": kernel_frame,
         "png_decode": png_decode,
     }
