@@ -224,10 +224,7 @@ def _accumulate_parallel(
     n = plan.rgb.size
     pose_d, pose_r = poses
     outcomes: list[tuple] = [(None, None)] * n
-    parts = [
-        TextureAccumulator(acc.geometry, acc.config, acc.model)
-        for _ in range(threads)
-    ]
+    parts = [TextureAccumulator(acc.geometry, acc.config, acc.model) for _ in range(threads)]
     lock = threading.Lock()
 
     def work(w: int) -> None:
