@@ -263,6 +263,12 @@ TEXTURE = "texture.demo_ground_truth_path"
 """The texture bench of the README: the demo along its true path (tools/benches/texture.py)."""
 
 
+COLD = "coldstart.demo_cold_then_warm"
+"""The cold-start bench: ``slam run demo`` on a fresh numba cache, then again (tools/benches/coldstart.py)."""
+WARMUP = "coldstart.warmup_then_run"
+"""``slam warmup`` on a fresh numba cache, then ``slam run demo``."""
+
+
 def _percent(*keys: str) -> Callable[[Benches], str]:
     return lambda benches: fixed(100 * get(benches, *keys), 0)
 
@@ -450,6 +456,20 @@ FIGURES: dict[str, tuple[str, Callable[[Benches], str | None]]] = {
     "texture.colour_mae": ("texture", _figure(TEXTURE, "colour_mae", digits=2)),
     "texture.coverage": ("texture", _percent(TEXTURE, "coverage")),
     "texture.frames_per_s": ("texture", _figure(TEXTURE, "frames_per_s", digits=0)),
+    "texture.cpu_ms_per_frame": ("texture", _figure(TEXTURE, "cpu_ms_per_frame", digits=1)),
+    "texture.load": ("texture", _figure(TEXTURE, "load_average_at_start", digits=0)),
+    "coldstart.cold_wall_s": ("coldstart", _figure(COLD, "cold", "wall_s", digits=0)),
+    "coldstart.cold_cpu_s": ("coldstart", _figure(COLD, "cold", "cpu_s", digits=0)),
+    "coldstart.cold_compile_s": ("coldstart", _figure(COLD, "cold", "compile_s", digits=0)),
+    "coldstart.warm_wall_s": ("coldstart", _figure(COLD, "warm", "wall_s", digits=0)),
+    "coldstart.warm_cpu_s": ("coldstart", _figure(COLD, "warm", "cpu_s", digits=0)),
+    "coldstart.load": ("coldstart", _figure(COLD, "cold", "load_average_at_start", digits=0)),
+    "coldstart.warmup_wall_s": ("coldstart", _figure(WARMUP, "warmup", "wall_s", digits=0)),
+    "coldstart.warmup_cpu_s": ("coldstart", _figure(WARMUP, "warmup", "cpu_s", digits=0)),
+    "coldstart.after_warmup_compile_s": (
+        "coldstart",
+        _figure(WARMUP, "run", "compile_s", digits=1),
+    ),
 }
 
 
