@@ -38,3 +38,21 @@ def test_the_progress_bar_says_compiling_while_numba_compiles(capsys) -> None:
     assert bar._bar.desc == "demo rbpf"
     bar.close()
     ProgressObserver(10, enabled=False).compiling(True)  # disabled: a no-op
+
+
+def test_slam_warmup_prints_what_it_compiled(monkeypatch, capsys, tmp_path) -> None:
+    """The command's summary line (the warm-up itself runs the demo pipeline: see the coldstart
+    bench, and .ci/run, which calls it before the tests)."""
+    from slam.cli import main
+
+    seen = {}
+
+    def fake(data_dir, progress=False):
+        seen["data_dir"], seen["progress"] = data_dir, progress
+        return jit.Warmup(compile_s=12.34, wall_s=20.0, kernels=["a.f", "a.g", "a.f"])
+
+    monkeypatch.setattr(jit, "warmup", fake)
+    assert main(["warmup", "--quiet", "--data-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 kernels compiled in 12.3 s (20.0 s in all)" in out
+    assert seen == {"data_dir": tmp_path, "progress": False}
