@@ -160,14 +160,22 @@ def test_texture_figures_wait_for_texture_json_then_fill_in(tmp_path):
     rendered, waiting = tables.render(text, tmp_path)
     assert rendered == text
     assert "fig texture.colour_mae (docs/bench/texture.json absent)" in waiting
-    figures = {"colour_mae": 4.2051, "coverage": 0.9987, "frames_per_s": 96.4}
+    figures = {
+        "colour_mae": 4.2051,
+        "coverage": 0.9987,
+        "frames_per_s": 96.4,
+        "cpu_ms_per_frame": 9.23,
+        "load_average_at_start": 4.2,
+    }
     write_bench(tmp_path, "texture", {tables.TEXTURE: figures})
     rendered, waiting = tables.render(text, tmp_path)
     assert not any(w.startswith("fig texture.") for w in waiting)
     floor = section_of(rendered, "Floor texture")
     assert "by <!-- fig:texture.colour_mae -->4.21<!-- /fig -->/255" in floor
     assert "floor to <!-- fig:texture.coverage -->100<!-- /fig --> %" in floor
-    assert "about <!-- fig:texture.frames_per_s -->96<!-- /fig --> frames/s" in floor
+    assert "ran at <!-- fig:texture.frames_per_s -->96<!-- /fig --> frames/s" in floor
+    assert "with <!-- fig:texture.cpu_ms_per_frame -->9.2<!-- /fig --> ms" in floor
+    assert "load average of <!-- fig:texture.load -->4<!-- /fig --> on" in floor
 
 
 @pytest.mark.parametrize(
