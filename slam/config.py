@@ -335,6 +335,68 @@ class LoopConfig(Validated):
     """Detection + optimisation rounds."""
 
 
+@dataclass(frozen=True)
+class BackendConfig(Validated):
+    """Global loop search over submaps (``slam.backend``), added to the loop closing (rbpf only).
+
+    The loop closing of ``[loops]`` looks for closures within ``loops.radius`` of the drifted
+    estimate and ±``loops.search_xy``; after a long stretch without closure the drift is larger.
+    This search registers keyframe scans against submaps by branch-and-bound over a window that
+    grows with the path since the submap (``window_*``), verifies each match and keeps only
+    closures that agree with another one (:mod:`slam.backend.global_loops`).
+    """
+
+    SECTION: ClassVar[str] = "backend"
+    RULES: ClassVar[tuple[Rule, ...]] = (
+        Rule(("window_xy_min", "window_xy_max"), lambda a, b: a <= b, "window_xy_min <= window_xy_max"),
+        Rule(("window_th_min", "window_th_max"), lambda a, b: a <= b, "window_th_min <= window_th_max"),
+    )  # fmt: skip
+
+    global_search: bool = True
+    """Run the global search (with ``loops.enabled``)."""
+    keyframe_path: float = bounded(2.0, gt=0.0, le=10000.0)
+    """Path (m) between two keyframes whose scans are searched for."""
+    submap_length: float = bounded(10.0, gt=0.0, le=10000.0)
+    """Path (m) covered by one submap (consecutive node scans at their current poses)."""
+    submap_range: float = bounded(15.0, gt=0.0, le=1000.0)
+    """Only hits within this distance (m) of their scan enter submaps and searched scans."""
+    resolution: float = bounded(0.1, ge=0.01, le=1.0)
+    """Cell size (m) of the branch-and-bound grids."""
+    sigma: float = bounded(0.1, gt=0.0, le=10.0)
+    """Width (m) of a hit's likelihood in the branch-and-bound grid."""
+    levels: int = bounded(7, ge=1, le=12)
+    """Levels of the max pyramid (the coarsest block is 2^(levels-1) cells wide)."""
+    points: int = bounded(90, ge=10, le=10000)
+    """Scan points scored by the search (evenly thinned)."""
+    window_xy_min: float = bounded(1.0, gt=0.0, le=1000.0)
+    """Half-width (m) of the search window, at least ..."""
+    drift_xy: float = bounded(0.03, ge=0.0, le=10.0)
+    """... plus this fraction of the path (m) between submap and keyframe ..."""
+    window_xy_max: float = bounded(12.0, gt=0.0, le=1000.0)
+    """... at most (m)."""
+    window_th_min: float = bounded(0.1, gt=0.0, le=math.pi)
+    """Half-width (rad) of the rotation window, at least ..."""
+    drift_th: float = bounded(0.002, ge=0.0, le=1.0)
+    """... plus this much (rad) per metre of path between submap and keyframe ..."""
+    window_th_max: float = bounded(0.5, gt=0.0, le=math.pi)
+    """... at most (rad)."""
+    candidates: int = bounded(3, ge=1, le=1000)
+    """Submaps searched per keyframe: those nearest relative to their window."""
+    min_score: float = bounded(0.55, ge=0.0, le=1.0)
+    """A match must score this mean likelihood in the branch-and-bound grid ..."""
+    min_fit: float = bounded(0.6, ge=0.0, le=1.0)
+    """... and, refined, put this share of its beams within ``loops.fit_distance`` of the
+    submap's surfaces."""
+    agree_xy: float = bounded(0.3, gt=0.0, le=100.0)
+    """Two closures agree when the corrections they imply move a keyframe to within this (m) ..."""
+    agree_th: float = bounded(0.05, gt=0.0, le=math.pi)
+    """... and this (rad) of each other, plus ``loops.seq_sigma_rel`` of the path between them."""
+    agree_path: float = bounded(30.0, gt=0.0, le=1e6)
+    """Closures whose keyframes lie within this path (m) of each other are compared."""
+    chi2_gate: float = bounded(16.0, gt=0.0, le=1e6)
+    """After optimising, a global closure whose error exceeds this χ² (3 dof) is dropped."""
+
+
 MAX_CLASSIC_OFFSETS = 20000
 """Most pose offsets the classic method's local search may score per particle and scan."""
 
@@ -638,6 +700,7 @@ class Config:
     rbpf: RbpfConfig = field(default_factory=RbpfConfig)
     classic: ClassicConfig = field(default_factory=ClassicConfig)
     loops: LoopConfig = field(default_factory=LoopConfig)
+    backend: BackendConfig = field(default_factory=BackendConfig)
     texture: TextureConfig = field(default_factory=TextureConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     viz: VizConfig = field(default_factory=VizConfig)

@@ -58,9 +58,11 @@ class LoopClosing:
         """Optimise the node poses; the stats get the candidates, closures and correction."""
         if not config.loops.enabled or len(output.steps) <= 1:
             return output
+        from slam.backend.global_loops import close_loops_global
         from slam.graph import close_loops
 
-        closed = close_loops(output.scans, output.steps, output.node_poses, config)
+        close = close_loops_global if config.backend.global_search else close_loops
+        closed = close(output.scans, output.steps, output.node_poses, config)
         stats = {
             **output.stats,
             "loop_candidates": closed.candidates,

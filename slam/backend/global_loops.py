@@ -1,0 +1,208 @@
+"""Global loop search: closures beyond the drifted estimate's reach, verified before they count.
+
+The loop closing of :mod:`slam.graph` looks for a closure only where the filter's estimate puts
+an earlier node within ``loops.radius``, and matches within ±``loops.search_xy``: after a long
+loop the drift is metres and degrees, and the loop stays open (or a corridor is doubled). This
+module adds, in the same pose graph and the same rounds:
+
+1. **Keyframes** every ``backend.keyframe_path`` metres of path, and **submaps** of
+   ``backend.submap_length`` metres each (:mod:`slam.backend.submaps`).
+2. **Search.** For keyframe ``i`` and a submap that ended at least ``loops.min_path`` back, the
+   window is ``window_xy_min + drift_xy · path gap`` (capped by ``window_xy_max``), and likewise
+   in rotation: the drift a filter may have accumulated since it last saw that place. The
+   ``backend.candidates`` submaps nearest relative to their window are searched by
+   branch-and-bound (:func:`slam.kernels.bnb.bnb_search`), exact over the whole window.
+3. **Verification.** The best pose must score ``min_score``; refined by Levenberg-Marquardt
+   against the submap's distance field it must stay within two search cells and put
+   ``backend.min_fit`` of the beams within ``loops.fit_distance`` of the submap's surfaces.
+4. **Consistency.** A closure counts only when another closure, found from a different
+   keyframe within ``agree_path`` metres of path (and to a submap as near), implies the same
+   correction of the trajectory (``agree_xy``, ``agree_th``, plus the drift allowed between
+   them): a single match in a corridor or a symmetric room is not enough.
+5. **χ² gate.** After the optimisation, a global closure whose error exceeds ``chi2_gate``
+   under its own information is dropped and the graph solved again without it.
+
+The edges then join the local ones of :func:`slam.graph._detect`, and the optimisation, the
+keyframes and the do-no-harm rule are those of :func:`slam.graph.close_loops`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.backend.submaps import SubmapCache, stretches, world_hits
+from slam.config import Config
+from slam.geometry import compose, inverse, relative, spread_corrections, wrap_angle
+from slam.graph import LoopResult, _detect, _edge_information, optimize
+from slam.kernels.bnb import bnb_search
+from slam.kernels.field import match_one, normal_equations
+from slam.kernels.graph import edge_error, fit_counts
+from slam.mapping import likelihood_tables
+
+F64 = NDArray[np.float64]
+
+
+def keyframes(path: F64, spacing: float) -> NDArray[np.int64]:
+    """Node indices about ``spacing`` metres of path apart (the first node included)."""
+    return np.unique(np.searchsorted(path, np.arange(0.0, path[-1] + 1e-9, spacing)))
+
+
+def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
+    bc = config.backend
+    hx, hy = world_hits(seq, step, np.zeros(3), bc.submap_range)
+    if hx.size > bc.points:
+        pick = np.linspace(0, hx.size - 1, bc.points).round().astype(np.int64)
+        hx, hy = hx[pick], hy[pick]
+    return np.ascontiguousarray(hx), np.ascontiguousarray(hy)
+
+
+def detect_global(seq, steps, x: F64, path: F64, config: Config) -> tuple[list, int]:
+    """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
+
+    See the module docstring (steps 1-3); :func:`consistent` is step 4.
+    """
+    bc, lc, rc = config.backend, config.loops, config.rbpf
+    subs = stretches(path, bc.submap_length)
+    centre = np.array([x[lo:hi, :2].mean(axis=0) for lo, hi in subs])
+    spread = np.array(
+        [np.hypot(*(x[lo:hi, :2] - centre[s]).T).max() for s, (lo, hi) in enumerate(subs)]
+    )
+    end_path = np.array([path[hi - 1] for _, hi in subs])
+    mid_path = np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs])
+    cache = SubmapCache(seq, steps, x, config)
+    luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
+    edges, searched = [], 0
+    for i in keyframes(path, bc.keyframe_path):
+        eligible = np.flatnonzero(end_path <= path[i] - lc.min_path)
+        if eligible.size == 0:
+            continue
+        gap = path[i] - mid_path[eligible]
+        wxy = np.minimum(bc.window_xy_min + bc.drift_xy * gap, bc.window_xy_max)
+        wth = np.minimum(bc.window_th_min + bc.drift_th * gap, bc.window_th_max)
+        reach = np.maximum(np.hypot(*(centre[eligible] - x[i, :2]).T) - spread[eligible], 0.0)
+        ok = reach <= wxy
+        if not ok.any():
+            continue
+        order = np.argsort(reach[ok] / wxy[ok], kind="stable")[: bc.candidates]
+        px, py = _search_points(seq, int(steps[i]), config)
+        if px.size < lc.min_beams:
+            continue
+        far = float(np.sqrt((px * px + py * py).max()))
+        th_step = float(np.clip(bc.resolution / max(far, 1.0), 0.002, 0.05))
+        ex, ey = seq.hits(int(steps[i]), rc.match_beams)
+        for q in order:
+            s = int(eligible[ok][q])
+            lo, hi = subs[s]
+            pyr = cache.pyramid(lo, hi)
+            if pyr is None:
+                continue
+            searched += 1
+            found = bnb_search(
+                pyr.levels, pyr.origin[0], pyr.origin[1], pyr.resolution, px, py,
+                x[i, 0], x[i, 1], x[i, 2], float(wxy[ok][q]), float(wth[ok][q]), th_step,
+                bc.min_score,
+            )  # fmt: skip
+            if found[3] < 0:
+                continue
+            args = cache.field_map(lo, hi).field(0)
+            refined, _, _ = match_one(
+                *args, found[:3].copy(), ex, ey, luts, step_inv, rc.max_iterations * 2,
+                rc.tolerance, 1,
+            )  # fmt: skip
+            if np.hypot(*(refined[:2] - found[:2])) > 2.0 * bc.resolution:
+                continue
+            _, close = fit_counts(*args, refined, ex, ey, lc.fit_distance)
+            if close < bc.min_fit * ex.size or close < lc.min_beams:
+                continue
+            hessian, gradient = np.zeros((3, 3)), np.zeros(3)
+            normal_equations(
+                *args, refined[0], refined[1], refined[2], ex, ey, luts[-1, 0], luts[-1, 1],
+                step_inv, hessian, gradient,
+            )  # fmt: skip
+            j = lo + int(np.argmin(np.hypot(*(x[lo:hi, :2] - refined[:2]).T)))
+            edges.append(
+                (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
+            )
+    return edges, searched
+
+
+def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
+    """The closures of ``edges`` that another closure from a different keyframe agrees with."""
+    bc, lc = config.backend, config.loops
+    if len(edges) < 2:
+        return []
+    matched = [compose(x[j], z) for j, _, z, _ in edges]
+    moves = [compose(m, inverse(x[i])) for m, (_, i, _, _) in zip(matched, edges, strict=True)]
+    keep = []
+    for k, (jk, ik, _, _) in enumerate(edges):
+        for m, (jm, im, _, _) in enumerate(edges):
+            if im == ik:
+                continue
+            gap_i, gap_j = abs(path[ik] - path[im]), abs(path[jk] - path[jm])
+            if gap_i > bc.agree_path or gap_j > bc.agree_path:
+                continue
+            moved = compose(moves[k], x[im])  # keyframe m corrected by closure k
+            drift = gap_i + gap_j
+            if np.hypot(*(moved[:2] - matched[m][:2])) > bc.agree_xy + lc.seq_sigma_rel * drift:
+                continue
+            if abs(wrap_angle(moved[2] - matched[m][2])) > bc.agree_th + bc.drift_th * drift:
+                continue
+            keep.append(edges[k])
+            break
+    return keep
+
+
+def _keyframe_edges(found: list, x: F64, keys, key_of) -> list:
+    """Loop edges between keyframes (as :func:`slam.graph.close_loops` builds them)."""
+    out = []
+    for j, i, z, info in found:
+        kj = int(key_of[j])
+        if kj > 0 and abs(int(keys[kj - 1]) - j) < abs(int(keys[kj]) - j):
+            kj -= 1
+        ki = int(np.searchsorted(keys, i))
+        out.append((kj, ki, relative(x[keys[kj]], compose(x[j], z)), info))
+    return out
+
+
+def _chi2(keys_x: F64, edge: tuple) -> float:
+    e = edge_error(keys_x[edge[0]], keys_x[edge[1]], np.asarray(edge[2], dtype=np.float64))
+    return float(e @ edge[3] @ e)
+
+
+def close_loops_global(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
+    """:func:`slam.graph.close_loops` with the global closures added (module docstring).
+
+    ``candidates`` counts the local candidates and the global searches; ``accepted`` the loop
+    edges of the last round's graph, local and global.
+    """
+    lc, bc = config.loops, config.backend
+    step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    path = np.concatenate([[0.0], np.cumsum(step_len)])
+    keys = np.arange(0, poses.shape[0], lc.stride)
+    if keys[-1] != poses.shape[0] - 1:
+        keys = np.append(keys, poses.shape[0] - 1)
+    key_of = np.searchsorted(keys, np.arange(poses.shape[0]))
+    x = poses.copy()
+    examined = 0
+    edges: list = []
+    for _ in range(lc.rounds):
+        local, count = _detect(seq, steps, x, path, config)
+        glob, searched = detect_global(seq, steps, x, path, config)
+        glob = consistent(glob, x, path, config)
+        examined += count + searched
+        if not local and not glob:
+            break
+        local_edges = _keyframe_edges(local, x, keys, key_of)
+        global_edges = _keyframe_edges(glob, x, keys, key_of)
+        edges = local_edges + global_edges
+        new_keys = optimize(poses[keys], edges, lc)
+        passed = [e for e in global_edges if _chi2(new_keys, e) <= bc.chi2_gate]
+        if len(passed) < len(global_edges):
+            edges = local_edges + passed
+            new_keys = optimize(poses[keys], edges, lc)
+        x = spread_corrections(poses, keys, new_keys, path)
+    moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
+    if moved < lc.min_correction:
+        return LoopResult(poses.copy(), examined, len(edges), 0.0)
+    return LoopResult(x, examined, len(edges), moved)

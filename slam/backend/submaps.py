@@ -1,0 +1,112 @@
+"""Submaps: stretches of ``backend.submap_length`` metres of path, as grids a search can use.
+
+A submap is the set of node scans whose path position lies in one stretch, taken at the nodes'
+current poses. It is built twice, on demand: as a branch-and-bound pyramid
+(:func:`slam.kernels.bnb.max_pyramid` of the hits' likelihood at ``backend.resolution``) for the
+global search, and as a one-particle distance-field map (:class:`slam.mapping.ParticleMaps`) for
+the Levenberg-Marquardt refinement and the fit check of :mod:`slam.graph`. Both are kept in a
+small cache (a few submaps at a time: a keyframe's candidates are neighbours of the previous
+keyframe's).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import Config
+from slam.kernels.bnb import max_pyramid, splat_likelihood
+from slam.mapping import ParticleMaps
+
+F64 = NDArray[np.float64]
+
+
+@dataclass
+class Pyramid:
+    """A submap's branch-and-bound grid: ``levels`` of ``(H, W)`` max blocks."""
+
+    levels: NDArray[np.float32]
+    origin: tuple[float, float]
+    resolution: float
+
+
+def stretches(path: F64, length: float) -> list[tuple[int, int]]:
+    """Node ranges ``[lo, hi)`` of consecutive ``length``-metre stretches of ``path``."""
+    edges = np.searchsorted(path, np.arange(0.0, path[-1] + length, length), "left")
+    edges = np.unique(np.append(edges, path.size))
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+
+
+def world_hits(seq, step: int, pose: F64, max_range: float, beams: int = 0) -> tuple[F64, F64]:
+    """World-frame hits of scan ``step`` at ``pose`` within ``max_range`` of the sensor."""
+    hx, hy = seq.hits(step, beams)
+    keep = hx * hx + hy * hy <= max_range * max_range
+    hx, hy = hx[keep], hy[keep]
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return pose[0] + c * hx - s * hy, pose[1] + s * hx + c * hy
+
+
+class SubmapCache:
+    """The submaps of one round (poses fixed), built when first asked for, a few kept."""
+
+    def __init__(self, seq, steps: NDArray[np.int64], poses: F64, config: Config, keep: int = 8):
+        self.seq, self.steps, self.poses, self.config = seq, steps, poses, config
+        self.keep = keep
+        self._pyramids: OrderedDict[tuple[int, int], Pyramid] = OrderedDict()
+        self._maps: OrderedDict[tuple[int, int], ParticleMaps] = OrderedDict()
+
+    def _node_hits(self, lo: int, hi: int) -> tuple[F64, F64]:
+        bc, lc = self.config.backend, self.config.loops
+        xs, ys = [], []
+        for k in range(lo, hi, lc.submap_stride):
+            hx, hy = world_hits(
+                self.seq, int(self.steps[k]), self.poses[k], bc.submap_range,
+                self.config.rbpf.insert_beams,
+            )  # fmt: skip
+            xs.append(hx)
+            ys.append(hy)
+        if not xs:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate(xs), np.concatenate(ys)
+
+    def pyramid(self, lo: int, hi: int) -> Pyramid | None:
+        """The branch-and-bound grid of nodes ``[lo, hi)`` (None without hits)."""
+        key = (lo, hi)
+        if key in self._pyramids:
+            self._pyramids.move_to_end(key)
+            return self._pyramids[key]
+        bc = self.config.backend
+        hx, hy = self._node_hits(lo, hi)
+        if hx.size == 0:
+            return None
+        res = bc.resolution
+        margin = 3.0 * bc.sigma + res
+        ox, oy = float(hx.min() - margin), float(hy.min() - margin)
+        w = int(np.ceil((hx.max() + margin - ox) / res)) + 1
+        h = int(np.ceil((hy.max() + margin - oy) / res)) + 1
+        grid = np.zeros((h, w), dtype=np.float32)
+        splat_likelihood(hx, hy, ox, oy, res, bc.sigma, grid)
+        pyr = Pyramid(max_pyramid(grid, bc.levels), (ox, oy), res)
+        self._pyramids[key] = pyr
+        if len(self._pyramids) > self.keep:
+            self._pyramids.popitem(last=False)
+        return pyr
+
+    def field_map(self, lo: int, hi: int) -> ParticleMaps:
+        """The distance-field map of nodes ``[lo, hi)`` (as :mod:`slam.graph` builds its own)."""
+        from slam.graph import _empty_map, _insert_node
+
+        key = (lo, hi)
+        if key in self._maps:
+            self._maps.move_to_end(key)
+            return self._maps[key]
+        maps = _empty_map(self.poses[lo], self.config)
+        for k in range(lo, hi, self.config.loops.submap_stride):
+            _insert_node(maps, self.seq, int(self.steps[k]), self.poses[k], self.config)
+        self._maps[key] = maps
+        if len(self._maps) > self.keep:
+            self._maps.popitem(last=False)
+        return maps
