@@ -366,13 +366,13 @@ class BackendConfig(Validated):
     """Width (m) of a hit's likelihood in the branch-and-bound grid."""
     levels: int = bounded(7, ge=1, le=12)
     """Levels of the max pyramid (the coarsest block is 2^(levels-1) cells wide)."""
-    points: int = bounded(90, ge=10, le=10000)
+    points: int = bounded(60, ge=10, le=10000)
     """Scan points scored by the search (evenly thinned)."""
     window_xy_min: float = bounded(1.0, gt=0.0, le=1000.0)
     """Half-width (m) of the search window, at least ..."""
     drift_xy: float = bounded(0.03, ge=0.0, le=10.0)
     """... plus this fraction of the path (m) between submap and keyframe ..."""
-    window_xy_max: float = bounded(12.0, gt=0.0, le=1000.0)
+    window_xy_max: float = bounded(30.0, gt=0.0, le=1000.0)
     """... at most (m)."""
     window_th_min: float = bounded(0.1, gt=0.0, le=math.pi)
     """Half-width (rad) of the rotation window, at least ..."""

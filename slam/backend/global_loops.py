@@ -34,10 +34,10 @@ from numpy.typing import NDArray
 from slam.backend.submaps import SubmapCache, stretches, world_hits
 from slam.config import Config
 from slam.geometry import compose, inverse, relative, spread_corrections, wrap_angle
-from slam.graph import LoopResult, _detect, _edge_information, optimize
+from slam.graph import LoopResult, _chain_information, _detect, _edge_information
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
-from slam.kernels.graph import edge_error, fit_counts
+from slam.kernels.graph import edge_error, fit_counts, linearize, solve_system
 from slam.mapping import likelihood_tables
 
 F64 = NDArray[np.float64]
@@ -57,10 +57,14 @@ def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
     return np.ascontiguousarray(hx), np.ascontiguousarray(hy)
 
 
-def detect_global(seq, steps, x: F64, path: F64, config: Config) -> tuple[list, int]:
+def detect_global(
+    seq, steps, x: F64, path: F64, config: Config, local: list = ()
+) -> tuple[list, int]:
     """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
 
-    See the module docstring (steps 1-3); :func:`consistent` is step 4.
+    See the module docstring (steps 1-3); :func:`consistent` is step 4. A submap that a local
+    closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node within
+    ``keyframe_path`` of the keyframe is not searched again: that loop is closed.
     """
     bc, lc, rc = config.backend, config.loops, config.rbpf
     subs = stretches(path, bc.submap_length)
@@ -72,6 +76,11 @@ def detect_global(seq, steps, x: F64, path: F64, config: Config) -> tuple[list, 
     mid_path = np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs])
     cache = SubmapCache(seq, steps, x, config)
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
+    sub_of = np.zeros(x.shape[0], dtype=np.int64)
+    for s, (lo, hi) in enumerate(subs):
+        sub_of[lo:hi] = s
+    closed_at = np.array([path[i] for _, i, _, _ in local])
+    closed_sub = np.array([sub_of[j] for j, _, _, _ in local], dtype=np.int64)
     edges, searched = [], 0
     for i in keyframes(path, bc.keyframe_path):
         eligible = np.flatnonzero(end_path <= path[i] - lc.min_path)
@@ -93,6 +102,9 @@ def detect_global(seq, steps, x: F64, path: F64, config: Config) -> tuple[list, 
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         for q in order:
             s = int(eligible[ok][q])
+            near = np.abs(closed_at - path[i]) <= bc.keyframe_path
+            if np.any(near & (closed_sub == s)):
+                continue
             lo, hi = subs[s]
             pyr = cache.pyramid(lo, hi)
             if pyr is None:
@@ -165,6 +177,39 @@ def _keyframe_edges(found: list, x: F64, keys, key_of) -> list:
     return out
 
 
+def optimize(poses: F64, edges: list, robust: F64, lc, start: F64 | None = None) -> F64:
+    """:func:`slam.graph.optimize` with a robust-kernel scale per loop edge (0: none).
+
+    Verified global closures enter without a kernel: their error at the drifted estimate is
+    metres, which a Cauchy kernel would treat as an outlier and never pull in. The chain's
+    measurements are the relative poses of ``poses``; the iterations start from ``start``.
+    """
+    n = poses.shape[0]
+    seq_z = relative(poses[:-1], poses[1:])
+    loop_info = np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3)
+    info = np.concatenate([_chain_information(seq_z, lc), loop_info])
+    rob = np.concatenate([np.zeros(n - 1), np.asarray(robust, dtype=np.float64)])
+    edge_i = np.concatenate([np.arange(n - 1), [e[0] for e in edges]]).astype(np.int64)
+    edge_j = np.concatenate([np.arange(1, n), [e[1] for e in edges]]).astype(np.int64)
+    z = np.ascontiguousarray(
+        np.concatenate([seq_z, np.array([e[2] for e in edges]).reshape(-1, 3)])
+    )
+    x = (poses if start is None else start).copy()
+    diag = np.zeros((n, 3, 3))
+    band = np.zeros((max(n - 1, 1), 3, 3))
+    far = np.zeros((edge_i.size, 3, 3))
+    grad = np.zeros((n, 3))
+    for _ in range(lc.iterations):
+        linearize(x, edge_i, edge_j, z, info, rob, diag, band, far, grad)
+        diag[0] += np.eye(3) * 1e9  # node 0 fixed
+        delta, _ = solve_system(diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, 1e-8)
+        x += delta
+        x[:, 2] = wrap_angle(x[:, 2])
+        if np.abs(delta[:, :2]).max() < 1e-3 and np.abs(delta[:, 2]).max() < 1e-4:
+            break
+    return x
+
+
 def _chi2(keys_x: F64, edge: tuple) -> float:
     e = edge_error(keys_x[edge[0]], keys_x[edge[1]], np.asarray(edge[2], dtype=np.float64))
     return float(e @ edge[3] @ e)
@@ -188,7 +233,7 @@ def close_loops_global(seq, steps: NDArray[np.int64], poses: F64, config: Config
     edges: list = []
     for _ in range(lc.rounds):
         local, count = _detect(seq, steps, x, path, config)
-        glob, searched = detect_global(seq, steps, x, path, config)
+        glob, searched = detect_global(seq, steps, x, path, config, local)
         glob = consistent(glob, x, path, config)
         examined += count + searched
         if not local and not glob:
@@ -196,11 +241,14 @@ def close_loops_global(seq, steps: NDArray[np.int64], poses: F64, config: Config
         local_edges = _keyframe_edges(local, x, keys, key_of)
         global_edges = _keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
-        new_keys = optimize(poses[keys], edges, lc)
-        passed = [e for e in global_edges if _chi2(new_keys, e) <= bc.chi2_gate]
-        if len(passed) < len(global_edges):
+        start = None
+        if global_edges:  # pull the verified global closures in, then gate them
+            robust = np.array([lc.robust] * len(local_edges) + [0.0] * len(global_edges))
+            pulled = optimize(poses[keys], edges, robust, lc)
+            passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
             edges = local_edges + passed
-            new_keys = optimize(poses[keys], edges, lc)
+            start = pulled if passed else None
+        new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
         x = spread_corrections(poses, keys, new_keys, path)
     moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
     if moved < lc.min_correction:
