@@ -177,7 +177,13 @@ def bnb_search(
         for q in range(nc):
             k = idx[q]
             if ch_s[k] > best:
-                st_a[sp], st_x[sp], st_y[sp], st_h[sp], st_s[sp] = a, ch_x[k], ch_y[k], h - 1, ch_s[k]
+                st_a[sp], st_x[sp], st_y[sp], st_h[sp], st_s[sp] = (
+                    a,
+                    ch_x[k],
+                    ch_y[k],
+                    h - 1,
+                    ch_s[k],
+                )
                 sp += 1
     out = np.empty(4)
     if best_a < 0:

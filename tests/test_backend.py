@@ -1,0 +1,109 @@
+"""The global loop search: the branch-and-bound kernel against brute force, and the checks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam.backend.global_loops import consistent, keyframes
+from slam.backend.submaps import stretches
+from slam.config import Config
+from slam.kernels.bnb import bnb_search, max_pyramid, splat_likelihood
+
+RES = 0.05
+
+
+def _room() -> np.ndarray:
+    t = np.linspace(0.0, 1.0, 300)
+    walls = [
+        np.c_[t * 10, 0 * t], np.c_[t * 10, 0 * t + 6], np.c_[0 * t, t * 6],
+        np.c_[0 * t + 10, t * 6], np.c_[3 + t * 2, 3 + 0 * t], np.c_[7 + 0 * t, 1 + t * 3],
+    ]  # fmt: skip
+    return np.vstack(walls)
+
+
+def _grid(points: np.ndarray) -> tuple[np.ndarray, float, float]:
+    ox, oy = -3.0, -3.0
+    grid = np.zeros((int(12 / RES), int(16 / RES)), np.float32)
+    splat_likelihood(points[:, 0].copy(), points[:, 1].copy(), ox, oy, RES, 0.05, grid)
+    return grid, ox, oy
+
+
+def _scan(points: np.ndarray, pose: np.ndarray, n: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    sel = points[rng.choice(len(points), n, replace=False)] - pose[:2]
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.ascontiguousarray(c * sel[:, 0] + s * sel[:, 1]), np.ascontiguousarray(
+        -s * sel[:, 0] + c * sel[:, 1]
+    )
+
+
+def test_pyramid_levels_bound_their_blocks():
+    grid = np.random.default_rng(1).random((37, 29)).astype(np.float32)
+    pyr = max_pyramid(grid, 4)
+    for h in range(4):
+        w = 1 << h
+        for iy, ix in [(0, 0), (5, 7), (36, 28), (30, 20)]:
+            assert pyr[h, iy, ix] == grid[iy : iy + w, ix : ix + w].max()
+
+
+def test_bnb_finds_the_pose_brute_force_finds():
+    """Exact: the branch-and-bound optimum equals the best of all offsets and rotations."""
+    room = _room()
+    grid, ox, oy = _grid(room)
+    pyr = max_pyramid(grid, 6)
+    true = np.array([4.0, 2.5, 0.3])
+    px, py = _scan(room, true, 80)
+    start = np.array([3.1, 3.3, 0.22])
+    found = bnb_search(pyr, ox, oy, RES, px, py, *start, 1.5, 0.1, 0.01, 0.3)
+    # a scan's own points land exactly on the walls: the true pose is on the search lattice
+    assert np.hypot(*(found[:2] - true[:2])) < RES
+    assert abs(found[2] - true[2]) < 0.011
+    best = -1.0
+    level0 = max_pyramid(grid, 1)
+    nth = int(np.ceil(0.1 / 0.01))
+    for a in range(-nth, nth + 1):
+        one = bnb_search(level0, ox, oy, RES, px, py, start[0], start[1], start[2] + a * 0.01,
+                         1.5, 0.0, 0.01, 0.0)  # fmt: skip
+        best = max(best, one[3])
+    assert abs(found[3] - best) < 1e-5
+
+
+def test_bnb_refuses_below_min_score():
+    room = _room()
+    grid, ox, oy = _grid(room)
+    pyr = max_pyramid(grid, 6)
+    rng = np.random.default_rng(3)
+    px, py = rng.uniform(-20, 20, 60), rng.uniform(-20, 20, 60)  # noise, far off the walls
+    found = bnb_search(pyr, ox, oy, RES, px, py, 4.0, 2.5, 0.0, 1.0, 0.1, 0.02, 0.6)
+    assert found[3] == -1.0
+
+
+def test_stretches_and_keyframes_cover_the_path():
+    path = np.linspace(0.0, 47.0, 300)
+    subs = stretches(path, 10.0)
+    assert subs[0][0] == 0 and subs[-1][1] == 300 and len(subs) == 5
+    assert all(a[1] == b[0] for a, b in zip(subs[:-1], subs[1:], strict=True))
+    keys = keyframes(path, 2.0)
+    assert keys[0] == 0 and np.all(np.diff(path[keys]) <= 2.0 + path[1])
+
+
+def test_consistency_keeps_agreeing_closures_only():
+    """Two closures implying the same correction survive; a lone different one does not."""
+    n = 200
+    x = np.zeros((n, 3))
+    x[:, 0] = np.linspace(0.0, 100.0, n)
+    path = x[:, 0].copy()
+    info = np.eye(3)
+    shift = np.array([0.0, 2.0, 0.0])  # both say: nodes 180-190 lie 2 m further in y
+
+    def closure(j: int, i: int, correction: np.ndarray):
+        from slam.geometry import compose, relative
+
+        matched = compose(correction, x[i])
+        return (j, i, relative(x[j], matched), info)
+
+    good = [closure(10, 180, shift), closure(14, 186, shift)]
+    lone = closure(60, 120, np.array([0.0, -1.5, 0.2]))
+    kept = consistent([*good, lone], x, path, Config())
+    assert [(e[0], e[1]) for e in kept] == [(10, 180), (14, 186)]
+    assert consistent([lone], x, path, Config()) == []
