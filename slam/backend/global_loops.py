@@ -215,15 +215,20 @@ def _chi2(keys_x: F64, edge: tuple) -> float:
     return float(e @ edge[3] @ e)
 
 
-def close_loops_global(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
+def close_loops_global(
+    seq, steps: NDArray[np.int64], poses: F64, config: Config, path: F64 | None = None
+) -> LoopResult:
     """:func:`slam.graph.close_loops` with the global closures added (module docstring).
 
-    ``candidates`` counts the local candidates and the global searches; ``accepted`` the loop
-    edges of the last round's graph, local and global.
+    ``path`` is each node's distance along the trajectory (default: summed from ``poses``;
+    a caller that passes a piece of a trajectory gives the whole one's). ``candidates`` counts
+    the local candidates and the global searches; ``accepted`` the loop edges of the last
+    round's graph, local and global.
     """
     lc, bc = config.loops, config.backend
-    step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    path = np.concatenate([[0.0], np.cumsum(step_len)])
+    if path is None:
+        step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        path = np.concatenate([[0.0], np.cumsum(step_len)])
     keys = np.arange(0, poses.shape[0], lc.stride)
     if keys[-1] != poses.shape[0] - 1:
         keys = np.append(keys, poses.shape[0] - 1)

@@ -1,0 +1,156 @@
+"""Write the back end's regression references (``data/reference/backend/``).
+
+Each case is a piece of a real log's filter output: the nodes (update scans and poses of the
+best particle's ancestry, as :meth:`slam.particle_filter.RbpfFilter.finish` hands them over) on
+one or two stretches of path. The back end (:func:`slam.backend.global_loops.close_loops_global`)
+runs on those nodes alone, so the test needs no filter run: it reads the log's scans from
+``$SLAM_DATA_DIR``, the stored nodes, and checks the relation errors between nodes
+(:mod:`tests.test_backend_regression`). Stored per case: ``<case>.npz`` (node scan numbers and
+poses) and ``<case>.json`` (the figures with the local loop closing only and with the back end).
+
+    SLAM_DATA_DIR=../shared/data uv run python tools/make_backend_reference.py
+
+The filter output of each (log, seed) is cached in ``$SLAM_CACHE_DIR/backend/`` (a full filter
+run per log, minutes); ``--filter-output DIR`` reads ``<log>-<seed>.npz`` from ``DIR`` instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+REFERENCE_DIR = ROOT / "data" / "reference" / "backend"
+
+CASES = {
+    # the first return to the start corridor after 470 m, ≈1 m off: beyond the local search
+    "fr-clinic-return": ("fr-clinic", 1, [(0.0, 80.0), (440.0, 520.0)]),
+    # intel's first loops: closed by the local search today, must stay closed
+    "intel-start": ("intel", 0, [(0.0, 120.0)]),
+    # fr079's first loops (odometry leads the laser in turns)
+    "fr079-start": ("fr079", 1, [(0.0, 120.0)]),
+}
+
+
+def log_path(data_dir: Path, log: str) -> Path:
+    """The CARMEN file of ``log`` in the data directory."""
+    name = "mit-killian-synthtime" if log == "mit-killian" else log
+    return data_dir / "carmen" / f"{name}.clf.gz"
+
+
+def load_scans(data_dir: Path, log: str):
+    """``(config, ScanSequence)`` of the whole log, as ``slam run`` feeds it."""
+    from slam.config import load_config
+    from slam.io import sources
+    from slam.pipeline import _needs
+    from slam.scans import LogScans, ScanSequence
+
+    config = load_config(log)
+    ref = sources.resolve(str(log_path(data_dir, log)), data_dir)
+    src = sources.load(ref, config, _needs(config), False, None)
+    seq = ScanSequence()
+    for scan, odometry in LogScans.from_log(src.log, config):
+        seq.append(scan.resolved(config.lidar), odometry)
+    return config, seq
+
+
+def filter_output(data_dir: Path, log: str, seed: int, cache: Path) -> tuple:
+    """``(steps, node_poses)`` of the filter on ``log`` with ``seed`` (cached in ``cache``)."""
+    file = cache / f"{log}-{seed}.npz"
+    if not file.is_file():
+        from slam.config import load_config
+        from slam.io import sources
+        from slam.online import Slam
+        from slam.pipeline import _needs
+        from slam.scans import LogScans
+
+        config = load_config(log, overrides=[f"filter.seed={seed}"])
+        ref = sources.resolve(str(log_path(data_dir, log)), data_dir)
+        scans = LogScans.from_log(
+            sources.load(ref, config, _needs(config), False, None).log, config
+        )
+        slam = Slam(config, stages=[], scan_period=scans.scan_period())
+        for scan, odometry in scans:
+            slam.update(scan, odometry=odometry)
+        out = slam._filter.finish()
+        cache.mkdir(parents=True, exist_ok=True)
+        np.savez(file, steps=out.steps, node_poses=out.node_poses)
+    with np.load(file) as z:
+        return z["steps"].astype(np.int64), z["node_poses"].astype(np.float64)
+
+
+def piece(steps, poses, stretches) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nodes on the given path stretches (``(start, end)`` m; negative from the end), with
+    their distance along the whole trajectory."""
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
+    keep = np.zeros(len(path), dtype=bool)
+    for lo, hi in stretches:
+        lo = lo if lo >= 0 else path[-1] + lo
+        hi = path[-1] if hi is None else hi
+        keep |= (path >= lo) & (path <= hi)
+    return steps[keep], poses[keep], path[keep]
+
+
+def node_errors(seq, steps, poses, relations) -> dict:
+    """Relation errors between nodes: every relation whose two times are node scans."""
+    from slam.eval.relations import relation_errors
+    from slam.trajectory import Trajectory
+
+    traj = Trajectory(seq.times[steps].copy(), poses, steps.copy())
+    e = relation_errors(traj, relations)
+    return {
+        "relations": int(e.trans.size),
+        "trans_mean": round(float(e.trans.mean()), 4),
+        "trans_max": round(float(e.trans.max()), 4),
+        "rot_mean_deg": round(float(np.degrees(e.rot).mean()), 3),
+    }
+
+
+def evaluate(data_dir: Path, name: str, steps, poses, path, scans=None) -> dict:
+    """The case's figures: filter nodes, local loop closing only, and the back end."""
+    from slam.backend.global_loops import close_loops_global
+    from slam.graph import close_loops
+    from slam.io.relations import read_relations
+
+    log = CASES[name][0]
+    config, seq = scans or load_scans(data_dir, log)
+    relations = read_relations(data_dir / "carmen" / "relations" / f"{log}.relations")
+    local = close_loops(seq, steps, poses, config).poses
+    result = close_loops_global(seq, steps, poses, config, path)
+    return {
+        "nodes": int(len(steps)),
+        "filter": node_errors(seq, steps, poses, relations),
+        "local_only": node_errors(seq, steps, local, relations),
+        "backend": node_errors(seq, steps, result.poses, relations),
+        "loop_closures": int(result.accepted),
+    }
+
+
+def main() -> int:
+    """Write every case's reference."""
+    from slam.io.datadir import resolve_cache_dir, resolve_data_dir
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--filter-output", type=Path, default=None)
+    parser.add_argument("cases", nargs="*", default=sorted(CASES))
+    args = parser.parse_args()
+    data_dir = resolve_data_dir()
+    cache = args.filter_output or resolve_cache_dir(data_dir) / "backend"
+    REFERENCE_DIR.mkdir(parents=True, exist_ok=True)
+    for name in args.cases:
+        log, seed, stretches = CASES[name]
+        steps, poses, path = piece(*filter_output(data_dir, log, seed, cache), stretches)
+        figures = evaluate(data_dir, name, steps, poses, path)
+        np.savez_compressed(REFERENCE_DIR / f"{name}.npz", steps=steps, node_poses=poses, path=path)
+        text = json.dumps({"log": log, "seed": seed, "stretches_m": stretches, **figures}, indent=2)
+        (REFERENCE_DIR / f"{name}.json").write_text(text + "\n")
+        print(name, json.dumps(figures))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
