@@ -19,8 +19,10 @@ module adds, in the same pose graph and the same rounds:
    keyframe within ``agree_path`` metres of path (and to a submap as near), implies the same
    correction of the trajectory (``agree_xy``, ``agree_th``, plus the drift allowed between
    them): a single match in a corridor or a symmetric room is not enough.
-5. **χ² gate.** After the optimisation, a global closure whose error exceeds ``chi2_gate``
-   under its own information is dropped and the graph solved again without it.
+5. **χ² gate.** The verified closures enter the optimisation without a robust kernel (metres
+   off the drifted estimate, a Cauchy kernel would never pull them in); a global closure whose
+   error then exceeds ``chi2_gate`` under its own information is dropped and the graph solved
+   again without it, every loop edge robust, from the pulled-in poses.
 
 The edges then join the local ones of :func:`slam.graph._detect`, and the optimisation, the
 keyframes and the do-no-harm rule are those of :func:`slam.graph.close_loops`.
@@ -246,14 +248,18 @@ def close_loops_global(
         local_edges = _keyframe_edges(local, x, keys, key_of)
         global_edges = _keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
+        new_keys = None
         start = None
         if global_edges:  # pull the verified global closures in, then gate them
             robust = np.array([lc.robust] * len(local_edges) + [0.0] * len(global_edges))
             pulled = optimize(poses[keys], edges, robust, lc)
             passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
+            if len(passed) == len(global_edges):
+                new_keys = pulled  # every closure agrees with the solution: nothing to redo
             edges = local_edges + passed
             start = pulled if passed else None
-        new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
+        if new_keys is None:
+            new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
         x = spread_corrections(poses, keys, new_keys, path)
     moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
     if moved < lc.min_correction:
