@@ -119,21 +119,20 @@ def detect_global(
             )  # fmt: skip
             if found[3] < 0:
                 continue
-            args = cache.field_map(lo, hi).field(0)
+            view = cache.field_map(lo, hi).field(0)
+            iterations = rc.max_iterations * lc.match_iteration_factor
             refined, _, _ = match_one(
-                *args, found[:3].copy(), ex, ey, luts, step_inv, rc.max_iterations * 2,
-                rc.tolerance, 1,
-            )  # fmt: skip
+                view, found[:3].copy(), ex, ey, luts, step_inv, iterations, rc.tolerance, 1
+            )
             if np.hypot(*(refined[:2] - found[:2])) > 2.0 * bc.resolution:
                 continue
-            _, close = fit_counts(*args, refined, ex, ey, lc.fit_distance)
+            _, close = fit_counts(view, refined, ex, ey, lc.fit_distance)
             if close < bc.min_fit * ex.size or close < lc.min_beams:
                 continue
             hessian, gradient = np.zeros((3, 3)), np.zeros(3)
             normal_equations(
-                *args, refined[0], refined[1], refined[2], ex, ey, luts[-1, 0], luts[-1, 1],
-                step_inv, hessian, gradient,
-            )  # fmt: skip
+                view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
+            )
             j = lo + int(np.argmin(np.hypot(*(x[lo:hi, :2] - refined[:2]).T)))
             edges.append(
                 (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
@@ -204,10 +203,15 @@ def optimize(poses: F64, edges: list, robust: F64, lc, start: F64 | None = None)
     for _ in range(lc.iterations):
         linearize(x, edge_i, edge_j, z, info, rob, diag, band, far, grad)
         diag[0] += np.eye(3) * 1e9  # node 0 fixed
-        delta, _ = solve_system(diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, 1e-8)
+        delta, _ = solve_system(
+            diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, lc.solver_tolerance
+        )
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])
-        if np.abs(delta[:, :2]).max() < 1e-3 and np.abs(delta[:, 2]).max() < 1e-4:
+        if (
+            np.abs(delta[:, :2]).max() < lc.converged_xy
+            and np.abs(delta[:, 2]).max() < lc.converged_th
+        ):
             break
     return x
 
