@@ -102,6 +102,10 @@ def bnb_search(
     Offsets are whole cells within ``±window_xy`` and rotations ``th_step`` apart within
     ``±window_th``. Returns ``[x, y, theta, score]`` (score: mean level-0 likelihood of the
     points); the score is ``-1`` when no pose reaches ``min_score``.
+
+    Long because numba has no recursion over typed stacks worth the name here: the rotated scans,
+    the coarsest level's scored blocks and the depth-first descent with its explicit stack
+    (arrays of rotation, offset, level and bound) are one loop nest sharing those arrays.
     """
     levels = pyramid.shape[0]
     top = levels - 1
