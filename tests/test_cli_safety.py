@@ -481,6 +481,7 @@ def test_sigint_inside_numba_during_loop_closing_exits_130(small, tmp_path, monk
     kernel ``solve_system``, until numba's dispatcher wraps the interrupt into a SystemError."""
     import numpy as np
 
+    import slam.backend.global_loops
     import slam.graph
     from slam.kernels.graph import solve_system
 
@@ -510,6 +511,8 @@ def test_sigint_inside_numba_during_loop_closing_exits_130(small, tmp_path, monk
             signal.signal(signal.SIGALRM, previous)
 
     monkeypatch.setattr(slam.graph, "close_loops", closing_loops)
+    # the default loop closing is the one with the global search ([backend])
+    monkeypatch.setattr(slam.backend.global_loops, "close_loops_global", closing_loops)
     out = tmp_path / "out"
     assert main(["run", str(small), "--out", str(out), "--quiet"]) == 130
     assert one_line(capsys.readouterr().err) == "slam: interrupted\n"
