@@ -22,7 +22,7 @@ from bagfixtures import (
 from slam.cli import main
 from slam.errors import DataError, UsageError
 from slam.io.formats import detect_format, run_config_name
-from slam.io.rosbag import BagOptions, load_bag
+from slam.io.rosbag import BagOptions, in_order_times, load_bag, publication_order
 
 
 def _run(capsys, *argv: str) -> tuple[int, str, str]:
@@ -215,11 +215,13 @@ def test_bare_mcap_loads_like_the_ros1_bag(tmp_path):
     ros1 = load_bag(write_ros1_bag(tmp_path / "a.bag", content))
     mcap = load_bag(write_bare_mcap(tmp_path / "a.mcap", content))
     assert mcap.meta["format"] == "mcap" and mcap.meta["fast_decoder"] == "odom=True, scan=True"
-    assert_same_log(ros1, mcap)
+    assert (ros1.meta["scan_order"], mcap.meta["scan_order"]) == ("header.seq", "bag")
+    assert_same_log(ros1, mcap, skip_meta=("scan_order",))
 
 
-def assert_same_log(a, b) -> None:
-    """Every array and field of two logs' streams are equal (meta may name another format)."""
+def assert_same_log(a, b, skip_meta: tuple[str, ...] = ()) -> None:
+    """Every array and field of two logs' streams are equal (meta may name another format, and
+    differ in the keys of ``skip_meta``)."""
     assert a.streams().keys() == b.streams().keys()
     for name, stream in a.streams().items():
         other = b.streams()[name]
@@ -228,7 +230,7 @@ def assert_same_log(a, b) -> None:
                 np.testing.assert_array_equal(value, vars(other)[key], err_msg=f"{name}.{key}")
             else:
                 assert value == vars(other)[key], f"{name}.{key}"
-    skip = {"format"}
+    skip = {"format", *skip_meta}
     assert {k: v for k, v in a.meta.items() if k not in skip} == {
         k: v for k, v in b.meta.items() if k not in skip
     }
@@ -328,3 +330,47 @@ def test_odom_sync_latest_takes_the_last_odometry_before_each_scan(tmp_path):
     assert latest.meta["odom_sync"] == "latest"
     with pytest.raises(UsageError, match="--odom-sync: expected one of interpolate, latest"):
         BagOptions(odom_sync="nearest")
+
+
+def _glitched_run() -> BagContent:
+    """straight_run(20) whose clock jumps ahead by 0.7 s while scans 8–9 and odometry messages
+    8–9 are published, and stamps scan 14 0.5 s early (its odometry is not affected)."""
+    content = straight_run(20)
+    for k in (8, 9):
+        content.scans[k].t += 0.7
+        content.odom[k].t += 0.7
+    content.scans[14].t -= 0.5
+    return content
+
+
+@pytest.mark.parametrize("sync", ["interpolate", "latest"])
+def test_stamps_against_the_publication_order_keep_scans_in_seq_order(tmp_path, sync):
+    content = _glitched_run()
+    log = load_bag(write_ros1_bag(tmp_path / "g.bag", content), options=BagOptions(odom_sync=sync))
+    s = log.scans
+    # scans in header.seq order, with their own (glitched) stamps
+    np.testing.assert_allclose(s.time, [c.t for c in content.scans], atol=1e-9)
+    assert log.meta["scan_order"] == "header.seq" and log.meta["scans_reordered"] == 6
+    assert log.meta["odom_match"] == "in publication order"
+    assert (log.meta["scan_stamp_glitches"], log.meta["odom_stamp_glitches"]) == (3, 2)
+    # the pose at each scan is the one of its true time: 0.01 s after odometry message k
+    expected = 0.1 * np.arange(20) + (0.005 if sync == "interpolate" else 0.0)
+    np.testing.assert_allclose(s.odometry[:, 0], expected, atol=1e-9)
+    # what the stamps alone give: scan 14 at x = 0.9 (stamp 102.31), two scans ahead at 1.6
+    naive = np.interp(s.time, log.odometry.time, log.odometry.poses[:, 0])
+    assert abs(naive[14] - expected[14]) > 0.45
+
+
+def test_in_order_times_replace_the_stamps_that_break_the_order():
+    times, glitches = in_order_times(np.array([0.0, 1.0, 2.0, 9.0, 4.0, 5.0, 1.5, 7.0]))
+    np.testing.assert_allclose(times, [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+    assert glitches == 2
+    same, none = in_order_times(np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_array_equal(same, [0.0, 0.0, 1.0])
+    assert none == 0
+
+
+def test_publication_order_needs_distinct_sequence_numbers():
+    np.testing.assert_array_equal(publication_order(np.array([5, 3, 4])), [1, 2, 0])
+    assert publication_order(np.array([0, 1, 1])) is None  # two publishers
+    assert publication_order(np.array([-1, -1])) is None  # ROS 2: no seq

@@ -13,8 +13,20 @@ Streams
   (the record time when a driver left it zero). Readings below ``range_min``, negative, NaN or
   −inf are invalid beams (NaN, counted); +inf and readings at or beyond the message's
   ``range_max`` mean "no return" (REP 117): they keep their value, or become ``no_return``.
-* ``nav_msgs/Odometry`` → :attr:`Log.odometry` (pose and twist); without an Odometry topic, the
-  ``odom → base`` transforms of ``/tf`` (velocities then by finite differences).
+* ``nav_msgs/Odometry`` → :attr:`Log.odometry` (pose and twist, sorted by stamp); without an
+  Odometry topic, the ``odom → base`` transforms of ``/tf`` (velocities then by finite
+  differences). The odometry pose at a scan is interpolated at the scan's stamp, or with
+  ``odom_sync="latest"`` the last one at or before it.
+* **Publication order.** In a ROS 1 bag each message carries the publisher's counter
+  ``header.seq``. Scans are kept in that order (the order the driver published them, which is
+  also the order of a CARMEN log's lines; the bag's order when the counter is missing or
+  repeats). When the stamps of the scans or of the odometry run against that order, the clock
+  glitched (intel: both streams, by up to 0.9 s): sorted by stamp the odometry zig-zags (675 m
+  of path instead of 509 m, 799 steps over 0.1 m) and a scan's stamp can point to a pose a
+  metre away. Then each stream's times are re-estimated from the order
+  (:func:`in_order_times`) and the pose at a scan is looked up at those times
+  (:func:`scan_odometry_in_order`, stored in :attr:`ScanStream.odometry`); the scans' own
+  times stay their stamps. ROS 2 headers have no ``seq``: a ROS 2 bag is read in its order.
 * ``tf2_msgs/TFMessage`` on ``/tf_static`` (else ``/tf``) → the laser's mounting in the robot
   frame, composed along the frame chain ``base → … → laser`` and projected to the plane (an
   upside-down laser, rolled by π, has its beam angles mirrored; a tilted one is an error).
@@ -34,6 +46,7 @@ when the bag's message definition differs.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import dataclasses
 import math
@@ -49,6 +62,7 @@ from numpy.typing import NDArray
 
 from slam.config import LidarConfig
 from slam.errors import DataError, UsageError
+from slam.geometry import interpolate_poses
 from slam.io.carmen import MAX_BEAMS as CARMEN_MAX_BEAMS
 from slam.io.formats import BAG_FORMATS, detect_format
 from slam.io.log import ImuStream, Log, OdometryStream, ScanStream
@@ -104,6 +118,8 @@ class _Scan:
     range_min: float
     range_max: float
     ranges: NDArray[np.float32]
+    seq: int = -1
+    """ROS 1 ``header.seq`` (the publisher's message counter); −1 in ROS 2 (no such field)."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +132,8 @@ class _Odom:
     yaw: float
     speed: float
     yaw_rate: float
+    seq: int = -1
+    """ROS 1 ``header.seq``; −1 in ROS 2."""
 
 
 @dataclass(frozen=True)
@@ -126,6 +144,8 @@ class _Edge:
     child: str
     translation: tuple[float, float, float]
     rotation: tuple[float, float, float, float]
+    seq: int = -1
+    """ROS 1 ``header.seq`` of the transform; −1 in ROS 2."""
 
 
 @dataclass
@@ -352,7 +372,7 @@ def _end(raw: bytes, pos: int, padding: int) -> None:
 
 
 def _scan_ros1(raw: bytes) -> _Scan:
-    _, sec, nsec = struct.unpack_from("<III", raw, 0)
+    seq, sec, nsec = struct.unpack_from("<III", raw, 0)
     frame, pos = _ros1_string(raw, 12)
     amin, _, inc, _, _, rmin, rmax, n = struct.unpack_from("<7fI", raw, pos)
     pos += 32
@@ -362,7 +382,7 @@ def _scan_ros1(raw: bytes) -> _Scan:
     pos += 4 * n
     (m,) = struct.unpack_from("<I", raw, pos)
     _end(raw, pos + 4 + 4 * m, 0)
-    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges, seq)
 
 
 def _scan_cdr(raw: bytes) -> _Scan:
@@ -386,14 +406,14 @@ def _yaw(qx: float, qy: float, qz: float, qw: float) -> float:
 
 
 def _odom_ros1(raw: bytes) -> _Odom:
-    _, sec, nsec = struct.unpack_from("<III", raw, 0)
+    seq, sec, nsec = struct.unpack_from("<III", raw, 0)
     frame, pos = _ros1_string(raw, 12)
     child, pos = _ros1_string(raw, pos)
     x, y, _, qx, qy, qz, qw = struct.unpack_from("<7d", raw, pos)
     pos += 56 + 288
     vx, _, _, _, _, wz = struct.unpack_from("<6d", raw, pos)
     _end(raw, pos + 48 + 288, 0)
-    return _Odom(sec * 10**9 + nsec, frame, child, x, y, _yaw(qx, qy, qz, qw), vx, wz)
+    return _Odom(sec * 10**9 + nsec, frame, child, x, y, _yaw(qx, qy, qz, qw), vx, wz, seq)
 
 
 def _odom_cdr(raw: bytes) -> _Odom:
@@ -419,6 +439,11 @@ def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
 
 
+def _seq(header: Any) -> int:
+    """``header.seq`` (ROS 1), −1 when the header has none (ROS 2)."""
+    return int(getattr(header, "seq", -1))
+
+
 def _scan_msg(msg: Any) -> _Scan:
     return _Scan(
         _stamp(msg.header),
@@ -428,6 +453,7 @@ def _scan_msg(msg: Any) -> _Scan:
         float(msg.range_min),
         float(msg.range_max),
         np.asarray(msg.ranges, dtype=np.float32),
+        _seq(msg.header),
     )
 
 
@@ -442,6 +468,7 @@ def _odom_msg(msg: Any) -> _Odom:
         _yaw(q.x, q.y, q.z, q.w),
         float(t.linear.x),
         float(t.angular.z),
+        _seq(msg.header),
     )
 
 
@@ -499,6 +526,7 @@ def _edges(msg: Any) -> list[_Edge]:
                 t.child_frame_id.lstrip("/"),
                 (float(tr.x), float(tr.y), float(tr.z)),
                 (float(q.x), float(q.y), float(q.z), float(q.w)),
+                _seq(t.header),
             )
         )
     return out
@@ -595,6 +623,8 @@ class _ScanRows:
     geometry: _Rows
     """``(angle_min, angle_increment, range_min, range_max, beams)`` per scan."""
     ranges: _Rows
+    seq: _Rows
+    """``header.seq`` per scan (−1 without one)."""
     frames: set[str] = field(default_factory=set)
     record_time_stamps: int = 0
 
@@ -605,10 +635,10 @@ class _Streams:
 
     scans: _ScanRows
     odom: _Rows | None
-    """``(time, x, y, yaw, speed, yaw_rate)`` per Odometry message."""
+    """``(time, x, y, yaw, speed, yaw_rate, seq)`` per Odometry message."""
     odom_children: set[str]
     dynamic: dict[tuple[str, str], _Rows]
-    """``(time, x, y, yaw)`` per ``(parent, child)`` transform of /tf."""
+    """``(time, x, y, yaw, seq)`` per ``(parent, child)`` transform of /tf."""
     first_edge: dict[tuple[str, str], _Edge]
     imu: ImuStream | None
     fast_decoder: dict[str, bool]
@@ -658,20 +688,36 @@ def load_bag(
     scans = streams.scans
     if base is None:
         base = _tf_base(path, parents, streams.dynamic, laser_frame)
-    odometry, odom_source = _odometry(path, sel, streams, base)
+    odometry, odom_source, published = _odometry(path, sel, streams, base)
     offset, upside_down, offset_source = _laser_offset(
         path, lidar, parents, streams, base, laser_frame
     )
+    scan_order = publication_order(scans.seq.array()[:, 0])
+    moved = _reorder_scans(scans, scan_order)
     stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
-    if options.odom_sync == "latest":  # per-scan odometry, as CARMEN FLASER lines carry it
+    glitches = scan_order is not None and (
+        bool(np.any(np.diff(stream.time) < 0)) or bool(np.any(np.diff(published[:, 0]) < 0))
+    )
+    scan_glitches = odom_glitches = 0
+    if glitches:  # stamps run against the publication order: times from that order
+        poses, scan_glitches, odom_glitches = scan_odometry_in_order(
+            stream.time, published[:, 0], published[:, 1:4], options.odom_sync
+        )
+        stream = dataclasses.replace(stream, odometry=poses)
+    elif options.odom_sync == "latest":  # per-scan odometry, as CARMEN FLASER lines carry it
         last = np.searchsorted(odometry.time, stream.time, side="right") - 1
         last = np.clip(last, 0, len(odometry.time) - 1)
         stream = dataclasses.replace(stream, odometry=odometry.poses[last].copy())
     meta: dict[str, Any] = {
         "format": fmt,
         "scan_topic": sel.scan_topic,
+        "scan_order": "bag" if scan_order is None else "header.seq",
+        "scans_reordered": moved,
         "odom_source": odom_source,
         "odom_sync": options.odom_sync,
+        "odom_match": "in publication order" if glitches else "by stamp",
+        "scan_stamp_glitches": scan_glitches,
+        "odom_stamp_glitches": odom_glitches,
         "base_frame": base,
         "laser_frame": laser_frame,
         "laser_offset_source": offset_source,
@@ -695,6 +741,88 @@ def load_bag(
         imu=streams.imu,
         meta=meta,
     )
+
+
+def in_order_times(stamps: F64) -> tuple[F64, int]:
+    """Times of messages given in publication order, with the clock's glitches taken out, and
+    how many stamps were glitches.
+
+    A topic's messages are published in the order of their ``header.seq``, so their true times
+    never decrease in that order. The stamps kept are a longest nondecreasing run of them (not
+    necessarily contiguous); each other stamp runs against the order of its neighbours and is
+    replaced by the time linearly interpolated, by publication index, between the nearest kept
+    stamps before and after it (the first or last kept stamp at the ends). Stamps already in
+    order are returned unchanged.
+    """
+    t = np.asarray(stamps, dtype=np.float64)
+    n = t.shape[0]
+    if n < 2 or not np.any(np.diff(t) < 0):
+        return t.copy(), 0
+    tails: list[float] = []  # tails[j]: smallest last stamp of a nondecreasing run of length j+1
+    tail_index: list[int] = []
+    previous = np.full(n, -1, dtype=np.int64)
+    for i, x in enumerate(t.tolist()):
+        j = bisect.bisect_right(tails, x)
+        if j == len(tails):
+            tails.append(x)
+            tail_index.append(i)
+        else:
+            tails[j] = x
+            tail_index[j] = i
+        previous[i] = tail_index[j - 1] if j > 0 else -1
+    kept = np.zeros(n, dtype=bool)
+    i = tail_index[-1]
+    while i >= 0:
+        kept[i] = True
+        i = int(previous[i])
+    index = np.arange(n, dtype=np.float64)
+    return np.interp(index, index[kept], t[kept]), int(n - np.count_nonzero(kept))
+
+
+def scan_odometry_in_order(
+    scan_stamps: F64, odom_stamps: F64, odom_poses: F64, sync: str
+) -> tuple[F64, int, int]:
+    """Odometry pose ``(N, 3)`` at each scan when the stamps run against the publication order,
+    and how many scan and odometry stamps were glitches.
+
+    Scans and odometry messages are both given in publication order (``header.seq``). Each
+    stream's times come from :func:`in_order_times`; the odometry pose at a scan is then
+    interpolated at the scan's in-order time (``sync="interpolate"``) or the last one at or
+    before it (``"latest"``), as :func:`load_bag` does with the stamps of a well-behaved bag.
+    """
+    scan_time, scan_glitches = in_order_times(scan_stamps)
+    odom_time, odom_glitches = in_order_times(odom_stamps)
+    if sync == "latest":
+        last = np.clip(np.searchsorted(odom_time, scan_time, side="right") - 1, 0, None)
+        poses = odom_poses[last].copy()
+    else:
+        poses = interpolate_poses(odom_time, odom_poses, scan_time)
+    return poses, scan_glitches, odom_glitches
+
+
+def _reorder_scans(scans: _ScanRows, order: NDArray[np.int64] | None) -> int:
+    """Put the scan rows in ``order`` (in place: the ranges are not copied); how many moved."""
+    if order is None:
+        return 0
+    moved = order != np.arange(order.shape[0])
+    if not np.any(moved):
+        return 0
+    for rows in (scans.time, scans.geometry, scans.seq):
+        rows.data[: rows.n] = rows.data[: rows.n][order]
+    ranges = scans.ranges.data
+    done = ~moved
+    for start in np.flatnonzero(moved):  # follow each cycle of the permutation
+        if done[start]:
+            continue
+        keep = ranges[start].copy()
+        i = start
+        while order[i] != start:
+            ranges[i] = ranges[order[i]]
+            done[i] = True
+            i = order[i]
+        ranges[i] = keep
+        done[i] = True
+    return int(np.count_nonzero(moved))
 
 
 def bag_stem(path: Path) -> str:
@@ -746,10 +874,11 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
         _Rows(n_scan, 1, np.float64),
         _Rows(n_scan, 5, np.float64),
         _Rows(n_scan, 1, np.float32, np.nan),
+        _Rows(n_scan, 1, np.int64),
     )
     out = _Streams(
         scans=scans,
-        odom=_Rows(sum(c.msgcount for c in sel.odom), 6, np.float64) if sel.odom else None,
+        odom=_Rows(sum(c.msgcount for c in sel.odom), 7, np.float64) if sel.odom else None,
         odom_children=set(),
         dynamic={},
         first_edge={},
@@ -774,16 +903,23 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
             o = odom_decode(raw)
             out.odom_children.add(o.child)
             t = _seconds(o.stamp_ns or record_ns)
-            out.odom.append([t, o.x, o.y, o.yaw, o.speed, o.yaw_rate])  # type: ignore[union-attr]
+            row = [t, o.x, o.y, o.yaw, o.speed, o.yaw_rate, o.seq]
+            out.odom.append(row)  # type: ignore[union-attr]
         elif kind == "tf":
             for e in _edges(reader.deserialize(raw, TF_TYPE)):
                 key = (e.parent, e.child)
                 if key not in out.dynamic:
-                    out.dynamic[key] = _Rows(1024, 4, np.float64)
+                    out.dynamic[key] = _Rows(1024, 5, np.float64)
                     out.first_edge[key] = e
                 x, y, z, w = e.rotation
                 out.dynamic[key].append(
-                    [_seconds(record_ns), e.translation[0], e.translation[1], _yaw(x, y, z, w)]
+                    [
+                        _seconds(record_ns),
+                        e.translation[0],
+                        e.translation[1],
+                        _yaw(x, y, z, w),
+                        e.seq,
+                    ]
                 )
         else:
             m = reader.deserialize(raw, IMU_TYPE)
@@ -822,6 +958,7 @@ def _add_scan(scans: _ScanRows, s: _Scan, record_ns: int, topic: str) -> None:
     scans.time.append(_seconds(stamp))
     scans.geometry.append([s.angle_min, s.angle_increment, s.range_min, s.range_max, n])
     scans.ranges.append(s.ranges, width=n)
+    scans.seq.append(s.seq)
 
 
 def _tf_base(
@@ -850,7 +987,9 @@ def _edge_list(dynamic: dict[tuple[str, str], _Rows]) -> str:
 
 def _odometry(
     path: Path, sel: _Selection, streams: _Streams, base: str
-) -> tuple[OdometryStream, str]:
+) -> tuple[OdometryStream, str, F64]:
+    """The odometry stream (sorted by stamp), its source, and ``(time, x, y, yaw)`` per message
+    in publication order (``header.seq`` when usable, else the stamp order)."""
     dynamic = streams.dynamic
     if streams.odom is not None:
         a = streams.odom.array()
@@ -862,6 +1001,7 @@ def _odometry(
                 f"{path}: {sel.odom_topic} describes frame {', '.join(sorted(children))}, "
                 f"not the robot frame {base!r} (--base-frame)"
             )
+        published = _published(a, 6)
         if np.any(np.diff(a[:, 0]) < 0):
             a = a[np.argsort(a[:, 0], kind="stable")]
         return (
@@ -869,6 +1009,7 @@ def _odometry(
                 time=a[:, 0].copy(), poses=a[:, 1:4].copy(), velocities=a[:, 4:6].copy()
             ),
             sel.odom_topic,
+            a[:, :4] if published is None else published,
         )
     edges = [k for k in dynamic if k[1] == base]
     if len(edges) != 1:
@@ -878,11 +1019,33 @@ def _odometry(
             f"to it, found {found} (moving transforms: {_edge_list(dynamic) or 'none'})"
         )
     a = dynamic[edges[0]].array()
+    published = _published(a, 4)
     order = np.argsort(a[:, 0], kind="stable")
     a = a[order]
-    return OdometryStream(time=a[:, 0].copy(), poses=a[:, 1:4].copy(), velocities=_velocities(a)), (
-        f"tf:{edges[0][0]}->{base}"
+    return (
+        OdometryStream(time=a[:, 0].copy(), poses=a[:, 1:4].copy(), velocities=_velocities(a)),
+        f"tf:{edges[0][0]}->{base}",
+        a[:, :4] if published is None else published,
     )
+
+
+def _published(rows: F64, seq_column: int) -> F64 | None:
+    """``(time, x, y, yaw)`` of odometry rows in ``header.seq`` order, or ``None`` when the
+    sequence numbers are unusable (:func:`publication_order`)."""
+    order = publication_order(rows[:, seq_column].astype(np.int64))
+    return None if order is None else rows[order, :4]
+
+
+def publication_order(seq: NDArray[np.int64]) -> NDArray[np.int64] | None:
+    """The order in which a topic's messages were published: by ROS 1 ``header.seq``, the
+    publisher's counter. ``None`` when the counter cannot tell: a message without one (ROS 2
+    headers have no ``seq``) or a number seen twice (several publishers, a restarted node)."""
+    if seq.shape[0] == 0 or np.any(seq < 0):
+        return None
+    order = np.argsort(seq, kind="stable")
+    if np.any(np.diff(seq[order]) == 0):
+        return None
+    return order
 
 
 def _velocities(a: F64) -> F64:
