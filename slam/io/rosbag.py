@@ -753,15 +753,34 @@ def in_order_times(stamps: F64) -> tuple[F64, int]:
     replaced by the time linearly interpolated, by publication index, between the nearest kept
     stamps before and after it (the first or last kept stamp at the ends). Stamps already in
     order are returned unchanged.
+
+    A stamp no smaller than every stamp before it and no larger than every one after it belongs
+    to a longest run; between two such stamps the run is the longest among the stamps within
+    their range (:func:`_longest_nondecreasing`), which keeps the search to the glitches.
     """
     t = np.asarray(stamps, dtype=np.float64)
     n = t.shape[0]
     if n < 2 or not np.any(np.diff(t) < 0):
         return t.copy(), 0
-    tails: list[float] = []  # tails[j]: smallest last stamp of a nondecreasing run of length j+1
+    kept = (t >= np.maximum.accumulate(t)) & (t <= np.minimum.accumulate(t[::-1])[::-1])
+    loose = np.flatnonzero(~kept)
+    for run in np.split(loose, np.flatnonzero(np.diff(loose) > 1) + 1):
+        first, end = int(run[0]), int(run[-1]) + 1
+        low = t[first - 1] if first > 0 else -np.inf
+        high = t[end] if end < n else np.inf
+        inside = run[(t[run] >= low) & (t[run] <= high)]
+        if inside.size:
+            kept[inside[_longest_nondecreasing(t[inside].tolist())]] = True
+    index = np.arange(n, dtype=np.float64)
+    return np.interp(index, index[kept], t[kept]), int(n - np.count_nonzero(kept))
+
+
+def _longest_nondecreasing(values: list[float]) -> list[int]:
+    """Indices of a longest nondecreasing subsequence of ``values`` (patience sorting)."""
+    tails: list[float] = []  # tails[j]: smallest last value of a nondecreasing run of length j+1
     tail_index: list[int] = []
-    previous = np.full(n, -1, dtype=np.int64)
-    for i, x in enumerate(t.tolist()):
+    previous = [-1] * len(values)
+    for i, x in enumerate(values):
         j = bisect.bisect_right(tails, x)
         if j == len(tails):
             tails.append(x)
@@ -770,13 +789,12 @@ def in_order_times(stamps: F64) -> tuple[F64, int]:
             tails[j] = x
             tail_index[j] = i
         previous[i] = tail_index[j - 1] if j > 0 else -1
-    kept = np.zeros(n, dtype=bool)
-    i = tail_index[-1]
+    out: list[int] = []
+    i = tail_index[-1] if tail_index else -1
     while i >= 0:
-        kept[i] = True
-        i = int(previous[i])
-    index = np.arange(n, dtype=np.float64)
-    return np.interp(index, index[kept], t[kept]), int(n - np.count_nonzero(kept))
+        out.append(i)
+        i = previous[i]
+    return out[::-1]
 
 
 def scan_odometry_in_order(
