@@ -644,6 +644,35 @@ class _Streams:
     fast_decoder: dict[str, bool]
 
 
+def _odometry_at_scans(
+    stream: ScanStream,
+    odometry: OdometryStream,
+    published: NDArray[np.float64],
+    ordered: bool,
+    odom_sync: str,
+) -> tuple[ScanStream, bool, int, int]:
+    """The odometry pose at each scan: ``(stream, glitches, scan_glitches, odom_glitches)``.
+
+    When the scans have a publication order (``ordered``) and either stream's stamps run against
+    it, both streams' times are rebuilt from that order (:func:`scan_odometry_in_order`);
+    otherwise the loader's interpolation stands, or with ``odom_sync == "latest"`` the latest
+    odometry message at or before each scan, as CARMEN FLASER lines carry it.
+    """
+    glitches = ordered and (
+        bool(np.any(np.diff(stream.time) < 0)) or bool(np.any(np.diff(published[:, 0]) < 0))
+    )
+    if glitches:  # stamps run against the publication order: times from that order
+        poses, scan_glitches, odom_glitches = scan_odometry_in_order(
+            stream.time, published[:, 0], published[:, 1:4], odom_sync
+        )
+        return dataclasses.replace(stream, odometry=poses), True, scan_glitches, odom_glitches
+    if odom_sync == "latest":
+        last = np.searchsorted(odometry.time, stream.time, side="right") - 1
+        last = np.clip(last, 0, len(odometry.time) - 1)
+        stream = dataclasses.replace(stream, odometry=odometry.poses[last].copy())
+    return stream, False, 0, 0
+
+
 def load_bag(
     path: Path,
     *,
@@ -695,19 +724,9 @@ def load_bag(
     scan_order = publication_order(scans.seq.array()[:, 0])
     moved = _reorder_scans(scans, scan_order)
     stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
-    glitches = scan_order is not None and (
-        bool(np.any(np.diff(stream.time) < 0)) or bool(np.any(np.diff(published[:, 0]) < 0))
+    stream, glitches, scan_glitches, odom_glitches = _odometry_at_scans(
+        stream, odometry, published, scan_order is not None, options.odom_sync
     )
-    scan_glitches = odom_glitches = 0
-    if glitches:  # stamps run against the publication order: times from that order
-        poses, scan_glitches, odom_glitches = scan_odometry_in_order(
-            stream.time, published[:, 0], published[:, 1:4], options.odom_sync
-        )
-        stream = dataclasses.replace(stream, odometry=poses)
-    elif options.odom_sync == "latest":  # per-scan odometry, as CARMEN FLASER lines carry it
-        last = np.searchsorted(odometry.time, stream.time, side="right") - 1
-        last = np.clip(last, 0, len(odometry.time) - 1)
-        stream = dataclasses.replace(stream, odometry=odometry.poses[last].copy())
     meta: dict[str, Any] = {
         "format": fmt,
         "scan_topic": sel.scan_topic,
