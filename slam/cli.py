@@ -49,6 +49,8 @@ COMMAND_ORDER: tuple[str, ...] = (
     "grid",
     "maze",
     "runs",
+    "sweep",
+    "tune",
 )
 """Order of the sub-commands in ``slam --help``; any other module of the package comes after."""
 

@@ -1,0 +1,485 @@
+"""The sweep specification: logs × seeds × settings, the ``slam run`` options of every cell.
+
+A specification comes from a TOML file (``slam sweep SPEC.toml``, layout in ``docs/sweep.md``)
+and/or the command line (``--logs``, ``--seeds``, ``--set KEY=V1,V2``, the ``slam run`` options);
+the command line wins. :func:`build_spec` checks every value and names the file and key of a bad
+one (:class:`~slam.errors.UsageError`, exit 2). :meth:`SweepSpec.cells` expands it into
+:class:`Cell` s, each one ordinary ``slam run`` argument list.
+
+:meth:`SweepSpec.identity` is what makes two sweeps the same sweep (what a cell computes; not
+where or how fast): a sweep folder remembers it, and a sweep of another identity is refused there.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import re
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from slam.errors import UsageError
+
+EXECUTORS = ("local", "ray")
+"""Where cells run: a local process pool, or a Ray cluster."""
+
+METRICS = ("auto", "relations", "ate", "quality")
+"""How a cell is evaluated: ``auto`` picks relations when the log has a relations file, ATE when
+it has a ground-truth trajectory, else the no-reference map quality score."""
+
+RUN_OPTIONS: dict[str, type] = {
+    "method": str,
+    "particles": int,
+    "every": int,
+    "max_scans": int,
+    "config": str,
+    "no_texture": bool,
+    "no_record": bool,
+    "set": list,
+}
+"""The ``[run]`` keys of a spec: the options of ``slam run`` applied to every cell."""
+
+SWEEP_KEYS = ("logs", "seeds", "out", "workers", "executor", "address", "evaluation")
+"""The ``[sweep]`` keys of a spec."""
+
+MAX_CELL_NAME = 120
+"""Longest cell folder name; longer setting labels are shortened with a hash."""
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting of the sweep: a name and the ``--set`` overrides it adds to every cell."""
+
+    name: str
+    overrides: tuple[str, ...] = ()
+    """``section.key=value`` strings (values as TOML literals)."""
+    values: tuple[tuple[str, Any], ...] = ()
+    """The setting's values by key, for tables and plots."""
+    seeds: tuple[int, ...] | None = None
+    """Seeds of this setting alone (``None``: the sweep's)."""
+    grid: bool = True
+    """Whether it is a point of a ``[grid]`` (else a ``[[setting]]`` table)."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The ``slam run`` options of every cell."""
+
+    method: str | None = None
+    particles: int | None = None
+    every: int | None = None
+    max_scans: int | None = None
+    config: Path | None = None
+    no_texture: bool = False
+    no_record: bool = False
+    set: tuple[str, ...] = ()
+
+    def argv(self) -> list[str]:
+        """These options as ``slam run`` arguments."""
+        out: list[str] = []
+        for flag in ("method", "particles", "every", "max_scans"):
+            value = getattr(self, flag)
+            if value is not None:
+                out += [f"--{flag.replace('_', '-')}", str(value)]
+        if self.config is not None:
+            out += ["--config", str(self.config)]
+        if self.no_texture:
+            out.append("--no-texture")
+        if self.no_record:
+            out.append("--no-record")
+        for item in self.set:
+            out += ["--set", item]
+        return out
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of the sweep: a log, a seed and a setting."""
+
+    name: str
+    """Folder name inside the sweep folder."""
+    log: str
+    seed: int
+    setting: Setting
+    argv: tuple[str, ...]
+    """``slam run`` arguments (without ``--out``)."""
+    metric: str
+    """``auto``, ``relations``, ``ate`` or ``quality``."""
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A whole sweep (see the module docstring)."""
+
+    logs: tuple[str, ...]
+    seeds: tuple[int, ...]
+    settings: tuple[Setting, ...]
+    run: RunOptions = field(default_factory=RunOptions)
+    evaluation: tuple[tuple[str, str], ...] = ()
+    """Metric per log (``(log, metric)``; logs not named use ``auto``)."""
+    out: Path | None = None
+    workers: int | None = None
+    executor: str = "local"
+    address: str | None = None
+    source: Path | None = None
+    """The spec file, when there is one."""
+
+    def metric_of(self, log: str) -> str:
+        """How cells of ``log`` are evaluated."""
+        return dict(self.evaluation).get(log, "auto")
+
+    def cells(self) -> list[Cell]:
+        """Every cell, log-major, then setting, then seed."""
+        cells: list[Cell] = []
+        for log in self.logs:
+            for setting in self.settings:
+                for seed in setting.seeds if setting.seeds is not None else self.seeds:
+                    argv = (log, *self.run.argv(), "--seed", str(seed))
+                    argv += tuple(x for o in setting.overrides for x in ("--set", o))
+                    name = cell_name(log, seed, setting, len(self.settings))
+                    cells.append(Cell(name, log, seed, setting, argv, self.metric_of(log)))
+        seen: dict[str, Cell] = {}
+        for cell in cells:
+            if cell.name in seen:
+                raise UsageError(
+                    f"{self.where('sweep')}: cells {seen[cell.name].argv} and {cell.argv} would "
+                    f"share the folder {cell.name!r} (two logs with one name, or two settings "
+                    "with one name)"
+                )
+            seen[cell.name] = cell
+        return cells
+
+    def where(self, key: str) -> str:
+        """``FILE: [key]`` for messages (or the option when there is no file)."""
+        return f"{self.source}: [{key}]" if self.source is not None else f"slam sweep ({key})"
+
+    def identity(self) -> dict[str, Any]:
+        """What the cells compute (see the module docstring), JSON-ready."""
+        config = None
+        if self.run.config is not None:
+            try:
+                digest = hashlib.sha256(Path(self.run.config).read_bytes()).hexdigest()
+            except OSError:
+                digest = None
+            config = {"path": str(self.run.config), "sha256": digest}
+        run = {k: getattr(self.run, k) for k in ("method", "particles", "every", "max_scans")}
+        run.update(no_texture=self.run.no_texture, no_record=self.run.no_record)
+        run.update(set=list(self.run.set), config=config)
+        return {
+            "logs": list(self.logs),
+            "seeds": list(self.seeds),
+            "settings": [
+                {
+                    "name": s.name,
+                    "overrides": list(s.overrides),
+                    "seeds": None if s.seeds is None else list(s.seeds),
+                }
+                for s in self.settings
+            ],
+            "run": run,
+            "evaluation": {log: self.metric_of(log) for log in self.logs},
+        }
+
+    def digest(self) -> str:
+        """A short hash of :meth:`identity`."""
+        text = json.dumps(self.identity(), sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._=+,-]", "_", text)
+
+
+def cell_name(log: str, seed: int, setting: Setting, n_settings: int) -> str:
+    """``<log>-seed<seed>[-<setting>]`` with only file-name-safe characters."""
+    stem = Path(log).name.split(".")[0] if ("/" in log or "." in log) else log
+    name = f"{_safe(stem)}-seed{seed}"
+    if n_settings > 1 or setting.overrides:
+        label = _safe(setting.name)
+        if len(name) + 1 + len(label) > MAX_CELL_NAME:
+            digest = hashlib.sha256(setting.name.encode()).hexdigest()[:8]
+            label = label[: MAX_CELL_NAME - len(name) - 10] + "-" + digest
+        name += "-" + label
+    return name
+
+
+def parse_seeds(value: Any, where: str) -> tuple[int, ...]:
+    """Seeds from ``"0-3"``, ``"0,2,5"``, ``3`` or a list of integers."""
+    if isinstance(value, bool):
+        raise UsageError(f"{where}: expected seeds like 0-3, 0,2,5 or a list, found {value!r}")
+    if isinstance(value, int):
+        return (value,)
+    if isinstance(value, list) and value and all(isinstance(v, int) for v in value):
+        return tuple(value)
+    if isinstance(value, str):
+        out: list[int] = []
+        for part in value.split(","):
+            match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
+            if match is None:
+                break
+            lo, hi = int(match[1]), int(match[2] if match[2] is not None else match[1])
+            if hi < lo:
+                break
+            out.extend(range(lo, hi + 1))
+        else:
+            if out:
+                return tuple(out)
+    raise UsageError(f"{where}: expected seeds like 0-3, 0,2,5 or a list, found {value!r}")
+
+
+def split_values(text: str) -> list[str]:
+    """Split ``V1,V2,...`` at commas outside brackets and quotes (``[1,2],[3,4]`` is two)."""
+    parts, depth, quote, current = [], 0, "", []
+    for char in text:
+        if quote:
+            quote = "" if char == quote else quote
+        elif char in "\"'":
+            quote = char
+        elif char in "[{":
+            depth += 1
+        elif char in "]}":
+            depth -= 1
+        elif char == "," and depth == 0:
+            parts.append("".join(current))
+            current = []
+            continue
+        current.append(char)
+    parts.append("".join(current))
+    return [p.strip() for p in parts]
+
+
+def _override(key: str, value: Any, where: str) -> str:
+    from slam.config import _toml_value
+    from slam.errors import ConfigError
+
+    if not isinstance(key, str) or key.count(".") != 1:
+        raise UsageError(
+            f"{where}: expected a key section.key (e.g. rbpf.temperature), found {key!r}"
+        )
+    try:
+        return f"{key}={_toml_value(value)}"
+    except ConfigError:
+        raise UsageError(f"{where}: {key}: cannot use the value {value!r}") from None
+
+
+def grid_settings(axes: list[tuple[str, list[Any]]], where: str) -> tuple[Setting, ...]:
+    """The cartesian product of ``(key, values)`` axes as settings named ``key=value,...``."""
+    from slam.config import _toml_value
+
+    for key, values in axes:
+        if not isinstance(values, list) or not values:
+            raise UsageError(
+                f"{where}: {key}: expected a non-empty list of values, found {values!r}"
+            )
+    settings = []
+    for combo in itertools.product(*(values for _key, values in axes)):
+        pairs = tuple(zip((k for k, _v in axes), combo, strict=True))
+        overrides = tuple(_override(k, v, where) for k, v in pairs)
+        name = ",".join(f"{k.split('.', 1)[1]}={_toml_value(v)}" for k, v in pairs)
+        settings.append(Setting(name or "default", overrides, pairs))
+    return tuple(settings)
+
+
+def _explicit_settings(items: Any, where: str) -> tuple[Setting, ...]:
+    if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+        raise UsageError(f"{where}: expected [[setting]] tables")
+    settings = []
+    for k, item in enumerate(items):
+        here = f"{where} #{k + 1}"
+        unknown = set(item) - {"name", "set", "seeds"}
+        if unknown:
+            raise UsageError(
+                f"{here}: unknown key {sorted(unknown)[0]!r} (expected name, set, seeds)"
+            )
+        name = item.get("name")
+        if not isinstance(name, str) or not name:
+            raise UsageError(f"{here}: name: expected a non-empty string")
+        values = item.get("set", {})
+        if not isinstance(values, dict):
+            raise UsageError(f"{here}: set: expected a table of section.key = value")
+        pairs = tuple(values.items())
+        overrides = tuple(_override(k, v, f"{here}: set") for k, v in pairs)
+        seeds = parse_seeds(item["seeds"], f"{here}: seeds") if "seeds" in item else None
+        settings.append(Setting(name, overrides, pairs, seeds, grid=False))
+    return tuple(settings)
+
+
+def read_spec_file(path: Path) -> dict[str, Any]:
+    """The TOML of a spec file; unreadable or malformed is one line naming it."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise UsageError(f"{path}: spec file not found") from None
+    except IsADirectoryError:
+        raise UsageError(f"{path}: expected a spec file (TOML), found a folder") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{path}: not valid TOML ({exc})") from None
+
+
+def _typed(value: Any, tp: type, where: str) -> Any:
+    ok = isinstance(value, tp) and not (tp is int and isinstance(value, bool))
+    if not ok:
+        raise UsageError(f"{where}: expected {tp.__name__}, found {value!r}")
+    return value
+
+
+def spec_from_toml(data: dict[str, Any], source: Path | None) -> SweepSpec:
+    """A spec from the TOML tables of a spec file (``[sweep]``, ``[run]``, ``[grid]``,
+    ``[[setting]]``); paths are relative to the file's folder. ``[tune]`` is read by
+    :mod:`slam.sweep.tune`."""
+    here = str(source) if source is not None else "spec"
+    base = source.parent if source is not None else Path.cwd()
+    unknown = set(data) - {"sweep", "run", "grid", "setting", "tune"}
+    if unknown:
+        raise UsageError(
+            f"{here}: unknown table [{sorted(unknown)[0]}] (expected sweep, run, grid, setting, tune)"
+        )
+    sweep = data.get("sweep", {})
+    if not isinstance(sweep, dict):
+        raise UsageError(f"{here}: [sweep] must be a table")
+    for key in sweep:
+        if key not in SWEEP_KEYS:
+            raise UsageError(
+                f"{here}: [sweep] unknown key {key!r} (expected {', '.join(SWEEP_KEYS)})"
+            )
+    logs = sweep.get("logs", [])
+    if isinstance(logs, str):
+        logs = [x.strip() for x in logs.split(",") if x.strip()]
+    if not isinstance(logs, list) or not all(isinstance(x, str) and x for x in logs):
+        raise UsageError(f"{here}: [sweep] logs: expected a list of dataset names or paths")
+    logs = [_log_path(x, base) for x in logs]
+    seeds = parse_seeds(sweep["seeds"], f"{here}: [sweep] seeds") if "seeds" in sweep else (0,)
+    evaluation = sweep.get("evaluation", {})
+    if not isinstance(evaluation, dict):
+        raise UsageError(f"{here}: [sweep] evaluation: expected a table log = metric")
+    for log, metric in evaluation.items():
+        if metric not in METRICS:
+            raise UsageError(
+                f"{here}: [sweep.evaluation] {log}: expected one of {', '.join(METRICS)}, found {metric!r}"
+            )
+    run_table = data.get("run", {})
+    if not isinstance(run_table, dict):
+        raise UsageError(f"{here}: [run] must be a table")
+    run_values: dict[str, Any] = {}
+    for key, value in run_table.items():
+        if key not in RUN_OPTIONS:
+            raise UsageError(
+                f"{here}: [run] unknown key {key!r} (expected {', '.join(RUN_OPTIONS)})"
+            )
+        run_values[key] = _typed(value, RUN_OPTIONS[key], f"{here}: [run] {key}")
+    if "config" in run_values:
+        run_values["config"] = base / run_values["config"]
+    if "set" in run_values:
+        if not all(isinstance(x, str) for x in run_values["set"]):
+            raise UsageError(f"{here}: [run] set: expected a list of 'section.key=value' strings")
+        run_values["set"] = tuple(run_values["set"])
+    grid = data.get("grid", {})
+    if not isinstance(grid, dict):
+        raise UsageError(f'{here}: [grid] must be a table of "section.key" = [values]')
+    if grid and "setting" in data:
+        raise UsageError(f"{here}: give either [grid] or [[setting]] tables, not both")
+    if "setting" in data:
+        settings = _explicit_settings(data["setting"], f"{here}: [[setting]]")
+    else:
+        settings = grid_settings(list(grid.items()), f"{here}: [grid]")
+    out = sweep.get("out")
+    workers = sweep.get("workers")
+    return SweepSpec(
+        logs=tuple(logs),
+        seeds=seeds,
+        settings=settings,
+        run=RunOptions(**run_values),
+        evaluation=tuple((_log_path(k, base), v) for k, v in evaluation.items()),
+        out=base / _typed(out, str, f"{here}: [sweep] out") if out is not None else None,
+        workers=_typed(workers, int, f"{here}: [sweep] workers") if workers is not None else None,
+        executor=sweep.get("executor", "local"),
+        address=sweep.get("address"),
+        source=source,
+    )
+
+
+def _log_path(log: str, base: Path) -> str:
+    """A log given as a relative path in a spec file is relative to the file's folder."""
+    if ("/" in log or log.startswith(".")) and not Path(log).is_absolute():
+        return str(base / log)
+    return log
+
+
+def apply_command_line(spec: SweepSpec, args: Any) -> SweepSpec:
+    """``spec`` with the values of the command line (``--logs``, ``--seeds``, ``--set``, the
+    ``slam run`` options, ``--out``, ``--workers``, ``--executor``, ``--address``)."""
+    changes: dict[str, Any] = {}
+    if getattr(args, "logs", None):
+        changes["logs"] = tuple(x.strip() for x in args.logs.split(",") if x.strip())
+    if getattr(args, "seeds", None) is not None:
+        changes["seeds"] = parse_seeds(args.seeds, "--seeds")
+    run = {}
+    for flag in ("method", "particles", "every", "max_scans"):
+        if getattr(args, flag, None) is not None:
+            run[flag] = getattr(args, flag)
+    if getattr(args, "config", None) is not None:
+        run["config"] = Path(args.config)
+    for flag in ("no_texture", "no_record"):
+        if getattr(args, flag, False):
+            run[flag] = True
+    axes: list[tuple[str, list[Any]]] = []
+    for text in getattr(args, "set", None) or []:
+        from slam.config import parse_literal
+
+        if "=" not in text:
+            raise UsageError(f"--set {text!r}: expected section.key=V1[,V2,...]")
+        key, raw = text.split("=", 1)
+        values = [parse_literal(v) for v in split_values(raw)]
+        if len(values) == 1:
+            run["set"] = (*run.get("set", spec.run.set), _override(key.strip(), values[0], "--set"))
+        else:
+            axes.append((key.strip(), values))
+    if run:
+        changes["run"] = replace(spec.run, **run)
+    if axes:
+        if any(not s.grid for s in spec.settings):
+            raise UsageError("--set with several values cannot be combined with [[setting]] tables")
+        grid = dict(_axes_of(spec.settings))
+        grid.update(dict(axes))
+        changes["settings"] = grid_settings(list(grid.items()), "--set")
+    for flag in ("out", "workers", "executor", "address"):
+        if getattr(args, flag, None) is not None:
+            changes[flag] = getattr(args, flag)
+    return replace(spec, **changes)
+
+
+def _axes_of(settings: tuple[Setting, ...]) -> list[tuple[str, list[Any]]]:
+    """The grid axes that produced ``settings`` (``[]`` for the lone default setting)."""
+    axes: dict[str, list[Any]] = {}
+    for setting in settings:
+        for key, value in setting.values:
+            if value not in axes.setdefault(key, []):
+                axes[key].append(value)
+    return list(axes.items())
+
+
+def build_spec(path: Path | None, args: Any) -> SweepSpec:
+    """The spec of ``slam sweep [SPEC.toml] [options]``, checked (see the module docstring)."""
+    data = read_spec_file(path) if path is not None else {}
+    spec = apply_command_line(spec_from_toml(data, path), args)
+    if not spec.logs:
+        raise UsageError(f"{spec.where('sweep')}: no logs (give [sweep] logs or --logs intel,aces)")
+    if not spec.settings:
+        spec = replace(spec, settings=(Setting("default"),))
+    if spec.executor not in EXECUTORS:
+        raise UsageError(
+            f"{spec.where('sweep')} executor: expected one of {', '.join(EXECUTORS)}, found {spec.executor!r}"
+        )
+    if spec.workers is not None and spec.workers < 1:
+        raise UsageError(
+            f"{spec.where('sweep')} workers: expected at least 1, found {spec.workers}"
+        )
+    if spec.address is not None and spec.executor != "ray":
+        raise UsageError("--address is the address of a Ray cluster: it needs --executor ray")
+    return spec
