@@ -43,6 +43,9 @@ OnResult = Callable[[Task, Result], None]
 RAY_RETRIES = 3
 """How often Ray re-runs a cell whose worker process died."""
 
+LOOPBACK_ONLY = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+"""Set to ``0``, Ray takes 127.0.0.1 as the node's address (else the first interface's)."""
+
 THREAD_POOLS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 """BLAS/OpenMP pools set to one thread in the workers (numba's is set by the executor)."""
 
@@ -211,6 +214,8 @@ class RayExecutor:
     """Cells as Ray tasks (see the module docstring)."""
 
     def __init__(self, workers: int | None, data_dir: Path, address: str | None) -> None:
+        if address is None:  # a local instance: every Ray address on loopback (read at import)
+            os.environ.setdefault(LOOPBACK_ONLY, "0")
         self.ray = import_ray()
         self.workers = workers
         self.data_dir = Path(data_dir)

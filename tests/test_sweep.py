@@ -1,0 +1,367 @@
+"""``slam sweep`` and ``slam tune`` (issue 17): the spec, the sweep folder's safety, resume after
+Ctrl-C, a crashing cell, the Ray executor with a worker killed mid-sweep, tuning on a simulated
+log, and (with the real logs) cell-for-cell equality with separate ``slam run`` commands.
+
+Runs use a 12 s simulated log (``slam sim small``) and few scans, so the whole module stays
+within a couple of minutes; the real-log comparison is marked ``data`` and ``slow``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from argparse import Namespace
+from pathlib import Path
+
+import pytest
+
+from slam.cli import main
+from slam.errors import UsageError
+from slam.sweep.cell import sha256_of
+from slam.sweep.spec import build_spec, parse_seeds, split_values
+
+ROOT = Path(__file__).resolve().parent.parent
+SCANS = "40"
+RUN_OPTIONS = ["--particles", "10", "--max-scans", SCANS, "--no-record", "--no-texture"]
+
+
+def env(**extra: str) -> dict[str, str]:
+    """Environment of CLI subprocesses (the worktree's package first on the path)."""
+    return dict(
+        os.environ,
+        RERUN_ANALYTICS="0",
+        RERUN_TELEMETRY="0",
+        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+        **extra,
+    )
+
+
+def slam_cmd(*args: str) -> list[str]:
+    return [sys.executable, "-m", "slam", *args]
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    """A 12 s simulated log (ECE276A format) with ground truth."""
+    folder = tmp_path_factory.mktemp("sweep") / "small"
+    args = ["sim", "small", "--out", str(folder), "--duration", "12", "--no-rgbd", "--quiet"]
+    assert main(args) == 0
+    return folder
+
+
+def results(folder: Path) -> dict[str, dict]:
+    """``results.json`` cells by name."""
+    return {c["cell"]: c for c in json.loads((folder / "results.json").read_text())["cells"]}
+
+
+def no_args(**values) -> Namespace:
+    base = dict.fromkeys(
+        ("logs", "seeds", "out", "workers", "executor", "address", "method", "particles", "every",
+         "max_scans", "config"))  # fmt: skip
+    base.update(no_texture=False, no_record=False, set=[])
+    base.update(values)
+    return Namespace(**base)
+
+
+# --- the spec ---------------------------------------------------------------------------------
+
+
+def test_seeds_values_and_the_grid_of_the_command_line():
+    assert parse_seeds("0-3", "--seeds") == (0, 1, 2, 3)
+    assert parse_seeds("0,2,5-6", "--seeds") == (0, 2, 5, 6)
+    assert parse_seeds([4, 1], "x") == (4, 1)
+    with pytest.raises(UsageError, match="--seeds: expected seeds like 0-3"):
+        parse_seeds("3-1", "--seeds")
+    assert split_values('10,20.5,[1,2],"a,b"') == ["10", "20.5", "[1,2]", '"a,b"']
+
+    spec = build_spec(
+        None,
+        no_args(logs="intel,aces", seeds="0-1", set=["rbpf.temperature=10,20,40",
+                "filter.particles=15", "loop.enabled=true,false"], max_scans=50),
+    )  # fmt: skip
+    cells = spec.cells()
+    assert len(cells) == 2 * 2 * 3 * 2
+    first = cells[0]
+    assert first.name == "intel-seed0-temperature=10,enabled=true"
+    # an ordinary slam run argument list: options first, the seed, then the setting
+    assert first.argv == ("intel", "--max-scans", "50", "--set", "filter.particles=15", "--seed",
+                          "0", "--set", "rbpf.temperature=10", "--set", "loop.enabled=true")  # fmt: skip
+    assert len({c.name for c in cells}) == len(cells)
+
+
+def test_spec_file_explicit_settings_and_per_setting_seeds(tmp_path):
+    spec_file = tmp_path / "s.toml"
+    spec_file.write_text(
+        '[sweep]\nlogs = ["intel"]\nseeds = "0-3"\n[run]\nno_record = true\n'
+        '[[setting]]\nname = "odometry"\nset = { "filter.method" = "odometry" }\nseeds = [0]\n'
+        '[[setting]]\nname = "rbpf"\n'
+    )
+    spec = build_spec(spec_file, no_args())
+    names = [c.name for c in spec.cells()]
+    assert names == ["intel-seed0-odometry"] + [f"intel-seed{s}-rbpf" for s in range(4)]
+    assert spec.cells()[0].argv == ("intel", "--no-record", "--seed", "0", "--set",
+                                    'filter.method="odometry"')  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[sweep]\nlogs = ['intel']\n[run]\nparticle = 3\n", "s.toml: [run] unknown key 'particle'"),
+        ("[sweep]\nlogs = ['intel']\nseeds = 'x'\n", "s.toml: [sweep] seeds: expected seeds"),
+        ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.temperature' = []\n", "[grid]: rbpf.temperature: expected a non-empty list"),
+        ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.nosuch' = [1, 2]\n", "nosuch"),
+        ("[sweep]\nlogs = ['nosuch-log']\n", "sweep log 'nosuch-log'"),
+        ("[sweep\n", "s.toml: not valid TOML"),
+    ],
+)  # fmt: skip
+def test_bad_spec_is_one_line_exit_2_before_any_work(tmp_path, capsys, text, message):
+    spec_file = tmp_path / "s.toml"
+    spec_file.write_text(text)
+    out = tmp_path / "out"
+    assert main(["sweep", str(spec_file), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_a_folder_not_made_by_slam_sweep_is_left_alone(small, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep")
+    assert main(["sweep", "--logs", str(small), "--out", str(out), *RUN_OPTIONS]) == 2
+    assert "is not a sweep folder of slam" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+# --- resume, crash ----------------------------------------------------------------------------
+
+
+def test_sigint_then_rerun_finishes_only_the_missing_cells(small, tmp_path):
+    """Ctrl-C during a 4-cell sweep (one worker): exit 130, no partial folder left, the finished
+    cells in results.json; the same command again runs only the missing cells."""
+    out = tmp_path / "sw"
+    cmd = slam_cmd("sweep", "--logs", str(small), "--seeds", "0-3", "--workers", "1", "--out",
+                   str(out), *RUN_OPTIONS)  # fmt: skip
+    proc = subprocess.Popen(
+        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 240
+    while not list(out.glob("*/eval.json")) and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    time.sleep(1.0)  # into the next cell
+    proc.send_signal(signal.SIGINT)
+    _stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "rerun the same command to finish them" in stderr
+    done = {c for c, r in results(out).items() if r["status"] == "ok"}
+    assert 1 <= len(done) < 4
+    assert not [p for p in out.rglob("*.partial")]
+    assert all((out / c / ".slam-run").is_file() for c in done)
+    before = {c: os.stat(out / c / "trajectory.tum").st_ino for c in done}
+
+    again = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"({4 - len(done)} run, {len(done)} already done, 0 failed)" in again.stdout
+    assert {c: os.stat(out / c / "trajectory.tum").st_ino for c in done} == before
+    final = results(out)
+    assert len(final) == 4 and all(r["status"] == "ok" for r in final.values())
+    assert all(r["metric"] == "ate" and 0 < r["error"] < 0.5 for r in final.values())
+    # a finished sweep is not run again
+    third = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
+    assert "(0 run, 4 already done, 0 failed)" in third.stdout
+
+
+def test_a_crashing_cell_is_recorded_and_the_sweep_goes_on(small, tmp_path, capsys):
+    broken = tmp_path / "broken"
+    shutil.copytree(small, broken)
+    (broken / "Hokuyo20.npz").write_bytes(b"PK\x03\x04 not a zip file")
+    out = tmp_path / "sw"
+    code = main(["sweep", "--logs", f"{small},{broken}", "--out", str(out), *RUN_OPTIONS])
+    assert code == 1
+    captured = capsys.readouterr()
+    rows = results(out)
+    assert rows["small-seed0"]["status"] == "ok"
+    assert rows["broken-seed0"]["status"] == "error"
+    assert "Hokuyo20.npz" in rows["broken-seed0"]["message"]
+    assert "cell broken-seed0 failed" in captured.err
+    assert not (out / "broken-seed0").exists()
+    csv_lines = (out / "results.csv").read_text().splitlines()
+    assert len(csv_lines) == 3 and csv_lines[0].startswith("cell,log,seed,setting,status")
+
+
+# --- tune -------------------------------------------------------------------------------------
+
+
+def test_tune_finds_a_setting_at_least_as_good_as_the_default_and_writes_it(
+    small, tmp_path, capsys
+):
+    """Budget: 4 trials (the default and 3 random draws of rbpf.temperature), 1 seed."""
+    spec_file = tmp_path / "tune.toml"
+    spec_file.write_text(
+        f'[sweep]\nlogs = ["{small}"]\nseeds = [0]\n[run]\nparticles = 10\nmax_scans = {SCANS}\n'
+        "no_record = true\nno_texture = true\n"
+        '[tune]\ntrials = 4\nseed = 1\n[tune.ranges]\n"rbpf.temperature" = { min = 2.0, max = 60.0, log = true }\n'
+    )
+    out = tmp_path / "tune"
+    assert main(["tune", str(spec_file), "--out", str(out)]) == 0
+    report = json.loads((out / "tune.json").read_text())
+    assert len(report["trials"]) == 4
+    best, default = report["best"], report["default"]
+    assert best["error_mean"] <= default["error_mean"]
+    assert any(t["pareto"] for t in report["trials"])
+    config = out / "config.toml"
+    assert "[rbpf]" in config.read_text() or best["trial"] == "trial000-default"
+    # the written configuration reproduces the best trial
+    run = tmp_path / "again"
+    assert main(["run", str(small), "--config", str(config), "--seed", "0", "--max-scans", SCANS,
+                 "--no-record", "--no-texture", "--quiet", "--out", str(run)]) == 0  # fmt: skip
+    ate = json.loads((run / "metrics.json").read_text())["ate_rmse"]
+    assert ate == pytest.approx(best["error_mean"], rel=1e-9)
+    assert "best trial" in capsys.readouterr().out
+
+
+# --- Ray --------------------------------------------------------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
+    """A local Ray cluster (head + one more node, 1 CPU each, 127.0.0.1, dashboard off) started
+    by the test; a worker process running a cell is killed mid-sweep; Ray re-runs the cell and
+    every cell's trajectory equals that of the local executor."""
+    pytest.importorskip("ray", reason="Ray is not installed (uv sync --extra ray)")
+    psutil = pytest.importorskip("psutil")
+    ray_bin = Path(sys.executable).parent / "ray"
+    if not ray_bin.is_file():
+        pytest.skip(f"{ray_bin}: the ray command is not installed")
+    port = _free_port()
+    temp = Path("/tmp") / f"slam-ray-{os.getpid()}"  # short: Ray's socket paths are limited
+    ray_env = env(RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_USAGE_STATS_ENABLED="0")
+    common = ["--block", "--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats"]
+    starters = [
+        subprocess.Popen(
+            [
+                str(ray_bin),
+                "start",
+                "--head",
+                f"--port={port}",
+                "--include-dashboard=false",
+                f"--temp-dir={temp}",
+                *common,
+            ],
+            env=ray_env,
+            start_new_session=True,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+    ]
+    out, local = tmp_path / "ray", tmp_path / "local"
+    sweep = ["sweep", "--logs", str(small), "--seeds", "0-2", "--set", "rbpf.temperature=10,40", *RUN_OPTIONS]  # fmt: skip
+    try:
+        time.sleep(8)
+        starters.append(
+            subprocess.Popen(
+                [str(ray_bin), "start", f"--address=127.0.0.1:{port}", *common],
+                env=ray_env,
+                start_new_session=True,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+        )
+        time.sleep(8)
+        driver = subprocess.Popen(
+            slam_cmd(*sweep, "--out", str(out), "--executor", "ray", "--address", f"127.0.0.1:{port}"),
+            env=ray_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        killed = None
+        deadline = time.monotonic() + 180
+        while killed is None and time.monotonic() < deadline and driver.poll() is None:
+            for starter in starters:
+                for proc in psutil.Process(starter.pid).children(recursive=True):
+                    try:
+                        if (
+                            proc.cmdline()[:1] == ["ray::ray_cell"]
+                            or proc.name() == "ray::ray_cell"
+                        ):
+                            time.sleep(1.0)  # let it get into the run
+                            proc.kill()
+                            killed = proc.pid
+                            break
+                    except psutil.Error:
+                        continue
+                if killed:
+                    break
+            time.sleep(0.2)
+        stdout, stderr = driver.communicate(timeout=600)
+        assert killed is not None, "no Ray worker running a cell was found to kill"
+        assert driver.returncode == 0, stderr
+        assert "(6 run, 0 already done, 0 failed)" in stdout
+    finally:
+        pids = set()
+        for starter in starters:
+            with_children = [starter.pid]
+            with contextlib.suppress(psutil.Error):
+                with_children += [
+                    p.pid for p in psutil.Process(starter.pid).children(recursive=True)
+                ]
+            pids.update(with_children)
+        for starter in starters:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(starter.pid, signal.SIGTERM)
+        time.sleep(3)
+        for proc in psutil.process_iter(["pid", "cmdline"]):
+            if str(temp) in " ".join(proc.info["cmdline"] or []):
+                pids.add(proc.info["pid"])
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
+        shutil.rmtree(temp, ignore_errors=True)
+    assert main([*sweep, "--out", str(local)]) == 0
+    ray_rows, local_rows = results(out), results(local)
+    assert len(ray_rows) == 6
+    for name, row in ray_rows.items():
+        assert row["status"] == "ok"
+        assert row["trajectory_sha256"] == local_rows[name]["trajectory_sha256"], name
+        assert sha256_of(out / name / "trajectory.tum") == row["trajectory_sha256"]
+        assert (out / name / ".slam-run").is_file() and (out / name / "eval.json").is_file()
+
+
+# --- real logs: a sweep is the same as separate runs ------------------------------------------
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_sweep_cells_equal_separate_slam_runs(carmen_dir, data_dir, tmp_path):
+    """intel, aces, fr079 × seeds 0-3 × 2 settings (24 cells, 12 scans each): every cell's
+    trajectory.tum is byte-identical to that of the equivalent separate ``slam run`` (run here in
+    this process, with numba's default thread count; the sweep's workers use one thread)."""
+    options = ["--max-scans", "12", "--no-record", "--no-texture", "--set", "quality.enabled=false"]
+    out = tmp_path / "sw"
+    code = main(["sweep", "--logs", "intel,aces,fr079", "--seeds", "0-3", "--set",
+                 "rbpf.temperature=10,40", "--out", str(out), "--data-dir", str(data_dir), *options])  # fmt: skip
+    assert code == 0
+    rows = results(out)
+    assert len(rows) == 24
+    for name, row in rows.items():
+        assert row["metric"] == "relations"
+        separate = tmp_path / "runs" / name
+        temperature = name.rsplit("=", 1)[1]
+        argv = ["run", row["log"], "--seed", str(row["seed"]), *options, "--set",
+                f"rbpf.temperature={temperature}", "--out", str(separate), "--quiet",
+                "--data-dir", str(data_dir)]  # fmt: skip
+        assert main(argv) == 0
+        assert sha256_of(separate / "trajectory.tum") == row["trajectory_sha256"], name
+        assert sha256_of(out / name / "trajectory.tum") == row["trajectory_sha256"], name
+        assert (separate / "config.toml").read_text() == (out / name / "config.toml").read_text()
