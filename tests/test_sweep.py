@@ -56,6 +56,17 @@ def small(tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.fixture(scope="module")
+def local_hashes(small, tmp_path_factory) -> dict[str, str]:
+    """Trajectory hashes of the 4-cell sweep (seeds 0-3) of the local executor."""
+    out = tmp_path_factory.mktemp("local") / "sw"
+    assert (
+        main(["sweep", "--logs", str(small), "--seeds", "0-3", "--out", str(out), *RUN_OPTIONS])
+        == 0
+    )
+    return {name: row["trajectory_sha256"] for name, row in results(out).items()}
+
+
 def results(folder: Path) -> dict[str, dict]:
     """``results.json`` cells by name."""
     return {c["cell"]: c for c in json.loads((folder / "results.json").read_text())["cells"]}
@@ -143,7 +154,7 @@ def test_a_folder_not_made_by_slam_sweep_is_left_alone(small, tmp_path, capsys):
 # --- resume, crash ----------------------------------------------------------------------------
 
 
-def test_sigint_then_rerun_finishes_only_the_missing_cells(small, tmp_path):
+def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, tmp_path):
     """Ctrl-C during a 4-cell sweep (one worker): exit 130, no partial folder left, the finished
     cells in results.json; the same command again runs only the missing cells."""
     out = tmp_path / "sw"
@@ -173,7 +184,9 @@ def test_sigint_then_rerun_finishes_only_the_missing_cells(small, tmp_path):
     assert {c: os.stat(out / c / "trajectory.tum").st_ino for c in done} == before
     final = results(out)
     assert len(final) == 4 and all(r["status"] == "ok" for r in final.values())
-    assert all(r["metric"] == "ate" and 0 < r["error"] < 0.5 for r in final.values())
+    assert all(r["metric"] == "ate" and 0 <= r["error"] < 0.5 for r in final.values())
+    # one worker (NUMBA_NUM_THREADS = the cores) gives the trajectories of the default pool
+    assert {c: r["trajectory_sha256"] for c, r in final.items()} == local_hashes
     # a finished sweep is not run again
     third = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
     assert "(0 run, 4 already done, 0 failed)" in third.stdout
@@ -203,10 +216,11 @@ def test_a_crashing_cell_is_recorded_and_the_sweep_goes_on(small, tmp_path, caps
 def test_tune_finds_a_setting_at_least_as_good_as_the_default_and_writes_it(
     small, tmp_path, capsys
 ):
-    """Budget: 4 trials (the default and 3 random draws of rbpf.temperature), 1 seed."""
+    """Budget: 4 trials (the default and 3 random draws of rbpf.temperature), 1 seed, the whole
+    log (480 scans: the robot drives, so the ATE is not ~0 as over the first scans)."""
     spec_file = tmp_path / "tune.toml"
     spec_file.write_text(
-        f'[sweep]\nlogs = ["{small}"]\nseeds = [0]\n[run]\nparticles = 10\nmax_scans = {SCANS}\n'
+        f'[sweep]\nlogs = ["{small}"]\nseeds = [0]\n[run]\nparticles = 10\n'
         "no_record = true\nno_texture = true\n"
         '[tune]\ntrials = 4\nseed = 1\n[tune.ranges]\n"rbpf.temperature" = { min = 2.0, max = 60.0, log = true }\n'
     )
@@ -215,13 +229,13 @@ def test_tune_finds_a_setting_at_least_as_good_as_the_default_and_writes_it(
     report = json.loads((out / "tune.json").read_text())
     assert len(report["trials"]) == 4
     best, default = report["best"], report["default"]
-    assert best["error_mean"] <= default["error_mean"]
+    assert 0.001 < best["error_mean"] <= default["error_mean"] < 0.5
     assert any(t["pareto"] for t in report["trials"])
     config = out / "config.toml"
     assert "[rbpf]" in config.read_text() or best["trial"] == "trial000-default"
     # the written configuration reproduces the best trial
     run = tmp_path / "again"
-    assert main(["run", str(small), "--config", str(config), "--seed", "0", "--max-scans", SCANS,
+    assert main(["run", str(small), "--config", str(config), "--seed", "0",
                  "--no-record", "--no-texture", "--quiet", "--out", str(run)]) == 0  # fmt: skip
     ate = json.loads((run / "metrics.json").read_text())["ate_rmse"]
     assert ate == pytest.approx(best["error_mean"], rel=1e-9)
@@ -237,10 +251,11 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
-    """A local Ray cluster (head + one more node, 1 CPU each, 127.0.0.1, dashboard off) started
-    by the test; a worker process running a cell is killed mid-sweep; Ray re-runs the cell and
-    every cell's trajectory equals that of the local executor."""
+def test_ray_cluster_survives_a_killed_worker(small, local_hashes, tmp_path):
+    """A local Ray cluster started by the test (``ray start --head``, 2 CPUs: the head and two
+    worker processes, every port on 127.0.0.1, dashboard off); a worker process running a cell
+    is killed mid-sweep; Ray re-runs the cell and every cell's trajectory equals that of the
+    local executor. (Ray 2.60 refuses a second *node* when its addresses are loopback-only.)"""
     pytest.importorskip("ray", reason="Ray is not installed (uv sync --extra ray)")
     psutil = pytest.importorskip("psutil")
     ray_bin = Path(sys.executable).parent / "ray"
@@ -248,18 +263,25 @@ def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
         pytest.skip(f"{ray_bin}: the ray command is not installed")
     port = _free_port()
     temp = Path("/tmp") / f"slam-ray-{os.getpid()}"  # short: Ray's socket paths are limited
-    ray_env = env(RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_USAGE_STATS_ENABLED="0")
-    common = ["--block", "--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats"]
+    ray_env = env(
+        RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0",  # every Ray port on 127.0.0.1
+        RAY_USAGE_STATS_ENABLED="0",
+        RAY_worker_register_timeout_seconds="300",
+        RAY_ENABLE_UV_RUN_RUNTIME_ENV="0",  # a loaded 2-core machine starts workers slowly
+    )
     starters = [
         subprocess.Popen(
             [
                 str(ray_bin),
                 "start",
                 "--head",
+                "--block",
                 f"--port={port}",
+                "--node-ip-address=127.0.0.1",
+                "--num-cpus=2",
                 "--include-dashboard=false",
+                "--disable-usage-stats",
                 f"--temp-dir={temp}",
-                *common,
             ],
             env=ray_env,
             start_new_session=True,
@@ -267,20 +289,11 @@ def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
             stderr=subprocess.DEVNULL,
         )  # fmt: skip
     ]
-    out, local = tmp_path / "ray", tmp_path / "local"
-    sweep = ["sweep", "--logs", str(small), "--seeds", "0-2", "--set", "rbpf.temperature=10,40", *RUN_OPTIONS]  # fmt: skip
+    out = tmp_path / "ray"
+    sweep = ["sweep", "--logs", str(small), "--seeds", "0-3", *RUN_OPTIONS]
+    driver = None
     try:
-        time.sleep(8)
-        starters.append(
-            subprocess.Popen(
-                [str(ray_bin), "start", f"--address=127.0.0.1:{port}", *common],
-                env=ray_env,
-                start_new_session=True,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-            )  # fmt: skip
-        )
-        time.sleep(8)
+        time.sleep(10)
         driver = subprocess.Popen(
             slam_cmd(*sweep, "--out", str(out), "--executor", "ray", "--address", f"127.0.0.1:{port}"),
             env=ray_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -307,8 +320,11 @@ def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
         stdout, stderr = driver.communicate(timeout=600)
         assert killed is not None, "no Ray worker running a cell was found to kill"
         assert driver.returncode == 0, stderr
-        assert "(6 run, 0 already done, 0 failed)" in stdout
+        assert "(4 run, 0 already done, 0 failed)" in stdout
     finally:
+        if driver is not None and driver.poll() is None:
+            driver.kill()
+            driver.wait()
         pids = set()
         for starter in starters:
             with_children = [starter.pid]
@@ -322,18 +338,19 @@ def test_ray_cluster_survives_a_killed_worker(small, tmp_path):
                 os.killpg(starter.pid, signal.SIGTERM)
         time.sleep(3)
         for proc in psutil.process_iter(["pid", "cmdline"]):
-            if str(temp) in " ".join(proc.info["cmdline"] or []):
+            if proc.info["pid"] != os.getpid() and str(temp) in " ".join(
+                proc.info["cmdline"] or []
+            ):
                 pids.add(proc.info["pid"])
         for pid in pids:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, signal.SIGKILL)
         shutil.rmtree(temp, ignore_errors=True)
-    assert main([*sweep, "--out", str(local)]) == 0
-    ray_rows, local_rows = results(out), results(local)
-    assert len(ray_rows) == 6
+    ray_rows = results(out)
+    assert len(ray_rows) == 4
     for name, row in ray_rows.items():
         assert row["status"] == "ok"
-        assert row["trajectory_sha256"] == local_rows[name]["trajectory_sha256"], name
+        assert row["trajectory_sha256"] == local_hashes[name], name
         assert sha256_of(out / name / "trajectory.tum") == row["trajectory_sha256"]
         assert (out / name / ".slam-run").is_file() and (out / name / "eval.json").is_file()
 

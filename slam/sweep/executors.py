@@ -10,8 +10,9 @@ callback, in the driver's main thread, as it arrives (so the driver alone writes
   folder itself, through ``slam run``'s atomic run folder. A worker killed by a signal or exiting
   without a result is that cell's error, not the sweep's. Ctrl-C (or SIGTERM) is forwarded to the
   running workers, which remove their partial folders; the interrupt is then re-raised.
-* :class:`RayExecutor` — each cell a Ray task (1 CPU, a fresh worker process per task,
-  ``NUMBA_NUM_THREADS=1``, retried up to :data:`RAY_RETRIES` times when its worker dies). The
+* :class:`RayExecutor` — each cell a Ray task (1 CPU, ``NUMBA_NUM_THREADS=1``; Ray reuses its
+  worker processes, so a cell's ``peak_rss_mb`` is its worker's peak so far; a cell is retried
+  up to :data:`RAY_RETRIES` times when its worker dies). The
   task runs the cell into a temporary folder on its node and returns the folder's files; the
   driver writes them into the sweep folder (the data directory must be the same path on every
   node: shared storage). ``ray.init(include_dashboard=False)`` locally (on 127.0.0.1), or
@@ -45,6 +46,9 @@ RAY_RETRIES = 3
 
 LOOPBACK_ONLY = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
 """Set to ``0``, Ray takes 127.0.0.1 as the node's address (else the first interface's)."""
+
+NO_UV_RUN_HOOK = "RAY_ENABLE_UV_RUN_RUNTIME_ENV"
+"""Set to ``0``, Ray's workers use the cluster's Python, not ``uv run`` in a copy of the cwd."""
 
 THREAD_POOLS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 """BLAS/OpenMP pools set to one thread in the workers (numba's is set by the executor)."""
@@ -216,6 +220,9 @@ class RayExecutor:
     def __init__(self, workers: int | None, data_dir: Path, address: str | None) -> None:
         if address is None:  # a local instance: every Ray address on loopback (read at import)
             os.environ.setdefault(LOOPBACK_ONLY, "0")
+        # Under `uv run`, Ray would start its workers with `uv run` in an uploaded copy of the
+        # current folder (a new environment per job); the cells use the installed slam.
+        os.environ.setdefault(NO_UV_RUN_HOOK, "0")
         self.ray = import_ray()
         self.workers = workers
         self.data_dir = Path(data_dir)
@@ -254,7 +261,7 @@ class RayExecutor:
         ray = self.ray
         self._init()
         try:
-            remote = ray.remote(num_cpus=1, max_retries=RAY_RETRIES, max_calls=1)(ray_cell)
+            remote = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(ray_cell)
             pending = {remote.remote(task): task for task in tasks}
             try:
                 while pending:
