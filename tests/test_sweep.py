@@ -361,10 +361,11 @@ def test_ray_cluster_survives_a_killed_worker(small, local_hashes, tmp_path):
 @pytest.mark.data
 @pytest.mark.slow
 def test_sweep_cells_equal_separate_slam_runs(carmen_dir, data_dir, tmp_path):
-    """intel, aces, fr079 × seeds 0-3 × 2 settings (24 cells, 12 scans each): every cell's
+    """intel, aces, fr079 × seeds 0-3 × 2 settings (24 cells, 250 scans of 5 particles each: the
+    first relations of intel end at scan 243, of aces at 134, of fr079 at 25): every cell's
     trajectory.tum is byte-identical to that of the equivalent separate ``slam run`` (run here in
     this process, with numba's default thread count; the sweep's workers use one thread)."""
-    options = ["--max-scans", "12", "--no-record", "--no-texture", "--set", "quality.enabled=false"]
+    options = ["--max-scans", "250", "--particles", "5", "--no-record", "--no-texture", "--set", "quality.enabled=false"]
     out = tmp_path / "sw"
     code = main(["sweep", "--logs", "intel,aces,fr079", "--seeds", "0-3", "--set",
                  "rbpf.temperature=10,40", "--out", str(out), "--data-dir", str(data_dir), *options])  # fmt: skip
