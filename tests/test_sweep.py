@@ -365,7 +365,16 @@ def test_sweep_cells_equal_separate_slam_runs(carmen_dir, data_dir, tmp_path):
     first relations of intel end at scan 243, of aces at 134, of fr079 at 25): every cell's
     trajectory.tum is byte-identical to that of the equivalent separate ``slam run`` (run here in
     this process, with numba's default thread count; the sweep's workers use one thread)."""
-    options = ["--max-scans", "250", "--particles", "5", "--no-record", "--no-texture", "--set", "quality.enabled=false"]
+    options = [
+        "--max-scans",
+        "250",
+        "--particles",
+        "5",
+        "--no-record",
+        "--no-texture",
+        "--set",
+        "quality.enabled=false",
+    ]
     out = tmp_path / "sw"
     code = main(["sweep", "--logs", "intel,aces,fr079", "--seeds", "0-3", "--set",
                  "rbpf.temperature=10,40", "--out", str(out), "--data-dir", str(data_dir), *options])  # fmt: skip

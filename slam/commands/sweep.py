@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "sweep",
         help="run many cells (logs × seeds × settings), evaluate, tabulate; resumable",
-        description=__doc__.split("\n\n")[1],
+        description=__doc__.split("\n\n")[1].replace("``", "'"),
     )
     add_sweep_arguments(parser)
     parser.add_argument(

@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "tune",
         help="random/grid search over declared ranges for the least mean error",
-        description=__doc__.split("\n\n")[1],
+        description=__doc__.split("\n\n")[1].replace("``", "'"),
     )
     add_sweep_arguments(parser)
     parser.add_argument("--trials", type=int, help="trials, the default included (budget)")
