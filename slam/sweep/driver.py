@@ -402,8 +402,8 @@ def run_sweep(
     """Run the sweep's missing cells into ``folder`` (module docstring) and write the results.
 
     Raises a :class:`KeyboardInterrupt` after writing the results of what is done when
-    interrupted. A function over 80 lines would be the loop below split for no reader's gain:
-    planning, the result callback and the interrupt path share the rows.
+    interrupted. Long because planning the cells, the result callback and the interrupt path
+    share the results and the counts; split, each piece would take them all as arguments.
     """
     folder = Path(folder or spec.out or default_sweep_dir(spec))
     cells = spec.cells()
