@@ -690,6 +690,9 @@ def load_bag(
 
     Raises :class:`DataError` naming the file when it cannot be read or lacks scans or
     odometry, :class:`UsageError` when a topic choice is ambiguous.
+
+    Long because it is the loader's one readable sequence (open, choose topics, read tf, stream,
+    order, mount, sync, describe); each step is a call, and most of the length is ``meta``.
     """
     path = Path(path)
     lidar = lidar or LidarConfig()
