@@ -196,7 +196,23 @@ def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
     edge_i = np.concatenate(ei).astype(np.int64)
     edge_j = np.concatenate(ej).astype(np.int64)
     z = np.ascontiguousarray(np.concatenate(meas))
-    x = poses.copy()
+    return gauss_newton(poses.copy(), edge_i, edge_j, z, info, robust, lc)
+
+
+def gauss_newton(
+    x: F64,
+    edge_i: NDArray[np.int64],
+    edge_j: NDArray[np.int64],
+    z: F64,
+    info: F64,
+    robust: F64,
+    lc: LoopConfig,
+) -> F64:
+    """Gauss-Newton on the pose graph from ``x`` (modified in place and returned): node 0
+    fixed, at most ``lc.iterations`` steps, until a step moves no node more than
+    ``lc.converged_xy`` / ``lc.converged_th``. Edges ``i → j`` measure ``z`` with information
+    ``info`` and per-edge robust scale ``robust``."""
+    n = x.shape[0]
     diag = np.zeros((n, 3, 3))
     band = np.zeros((max(n - 1, 1), 3, 3))
     far = np.zeros((edge_i.size, 3, 3))

@@ -36,10 +36,16 @@ from numpy.typing import NDArray
 from slam.backend.submaps import SubmapCache, stretches, world_hits
 from slam.config import Config
 from slam.geometry import compose, inverse, relative, spread_corrections, wrap_angle
-from slam.graph import LoopResult, _chain_information, _detect, _edge_information
+from slam.graph import (
+    LoopResult,
+    _chain_information,
+    _detect,
+    _edge_information,
+    gauss_newton,
+)
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
-from slam.kernels.graph import edge_error, fit_counts, linearize, solve_system
+from slam.kernels.graph import edge_error, fit_counts
 from slam.mapping import likelihood_tables
 
 F64 = NDArray[np.float64]
@@ -196,24 +202,7 @@ def optimize(poses: F64, edges: list, robust: F64, lc, start: F64 | None = None)
         np.concatenate([seq_z, np.array([e[2] for e in edges]).reshape(-1, 3)])
     )
     x = (poses if start is None else start).copy()
-    diag = np.zeros((n, 3, 3))
-    band = np.zeros((max(n - 1, 1), 3, 3))
-    far = np.zeros((edge_i.size, 3, 3))
-    grad = np.zeros((n, 3))
-    for _ in range(lc.iterations):
-        linearize(x, edge_i, edge_j, z, info, rob, diag, band, far, grad)
-        diag[0] += np.eye(3) * 1e9  # node 0 fixed
-        delta, _ = solve_system(
-            diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, lc.solver_tolerance
-        )
-        x += delta
-        x[:, 2] = wrap_angle(x[:, 2])
-        if (
-            np.abs(delta[:, :2]).max() < lc.converged_xy
-            and np.abs(delta[:, 2]).max() < lc.converged_th
-        ):
-            break
-    return x
+    return gauss_newton(x, edge_i, edge_j, z, info, rob, lc)
 
 
 def _chi2(keys_x: F64, edge: tuple) -> float:
