@@ -277,9 +277,13 @@ def test_sigterm_exits_143_and_sigkill_leftovers_go_with_the_next_run(small, tmp
         cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     left = wait_for_partial(parent, process)
+    from slam.io.runfolder import read_owner
+
+    deadline = time.monotonic() + 60  # the owner record follows the folder's creation
+    while read_owner(left) is None and time.monotonic() < deadline:
+        time.sleep(0.05)
     process.kill()
     process.communicate(timeout=60)
-    from slam.io.runfolder import read_owner
 
     assert process.returncode == -signal.SIGKILL
     assert left.is_dir() and read_owner(left)["pid"] == process.pid
