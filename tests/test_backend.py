@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from slam.backend.global_loops import consistent, keyframes
 from slam.backend.submaps import stretches
@@ -107,3 +108,12 @@ def test_consistency_keeps_agreeing_closures_only():
     kept = consistent([*good, lone], x, path, Config())
     assert [(e[0], e[1]) for e in kept] == [(10, 180), (14, 186)]
     assert consistent([lone], x, path, Config()) == []
+
+
+def test_backend_config_bounds_name_the_key():
+    """A bad ``[backend]`` value is one ConfigError naming the key and the bound."""
+    from slam.config import load_config
+    from slam.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="window_xy_min <= window_xy_max"):
+        load_config("demo", None, ["backend.window_xy_min=5", "backend.window_xy_max=1"])
