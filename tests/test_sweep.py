@@ -154,17 +154,12 @@ def test_a_folder_not_made_by_slam_sweep_is_left_alone(small, tmp_path, capsys):
 # --- resume, crash ----------------------------------------------------------------------------
 
 
-@pytest.mark.xfail(
-    reason="known bug (open): on an idle machine the sweep driver finishes every cell after a SIGINT "
-    "sent between cells instead of exiting 130; passes under load",
-    strict=False,
-)
 def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, tmp_path):
-    """Ctrl-C during an 8-cell sweep (one worker; eight so that a fast machine is still inside
-    the sweep when the signal comes): exit 130, no partial folder left, the finished
-    cells in results.json; the same command again runs only the missing cells."""
+    """Ctrl-C during a 4-cell sweep (one worker), sent when the first cell has finished: exit
+    130, no partial folder left, the finished cells in results.json; the same command again runs
+    only the missing cells."""
     out = tmp_path / "sw"
-    cmd = slam_cmd("sweep", "--logs", str(small), "--seeds", "0-7", "--workers", "1", "--out",
+    cmd = slam_cmd("sweep", "--logs", str(small), "--seeds", "0-3", "--workers", "1", "--out",
                    str(out), *RUN_OPTIONS)  # fmt: skip
     proc = subprocess.Popen(
         cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
@@ -174,27 +169,27 @@ def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, 
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
-    _stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, stderr
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (stdout, stderr)
     assert "rerun the same command to finish them" in stderr
     done = {c for c, r in results(out).items() if r["status"] == "ok"}
-    assert 1 <= len(done) < 8
+    assert 1 <= len(done) < 4, (stdout, stderr)
     assert not [p for p in out.rglob("*.partial")]
     assert all((out / c / ".slam-run").is_file() for c in done)
     before = {c: os.stat(out / c / "trajectory.tum").st_ino for c in done}
 
     again = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr
-    assert f"({8 - len(done)} run, {len(done)} already done, 0 failed)" in again.stdout
+    assert f"({4 - len(done)} run, {len(done)} already done, 0 failed)" in again.stdout
     assert {c: os.stat(out / c / "trajectory.tum").st_ino for c in done} == before
     final = results(out)
-    assert len(final) == 8 and all(r["status"] == "ok" for r in final.values())
+    assert len(final) == 4 and all(r["status"] == "ok" for r in final.values())
     assert all(r["metric"] == "ate" and 0 <= r["error"] < 0.5 for r in final.values())
     # one worker (NUMBA_NUM_THREADS = the cores) gives the trajectories of the default pool
     assert {c: final[c]["trajectory_sha256"] for c in local_hashes} == local_hashes
     # a finished sweep is not run again
     third = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
-    assert "(0 run, 8 already done, 0 failed)" in third.stdout
+    assert "(0 run, 4 already done, 0 failed)" in third.stdout
 
 
 def test_a_crashing_cell_is_recorded_and_the_sweep_goes_on(small, tmp_path, capsys):
