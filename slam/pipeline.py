@@ -55,6 +55,7 @@ from slam.observers import Observer
 
 if TYPE_CHECKING:
     from slam.online import Result
+    from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
@@ -337,6 +338,18 @@ def _check_memory(
     check_run_memory(name, components, config)
 
 
+def _up_to_scan(trajectory: Trajectory, log: Log, last: int) -> Trajectory:
+    """``trajectory`` (from :func:`slam.odometry.odometry_trajectory`) cut after scan ``last``:
+    one pose per scan (CARMEN) keeps the first ``last + 1``; encoder-rate poses (ECE276A) keep
+    those up to that scan's time."""
+    from slam.trajectory import Trajectory
+
+    if log.encoders is None:
+        return Trajectory(trajectory.times[: last + 1], trajectory.poses[: last + 1])
+    keep = trajectory.times <= log.scans.time[last]  # type: ignore[union-attr]
+    return Trajectory(trajectory.times[keep], trajectory.poses[keep])
+
+
 def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
     """``method = "odometry"``: the odometry trajectory at its natural rate, and the map of the
     scans at their odometry poses."""
@@ -350,6 +363,8 @@ def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
     grid = None
     if log.scans is not None:
         seq = ScanSequence.from_log(log, config)
+        if config.filter.max_scans:  # the trajectory ends with the last scan the run processes
+            trajectory = _up_to_scan(trajectory, log, int(seq.indices[-1]))
         reach = float(seq.scan(0).range_max)  # type: ignore[arg-type]
         _check_memory(log.name, len(seq), seq.num_beams, seq.odometry, reach, config)
         grid = build_map(seq, seq.odometry, np.arange(len(seq)), config)

@@ -178,3 +178,19 @@ def test_intel_odometry_one_pose_per_scan_and_its_relation_error(carmen_dir, tmp
     rel = json.loads(capsys.readouterr().out)["relations"]
     assert rel["count"] == 2984
     assert rel["trans_mean"] == pytest.approx(7.370, abs=0.001)
+
+
+def test_odometry_method_stops_at_max_scans(small, tmp_path):
+    """``--method odometry --max-scans N`` ends its trajectory at the N-th scan, as the filter's
+    run does (it used to keep the whole log's encoder-rate dead reckoning)."""
+    ends = {}
+    for method in ("odometry", "rbpf"):
+        out = tmp_path / method
+        assert main(["run", str(small), "--out", str(out), "--method", method, "--max-scans",
+                     "100", "--particles", "5", "--quiet", "--no-record"]) == 0  # fmt: skip
+        ends[method] = read_tum(out / "trajectory.tum")
+    odo, rbpf = ends["odometry"], ends["rbpf"]
+    assert len(rbpf.times) == 100
+    assert odo.times[-1] <= rbpf.times[-1] < odo.times[-1] + 0.05  # encoders at 40 Hz
+    full, _ = read_tum(small / "groundtruth.tum")
+    assert odo.times[-1] < full[-1] - 20.0  # 100 scans of a 30 s log: about 2.5 s
