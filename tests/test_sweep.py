@@ -9,11 +9,11 @@ within a couple of minutes; the real-log comparison is marked ``data`` and ``slo
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -245,104 +245,107 @@ def test_tune_finds_a_setting_at_least_as_good_as_the_default_and_writes_it(
 # --- Ray --------------------------------------------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+CLUSTER = """
+import signal, sys
+from ray.cluster_utils import Cluster
+cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
+                                                        "node_ip_address": "127.0.0.1"})
+cluster.add_node(num_cpus=1, node_ip_address="127.0.0.1")
+cluster.wait_for_nodes()
+print("ADDRESS", cluster.address, flush=True)
+signal.sigwait({signal.SIGTERM, signal.SIGINT})
+cluster.shutdown()
+"""
+"""A two-node Ray cluster on this machine (Ray's own test cluster, ``ray.cluster_utils``): the
+head and one extra worker node, one CPU each, every address 127.0.0.1; stops on SIGTERM."""
+
+
+def _loopback(ip: str) -> bool:
+    address = ipaddress.ip_address(ip)
+    mapped = getattr(address, "ipv4_mapped", None)
+    return (mapped or address).is_loopback
+
+
+def _descendants(psutil, pid: int) -> list:
+    with contextlib.suppress(psutil.Error):
+        return psutil.Process(pid).children(recursive=True)
+    return []
 
 
 def test_ray_cluster_survives_a_killed_worker(small, local_hashes, tmp_path):
-    """A local Ray cluster started by the test (``ray start --head``, 2 CPUs: the head and two
-    worker processes, every port on 127.0.0.1, dashboard off); a worker process running a cell
-    is killed mid-sweep; Ray re-runs the cell and every cell's trajectory equals that of the
-    local executor. (Ray 2.60 refuses a second *node* when its addresses are loopback-only.)"""
+    """A local Ray cluster started by the test: a head node and one extra worker node (one CPU
+    each, every address on 127.0.0.1, dashboard off). A Ray worker process of the extra node
+    running a cell is killed mid-sweep; Ray re-runs the cell and every cell's trajectory equals
+    that of the local executor."""
     pytest.importorskip("ray", reason="Ray is not installed (uv sync --extra ray)")
     psutil = pytest.importorskip("psutil")
-    ray_bin = Path(sys.executable).parent / "ray"
-    if not ray_bin.is_file():
-        pytest.skip(f"{ray_bin}: the ray command is not installed")
-    port = _free_port()
     temp = Path("/tmp") / f"slam-ray-{os.getpid()}"  # short: Ray's socket paths are limited
+    temp.mkdir(exist_ok=True)
     ray_env = env(
-        RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0",  # every Ray port on 127.0.0.1
+        RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0",  # every Ray address on 127.0.0.1
         RAY_USAGE_STATS_ENABLED="0",
-        RAY_worker_register_timeout_seconds="300",
-        RAY_ENABLE_UV_RUN_RUNTIME_ENV="0",  # a loaded 2-core machine starts workers slowly
+        RAY_TMPDIR=str(temp),
+        RAY_worker_register_timeout_seconds="300",  # a loaded 2-core machine starts workers slowly
+        RAY_ENABLE_UV_RUN_RUNTIME_ENV="0",
     )
-    starters = [
-        subprocess.Popen(
-            [
-                str(ray_bin),
-                "start",
-                "--head",
-                "--block",
-                f"--port={port}",
-                "--node-ip-address=127.0.0.1",
-                "--num-cpus=2",
-                "--include-dashboard=false",
-                "--disable-usage-stats",
-                f"--temp-dir={temp}",
-            ],
-            env=ray_env,
-            start_new_session=True,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )  # fmt: skip
-    ]
+    starter = subprocess.Popen(
+        [sys.executable, "-c", CLUSTER], env=ray_env, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
     out = tmp_path / "ray"
     sweep = ["sweep", "--logs", str(small), "--seeds", "0-3", *RUN_OPTIONS]
     driver = None
     try:
-        time.sleep(10)
+        line = starter.stdout.readline()  # type: ignore[union-attr]
+        assert line.startswith("ADDRESS 127.0.0.1:"), f"the Ray cluster did not start: {line!r}"
+        address = line.split()[1]
+        raylets = sorted(
+            (p for p in _descendants(psutil, starter.pid) if p.name() == "raylet"),
+            key=lambda p: p.create_time(),
+        )
+        assert len(raylets) == 2, raylets  # the head's and the extra node's
+        extra = raylets[1]
+        listening = {
+            c.laddr.ip
+            for p in [psutil.Process(starter.pid), *_descendants(psutil, starter.pid)]
+            for c in p.net_connections("inet")
+            if c.status == psutil.CONN_LISTEN
+        }
+        assert listening and all(_loopback(ip) for ip in listening), listening
         driver = subprocess.Popen(
-            slam_cmd(*sweep, "--out", str(out), "--executor", "ray", "--address", f"127.0.0.1:{port}"),
+            slam_cmd(*sweep, "--out", str(out), "--executor", "ray", "--address", address),
             env=ray_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         killed = None
         deadline = time.monotonic() + 180
         while killed is None and time.monotonic() < deadline and driver.poll() is None:
-            for starter in starters:
-                for proc in psutil.Process(starter.pid).children(recursive=True):
-                    try:
-                        if (
-                            proc.cmdline()[:1] == ["ray::ray_cell"]
-                            or proc.name() == "ray::ray_cell"
-                        ):
-                            time.sleep(1.0)  # let it get into the run
-                            proc.kill()
-                            killed = proc.pid
-                            break
-                    except psutil.Error:
-                        continue
-                if killed:
-                    break
+            for proc in _descendants(psutil, extra.pid):
+                with contextlib.suppress(psutil.Error):
+                    if proc.name() == "ray::ray_cell" or proc.cmdline()[:1] == ["ray::ray_cell"]:
+                        time.sleep(1.0)  # let it get into the run
+                        proc.kill()
+                        killed = proc.pid
+                        break
             time.sleep(0.2)
         stdout, stderr = driver.communicate(timeout=600)
-        assert killed is not None, "no Ray worker running a cell was found to kill"
+        assert killed is not None, "no Ray worker of the extra node running a cell was found"
         assert driver.returncode == 0, stderr
         assert "(4 run, 0 already done, 0 failed)" in stdout
     finally:
         if driver is not None and driver.poll() is None:
             driver.kill()
             driver.wait()
-        pids = set()
-        for starter in starters:
-            with_children = [starter.pid]
-            with contextlib.suppress(psutil.Error):
-                with_children += [
-                    p.pid for p in psutil.Process(starter.pid).children(recursive=True)
-                ]
-            pids.update(with_children)
-        for starter in starters:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(starter.pid, signal.SIGTERM)
-        time.sleep(3)
+        pids = {p.pid for p in _descendants(psutil, starter.pid)}
+        starter.terminate()  # the cluster shuts its nodes down
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            starter.wait(timeout=60)
         for proc in psutil.process_iter(["pid", "cmdline"]):
             if proc.info["pid"] != os.getpid() and str(temp) in " ".join(
                 proc.info["cmdline"] or []
             ):
                 pids.add(proc.info["pid"])
-        for pid in pids:
+        left = [pid for pid in pids if psutil.pid_exists(pid)]
+        for pid in [starter.pid, *left]:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, signal.SIGKILL)
         shutil.rmtree(temp, ignore_errors=True)
