@@ -44,8 +44,8 @@ from slam.localize.maps import LikelihoodMap
 from slam.viz import blueprint as bp
 from slam.viz.grid import heat_map
 from slam.viz.images import PlacedImage, occupancy_image
-from slam.viz.recorder import log_placed, weight_colours
-from slam.viz.stream import close_stream, open_stream, set_time, time_columns
+from slam.viz.recorder import log_placed, log_track_styles, send_track, weight_colours
+from slam.viz.stream import close_stream, open_stream, set_time
 
 F64 = NDArray[np.float64]
 
@@ -53,9 +53,6 @@ HISTOGRAM = "world/histogram"
 PARTICLE_COUNT = "metrics/particles"
 QUALITY = "metrics/quality"
 LOCALIZED = "metrics/localized"
-
-_RED = (220, 40, 40)
-_BLUE = (40, 110, 230)
 
 
 def localize_blueprint() -> rrb.Blueprint:
@@ -101,33 +98,15 @@ class LocalizeRecorder:
         self.path = Path(path)
         self.config = config
         self.rec = open_stream(self.path, name=name, blueprint=localize_blueprint())
-        rec, ui = self.rec, rr.Radius.ui_points
+        rec = self.rec
         rec.log(bp.WORLD, bp.world_flip(), static=True)
         image = occupancy_image(lmap.grid, config.map_levels)
         if image is not None:
             log_placed(rec, bp.MAP, image, draw_order=0.0, static=True)
-        rec.log(
-            bp.TRAJECTORY,
-            rr.LineStrips2D.from_fields(colors=[_RED], radii=ui(1.5), draw_order=30.0),
-            static=True,
+        log_track_styles(
+            rec,
+            ((PARTICLE_COUNT, "particles"), (QUALITY, "match quality"), (LOCALIZED, "localized")),
         )
-        rec.log(
-            bp.TRAJECTORY_FINAL,
-            rr.LineStrips2D.from_fields(colors=[_BLUE], radii=ui(1.5), draw_order=31.0),
-            static=True,
-        )
-        rec.log(
-            bp.ROBOT,
-            rr.Arrows2D.from_fields(colors=[_RED], radii=ui(2.5), draw_order=40.0),
-            static=True,
-        )
-        rec.log(bp.PARTICLES, rr.Points2D.from_fields(radii=ui(2.0), draw_order=35.0), static=True)
-        for path, label in (
-            (PARTICLE_COUNT, "particles"),
-            (QUALITY, "match quality"),
-            (LOCALIZED, "localized"),
-        ):
-            rec.log(path, rr.SeriesLines(names=label, widths=1.5), static=True)
         self._rows: list[tuple[float, ...]] = []
         self.steps = 0
         self.particle_sets = 0
@@ -176,22 +155,7 @@ class LocalizeRecorder:
         rec = self.rec
         if self._rows:
             rows = np.asarray(self._rows, dtype=np.float64)
-            index = time_columns(rows[:, 0].astype(np.int64), rows[:, 1])
-            xy = rows[:, 2:4]
-            prev = np.vstack([xy[:1], xy[:-1]])
-            rec.send_columns(
-                bp.TRAJECTORY,
-                indexes=index,
-                columns=rr.LineStrips2D.columns(strips=np.stack([prev, xy], axis=1)),
-            )
-            heading = 0.5 * np.stack([np.cos(rows[:, 4]), np.sin(rows[:, 4])], axis=1)
-            rec.send_columns(
-                bp.ROBOT, indexes=index, columns=rr.Arrows2D.columns(origins=xy, vectors=heading)
-            )
-            for path, column in ((PARTICLE_COUNT, 5), (QUALITY, 6), (LOCALIZED, 7)):
-                rec.send_columns(
-                    path, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, column])
-                )
+            send_track(rec, rows, None, ((PARTICLE_COUNT, 5), (QUALITY, 6), (LOCALIZED, 7)))
             set_time(rec, int(rows[-1, 0]), float(rows[-1, 1]))
             rec.log(bp.TRAJECTORY_FINAL, rr.LineStrips2D([np.asarray(poses)[:, :2]]))
         close_stream(rec)

@@ -41,7 +41,7 @@ from __future__ import annotations
 import sys
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +113,50 @@ def weight_colours(weights: F64) -> NDArray[np.uint8]:
     return (lo + s[:, None] * (hi - lo)).astype(np.uint8)
 
 
+def log_track_styles(
+    rec: rr.RecordingStream, series: Iterable[tuple[str, str]], scan: bool = False
+) -> None:
+    """Static styles of the entities a pose track uses (live and final trajectory, robot arrow,
+    particles, the scan endpoints when ``scan``) and one line style per ``(path, label)`` of
+    ``series``, so that per-step rows carry only positions and values."""
+    ui = rr.Radius.ui_points
+    line, points = rr.LineStrips2D.from_fields, rr.Points2D.from_fields
+    styles = [
+        (bp.TRAJECTORY, line(colors=[_RED], radii=ui(1.5), draw_order=30.0)),
+        (bp.TRAJECTORY_FINAL, line(colors=[_BLUE], radii=ui(1.5), draw_order=31.0)),
+        (bp.SCAN, points(colors=[_ORANGE], radii=ui(1.5), draw_order=20.0)),
+        (bp.ROBOT, rr.Arrows2D.from_fields(colors=[_RED], radii=ui(2.5), draw_order=40.0)),
+        (bp.PARTICLES, points(radii=ui(2.0), draw_order=35.0)),
+    ]
+    for path, style in styles:
+        if scan or path != bp.SCAN:
+            rec.log(path, style, static=True)
+    for path, label in series:
+        rec.log(path, rr.SeriesLines(names=label, widths=1.5), static=True)
+
+
+def send_track(
+    rec: rr.RecordingStream,
+    rows: F64,
+    last_xy: F64 | None,
+    scalars: Iterable[tuple[str, int]],
+) -> None:
+    """Send buffered pose rows (columns step, time, x, y, theta, …) as columns: per row a
+    trajectory segment from the previous position (``last_xy`` before the first row; none: the
+    first segment has length 0), the robot arrow, and for each ``(path, column)`` of
+    ``scalars`` that column's values."""
+    index = time_columns(rows[:, 0].astype(np.int64), rows[:, 1])
+    xy = rows[:, 2:4]
+    prev = np.vstack([xy[:1] if last_xy is None else last_xy[None], xy[:-1]])
+    segments = rr.LineStrips2D.columns(strips=np.stack([prev, xy], axis=1))
+    rec.send_columns(bp.TRAJECTORY, indexes=index, columns=segments)
+    heading = 0.5 * np.stack([np.cos(rows[:, 4]), np.sin(rows[:, 4])], axis=1)
+    arrows = rr.Arrows2D.columns(origins=xy, vectors=heading)
+    rec.send_columns(bp.ROBOT, indexes=index, columns=arrows)
+    for path, column in scalars:
+        rec.send_columns(path, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, column]))
+
+
 class RunRecorder:
     """Observer that records a run for the rerun viewer (file and/or live viewer).
 
@@ -169,35 +213,12 @@ class RunRecorder:
 
     def _log_styles(self) -> None:
         """Static transform and styles, so that per-step rows carry only positions."""
-        rec, ui = self.rec, rr.Radius.ui_points
-        rec.log(bp.WORLD, bp.world_flip(), static=True)
-        rec.log(
-            bp.TRAJECTORY,
-            rr.LineStrips2D.from_fields(colors=[_RED], radii=ui(1.5), draw_order=30.0),
-            static=True,
+        self.rec.log(bp.WORLD, bp.world_flip(), static=True)
+        log_track_styles(
+            self.rec,
+            ((bp.N_EFF, "N_eff"), (bp.MAX_WEIGHT, "max weight"), (bp.SCANS_PER_S, "scans/s")),
+            scan=True,
         )
-        rec.log(
-            bp.TRAJECTORY_FINAL,
-            rr.LineStrips2D.from_fields(colors=[_BLUE], radii=ui(1.5), draw_order=31.0),
-            static=True,
-        )
-        rec.log(
-            bp.SCAN,
-            rr.Points2D.from_fields(colors=[_ORANGE], radii=ui(1.5), draw_order=20.0),
-            static=True,
-        )
-        rec.log(
-            bp.ROBOT,
-            rr.Arrows2D.from_fields(colors=[_RED], radii=ui(2.5), draw_order=40.0),
-            static=True,
-        )
-        rec.log(bp.PARTICLES, rr.Points2D.from_fields(radii=ui(2.0), draw_order=35.0), static=True)
-        for path, label in (
-            (bp.N_EFF, "N_eff"),
-            (bp.MAX_WEIGHT, "max weight"),
-            (bp.SCANS_PER_S, "scans/s"),
-        ):
-            rec.log(path, rr.SeriesLines(names=label, widths=1.5), static=True)
 
     # -- the Observer protocol
     def on_step(self, record: StepRecord) -> None:
@@ -236,21 +257,8 @@ class RunRecorder:
         if self._rows:
             rows = np.asarray(self._rows, dtype=np.float64)
             self._rows = []
-            index = time_columns(rows[:, 0].astype(np.int64), rows[:, 1])
-            xy = rows[:, 2:4]
-            prev = np.vstack([xy[:1] if self._last_xy is None else self._last_xy[None], xy[:-1]])
-            self._last_xy = xy[-1].copy()
-            segments = rr.LineStrips2D.columns(strips=np.stack([prev, xy], axis=1))
-            rec.send_columns(bp.TRAJECTORY, indexes=index, columns=segments)
-            heading = 0.5 * np.stack([np.cos(rows[:, 4]), np.sin(rows[:, 4])], axis=1)
-            arrows = rr.Arrows2D.columns(origins=xy, vectors=heading)
-            rec.send_columns(bp.ROBOT, indexes=index, columns=arrows)
-            rec.send_columns(
-                bp.N_EFF, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 5])
-            )
-            rec.send_columns(
-                bp.MAX_WEIGHT, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, 6])
-            )
+            send_track(rec, rows, self._last_xy, ((bp.N_EFF, 5), (bp.MAX_WEIGHT, 6)))
+            self._last_xy = rows[-1, 2:4].copy()
         if self._particles:
             steps, stamps, points, colours = zip(*self._particles, strict=True)
             self._particles = []
