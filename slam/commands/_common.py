@@ -23,6 +23,47 @@ def add_data_dir_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--config`` (a TOML file) and ``--set SECTION.KEY=VALUE`` (repeatable); read them
+    with :func:`slam.commands.run.overrides_from`."""
+    parser.add_argument("--config", type=Path, help="configuration file (TOML)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="override one configuration value (repeatable)",
+    )
+
+
+def add_scan_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--seed``, ``--every`` and ``--max-scans`` (shortcuts for ``filter.seed``,
+    ``filter.every`` and ``filter.max_scans``)."""
+    parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument("--every", type=int, help="process every k-th scan")
+    parser.add_argument("--max-scans", type=int, help="stop after this many scans (0: all)")
+
+
+def add_output_arguments(
+    parser: argparse.ArgumentParser,
+    folder: str,
+    record: bool = True,
+    quiet: str = "no progress bar",
+) -> None:
+    """Add ``--no-record`` (when ``record``), ``--force`` (replace an existing ``folder``, never
+    any other folder) and ``--quiet`` (help text ``quiet``)."""
+    if record:
+        parser.add_argument(
+            "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
+        )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help=f"replace an existing {folder} (never any other folder)",
+    )
+    parser.add_argument("--quiet", action="store_true", help=quiet)
+
+
 def data_dir_from(args: argparse.Namespace) -> Path:
     """The data directory chosen by ``args`` (see :func:`slam.io.datadir.resolve_data_dir`)."""
     return resolve_data_dir(getattr(args, "data_dir", None))

@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_config_arguments,
+    add_data_dir_argument,
+    add_output_arguments,
+    add_scan_arguments,
+    data_dir_from,
+    show_progress,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,26 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="global localization (the default without --initial)",
     )
     parser.add_argument("--out", type=Path, help="run folder (default runs/LOG-localize-<time>)")
-    parser.add_argument("--config", type=Path, help="configuration file (TOML)")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override one configuration value (repeatable)",
-    )
-    parser.add_argument("--seed", type=int, help="random seed")
-    parser.add_argument("--every", type=int, help="process every k-th scan")
-    parser.add_argument("--max-scans", type=int, help="stop after this many scans (0: all)")
-    parser.add_argument(
-        "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
-    )
-    parser.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing folder of slam localize (never any other folder)",
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_config_arguments(parser)
+    add_scan_arguments(parser)
+    add_output_arguments(parser, "folder of slam localize")
     add_data_dir_argument(parser)
     parser.set_defaults(func=localize_command)
 

@@ -8,7 +8,10 @@ from pathlib import Path
 
 from slam.commands._common import (
     add_bag_arguments,
+    add_config_arguments,
     add_data_dir_argument,
+    add_output_arguments,
+    add_scan_arguments,
     bag_options_from,
     data_dir_from,
     show_progress,
@@ -33,33 +36,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("name", metavar="NAME", help="dataset name, 'demo', or a path")
     parser.add_argument("--method", choices=METHODS, help="estimation method (default: rbpf)")
     parser.add_argument("--out", type=Path, help="run folder (default runs/NAME-<time>)")
-    parser.add_argument("--config", type=Path, help="configuration file (TOML)")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override one configuration value (repeatable)",
-    )
+    add_config_arguments(parser)
     parser.add_argument("--particles", type=int, help="number of particles")
-    parser.add_argument("--seed", type=int, help="random seed")
-    parser.add_argument("--every", type=int, help="process every k-th scan")
-    parser.add_argument("--max-scans", type=int, help="stop after this many scans (0: all)")
+    add_scan_arguments(parser)
     parser.add_argument(
         "--no-texture", action="store_true", help="skip the floor texture (RGB-D) stage"
     )
     parser.add_argument(
         "--viewer", action="store_true", help="stream the run live to a rerun viewer (127.0.0.1)"
     )
-    parser.add_argument(
-        "--no-record", action="store_true", help="do not write recording.rrd (viz.record=false)"
-    )
-    parser.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing run folder of slam run (never any other folder)",
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_output_arguments(parser, "run folder of slam run")
     add_bag_arguments(parser)
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_command)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.commands._common import show_progress
+from slam.commands._common import add_output_arguments, show_progress
 from slam.io.atomic import check_output_dir
 
 
@@ -44,12 +44,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--noise-free", action="store_true", help="exact sensors: no noise, jitter or drops"
     )
-    parser.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing dataset folder written by slam sim (never any other folder)",
+    add_output_arguments(
+        parser,
+        "dataset folder written by slam sim",
+        record=False,
+        quiet="no progress bar or summary",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(func=run_sim)
 
 
