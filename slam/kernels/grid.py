@@ -13,39 +13,55 @@ from slam.kernels.cells import cell_index
 
 
 @njit(cache=True)
+def line_start(x0: int, y0: int, x1: int, y1: int) -> tuple[int, int, int, int, int]:
+    """``(dx, dy, stepx, stepy, err)`` that start the Bresenham walk from cell ``(x0, y0)`` to
+    ``(x1, y1)``: lengths and directions along both axes and the initial error term; the walk
+    takes ``max(dx, dy)`` steps of :func:`line_step`."""
+    dx = abs(x1 - x0)
+    dy = abs(y1 - y0)
+    stepx = 1 if x1 >= x0 else -1
+    stepy = 1 if y1 >= y0 else -1
+    err = 2 * dy - dx if dx >= dy else 2 * dx - dy
+    return dx, dy, stepx, stepy, err
+
+
+@njit(cache=True)
+def line_step(
+    x: int, y: int, err: int, dx: int, dy: int, stepx: int, stepy: int
+) -> tuple[int, int, int]:
+    """The next cell ``(x, y)`` of the walk :func:`line_start` began, and the new error term: one
+    cell along the major axis, and one along the other when the error term says so (the classic
+    all-octant Bresenham)."""
+    if dx >= dy:
+        if err > 0:
+            y += stepy
+            err -= 2 * dx
+        err += 2 * dy
+        x += stepx
+    else:
+        if err > 0:
+            x += stepx
+            err -= 2 * dy
+        err += 2 * dx
+        y += stepy
+    return x, y, err
+
+
+@njit(cache=True)
 def bresenham(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
     """Cells ``(K, 2)`` of the integer line from ``(x0, y0)`` to ``(x1, y1)``, both ends included.
 
-    The classic all-octant Bresenham: one cell per step along the major axis, in order from the
-    start to the end.
+    The classic all-octant Bresenham (:func:`line_start`, :func:`line_step`): one cell per step
+    along the major axis, in order from the start to the end.
     """
-    dx = abs(x1 - x0)
-    dy = abs(y1 - y0)
-    sx = 1 if x1 >= x0 else -1
-    sy = 1 if y1 >= y0 else -1
+    dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
     n = max(dx, dy) + 1
     out = np.empty((n, 2), dtype=np.int64)
     x, y = x0, y0
-    if dx >= dy:
-        err = 2 * dy - dx
-        for k in range(n):
-            out[k, 0] = x
-            out[k, 1] = y
-            if err > 0:
-                y += sy
-                err -= 2 * dx
-            err += 2 * dy
-            x += sx
-    else:
-        err = 2 * dx - dy
-        for k in range(n):
-            out[k, 0] = x
-            out[k, 1] = y
-            if err > 0:
-                x += sx
-                err -= 2 * dy
-            err += 2 * dx
-            y += sy
+    for k in range(n):
+        out[k, 0] = x
+        out[k, 1] = y
+        x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
     return out
 
 
@@ -89,34 +105,13 @@ def integrate_rays(
     for k in range(ex.shape[0]):
         x1 = cell_index(ex[k], ox, res)
         y1 = cell_index(ey[k], oy, res)
-        dx = abs(x1 - x0)
-        dy = abs(y1 - y0)
-        stepx = 1 if x1 >= x0 else -1
-        stepy = 1 if y1 >= y0 else -1
-        n = max(dx, dy)
+        dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
         x, y = x0, y0
-        if dx >= dy:
-            err = 2 * dy - dx
-            for _ in range(n):
-                if 0 <= x < w and 0 <= y < h:
-                    _add_clamped(log_odds, x, y, l_miss, l_min, l_max)
-                    count += 1
-                if err > 0:
-                    y += stepy
-                    err -= 2 * dx
-                err += 2 * dy
-                x += stepx
-        else:
-            err = 2 * dx - dy
-            for _ in range(n):
-                if 0 <= x < w and 0 <= y < h:
-                    _add_clamped(log_odds, x, y, l_miss, l_min, l_max)
-                    count += 1
-                if err > 0:
-                    x += stepx
-                    err -= 2 * dy
-                err += 2 * dx
-                y += stepy
+        for _ in range(max(dx, dy)):
+            if 0 <= x < w and 0 <= y < h:
+                _add_clamped(log_odds, x, y, l_miss, l_min, l_max)
+                count += 1
+            x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
         if 0 <= x1 < w and 0 <= y1 < h:
             _add_clamped(log_odds, x1, y1, l_hit if hit[k] else l_miss, l_min, l_max)
             count += 1

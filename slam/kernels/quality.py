@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from slam.kernels.cells import cell_index
+from slam.kernels.grid import line_start, line_step
 
 
 class CountMap(NamedTuple):
@@ -148,51 +149,33 @@ def _add(table, pool, x, y, layer, value):
 
 
 @njit(cache=True)
+def _world(poses, k, c, s, x, y):
+    """The point ``(x, y)`` of scan ``k``'s robot frame in the world frame (``c``, ``s``: cosine
+    and sine of its heading)."""
+    return poses[k, 0] + c * x - s * y, poses[k, 1] + s * x + c * y
+
+
+@njit(cache=True)
+def _laser(poses, k, lx, ly):
+    """``(c, s, sx, sy)``: cosine and sine of scan ``k``'s heading and the world position of the
+    laser (``(lx, ly)`` in the robot frame)."""
+    c = math.cos(poses[k, 2])
+    s = math.sin(poses[k, 2])
+    sx, sy = _world(poses, k, c, s, lx, ly)
+    return c, s, sx, sy
+
+
+@njit(cache=True)
 def touched_tiles(
     tiles_y: int, tiles_x: int, ox: float, oy: float, res: float, rays: ScanRays
 ) -> np.ndarray:
     """``(TY, TX)`` mask of the tiles holding a cell some ray passes through or ends in (the
-    cells :func:`count_rays` updates)."""
-    poses, lx, ly, ex, ey, kind = rays
+    cells :func:`count_rays` updates: the same walk, :func:`_walk_rays`)."""
     mask = np.zeros((tiles_y, tiles_x), dtype=np.bool_)
-    h = tiles_y * TILE
-    w = tiles_x * TILE
-    for k in range(poses.shape[0]):
-        c = math.cos(poses[k, 2])
-        s = math.sin(poses[k, 2])
-        sx = poses[k, 0] + c * lx - s * ly
-        sy = poses[k, 1] + s * lx + c * ly
-        x0 = cell_index(sx, ox, res)
-        y0 = cell_index(sy, oy, res)
-        for j in range(kind.shape[1]):
-            if kind[k, j] == NO_RAY:
-                continue
-            wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
-            wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
-            x1 = cell_index(wx, ox, res)
-            y1 = cell_index(wy, oy, res)
-            dx = abs(x1 - x0)
-            dy = abs(y1 - y0)
-            stepx = 1 if x1 >= x0 else -1
-            stepy = 1 if y1 >= y0 else -1
-            x, y = x0, y0
-            n = max(dx, dy)
-            err = 2 * dy - dx if dx >= dy else 2 * dx - dy
-            for _ in range(n + 1):
-                if 0 <= x < w and 0 <= y < h:
-                    mask[y >> SHIFT, x >> SHIFT] = True
-                if dx >= dy:
-                    if err > 0:
-                        y += stepy
-                        err -= 2 * dx
-                    err += 2 * dy
-                    x += stepx
-                else:
-                    if err > 0:
-                        x += stepx
-                        err -= 2 * dy
-                    err += 2 * dx
-                    y += stepy
+    no_counts = CountMap(
+        np.empty((0, 0), dtype=np.int32), np.empty((0, TILE, TILE, 2), dtype=np.int32), ox, oy, res
+    )
+    _walk_rays(no_counts, rays, 0, rays.poses.shape[0], 0, mask)
     return mask
 
 
@@ -204,52 +187,46 @@ def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) ->
     a hit for a :data:`HIT` ray and a miss for a :data:`FREE` ray, as the occupancy map does.
     Cells outside the grid are skipped (the caller sizes the grid to hold every ray).
     """
+    _walk_rays(counts, rays, k0, k1, sign, np.zeros((0, 0), dtype=np.bool_))
+
+
+@njit(cache=True)
+def _walk_rays(counts, rays, k0, k1, sign, mask):
+    """Walk the rays of scans ``k0 .. k1 − 1`` cell by cell (Bresenham) over the grid of
+    ``counts`` and, when ``mask`` is empty, add ``sign`` to their counts (:func:`count_rays`);
+    else mark the tile of every cell in ``mask``, whose tiles are then the grid (the counts'
+    ``table`` and ``pool`` are not read: :func:`touched_tiles`)."""
     table, pool, ox, oy, res = counts
     poses, lx, ly, ex, ey, kind = rays
-    h = table.shape[0] * TILE
-    w = table.shape[1] * TILE
+    marking = mask.size > 0
+    ty, tx = mask.shape if marking else table.shape
+    h = ty * TILE
+    w = tx * TILE
     for k in range(k0, k1):
-        c = math.cos(poses[k, 2])
-        s = math.sin(poses[k, 2])
-        sx = poses[k, 0] + c * lx - s * ly
-        sy = poses[k, 1] + s * lx + c * ly
+        c, s, sx, sy = _laser(poses, k, lx, ly)
         x0 = cell_index(sx, ox, res)
         y0 = cell_index(sy, oy, res)
         for j in range(kind.shape[1]):
             what = kind[k, j]
             if what == NO_RAY:
                 continue
-            wx = poses[k, 0] + c * ex[k, j] - s * ey[k, j]
-            wy = poses[k, 1] + s * ex[k, j] + c * ey[k, j]
+            wx, wy = _world(poses, k, c, s, ex[k, j], ey[k, j])
             x1 = cell_index(wx, ox, res)
             y1 = cell_index(wy, oy, res)
-            dx = abs(x1 - x0)
-            dy = abs(y1 - y0)
-            stepx = 1 if x1 >= x0 else -1
-            stepy = 1 if y1 >= y0 else -1
+            dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
             x, y = x0, y0
-            if dx >= dy:
-                err = 2 * dy - dx
-                for _ in range(dx):
-                    if 0 <= x < w and 0 <= y < h:
+            for _ in range(max(dx, dy)):
+                if 0 <= x < w and 0 <= y < h:
+                    if marking:
+                        mask[y >> SHIFT, x >> SHIFT] = True
+                    else:
                         _add(table, pool, x, y, 1, sign)
-                    if err > 0:
-                        y += stepy
-                        err -= 2 * dx
-                    err += 2 * dy
-                    x += stepx
-            else:
-                err = 2 * dx - dy
-                for _ in range(dy):
-                    if 0 <= x < w and 0 <= y < h:
-                        _add(table, pool, x, y, 1, sign)
-                    if err > 0:
-                        x += stepx
-                        err -= 2 * dy
-                    err += 2 * dx
-                    y += stepy
+                x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
             if 0 <= x1 < w and 0 <= y1 < h:
-                _add(table, pool, x1, y1, 0 if what == HIT else 1, sign)
+                if marking:
+                    mask[y1 >> SHIFT, x1 >> SHIFT] = True
+                else:
+                    _add(table, pool, x1, y1, 0 if what == HIT else 1, sign)
 
 
 @njit(cache=True)
@@ -295,7 +272,7 @@ def _near_hit(table, pool, x, y, disc, w, h):
 
 
 @njit(cache=True)
-def _incidence_sin(ex, ey, kind, k, j, sx, sy, wx, wy, c, s, px, py, gap, relative_gap):
+def _incidence_sin(poses, ex, ey, kind, k, j, sx, sy, wx, wy, c, s, gap, relative_gap):
     """|sin| of the angle between beam ``j`` and the surface the scan's neighbouring returns
     trace (1: the beam meets it head on, 0: it grazes it); −1 when no neighbour is close."""
     nb = kind.shape[1]
@@ -307,8 +284,7 @@ def _incidence_sin(ex, ey, kind, k, j, sx, sy, wx, wy, c, s, px, py, gap, relati
     for nj in (j - 1, j + 1):
         if nj < 0 or nj >= nb or kind[k, nj] != HIT:
             continue
-        nx = px + c * ex[k, nj] - s * ey[k, nj]
-        ny = py + s * ex[k, nj] + c * ey[k, nj]
+        nx, ny = _world(poses, k, c, s, ex[k, nj], ey[k, nj])
         ddx = nx - wx
         ddy = ny - wy
         if math.hypot(ddx, ddy) < limit:
@@ -331,32 +307,16 @@ def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
     the first solid cell it crosses (Bresenham) before ``stop`` metres, or −1. Solid: at least
     as many rays ended in the cell as passed through it (a cell a door frame's corner only
     partly fills is crossed by more rays than end in it, and is not solid)."""
-    dx = abs(x1 - x0)
-    dy = abs(y1 - y0)
+    dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
     n = max(dx, dy)
-    stepx = 1 if x1 >= x0 else -1
-    stepy = 1 if y1 >= y0 else -1
     x, y = x0, y0
-    major_x = dx >= dy
-    err = 2 * dy - dx if major_x else 2 * dx - dy
     for i in range(n):
         along = r * i / n
         if along >= stop:
             break
         if 0 <= x < w and 0 <= y < h and _solid(table, pool, x, y):
             return along
-        if major_x:
-            if err > 0:
-                y += stepy
-                err -= 2 * dx
-            err += 2 * dy
-            x += stepx
-        else:
-            if err > 0:
-                x += stepx
-                err -= 2 * dy
-            err += 2 * dx
-            y += stepy
+        x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
     return -1.0
 
 
@@ -407,12 +367,7 @@ def classify_beams(
     w = table.shape[1] * TILE
     nb = kind.shape[1]
     for k in range(k0, k1):
-        c = math.cos(poses[k, 2])
-        s = math.sin(poses[k, 2])
-        px = poses[k, 0]
-        py = poses[k, 1]
-        sx = px + c * lx - s * ly
-        sy = py + s * lx + c * ly
+        c, s, sx, sy = _laser(poses, k, lx, ly)
         x0 = cell_index(sx, ox, res)
         y0 = cell_index(sy, oy, res)
         for j in range(nb):
@@ -420,15 +375,14 @@ def classify_beams(
             if kind[k, j] != HIT:
                 verdict[k, j] = UNCHECKED
                 continue
-            wx = px + c * ex[k, j] - s * ey[k, j]
-            wy = py + s * ex[k, j] + c * ey[k, j]
+            wx, wy = _world(poses, k, c, s, ex[k, j], ey[k, j])
             x1 = cell_index(wx, ox, res)
             y1 = cell_index(wy, oy, res)
             if not (0 <= x1 < w and 0 <= y1 < h):
                 verdict[k, j] = UNKNOWN
                 continue
             sin_b = _incidence_sin(
-                ex, ey, kind, k, j, sx, sy, wx, wy, c, s, px, py,
+                poses, ex, ey, kind, k, j, sx, sy, wx, wy, c, s,
                 neighbour_gap, neighbour_relative_gap,
             )  # fmt: skip
             if sin_b < 0.0:
@@ -507,8 +461,7 @@ def ray_bounds(poses: np.ndarray, lx: float, ly: float, ex: np.ndarray, ey: np.n
                 continue
             px = lx if j < 0 else ex[k, j]
             py = ly if j < 0 else ey[k, j]
-            wx = poses[k, 0] + c * px - s * py
-            wy = poses[k, 1] + s * px + c * py
+            wx, wy = _world(poses, k, c, s, px, py)
             out[0] = min(out[0], wx)
             out[1] = min(out[1], wy)
             out[2] = max(out[2], wx)
