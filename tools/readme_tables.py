@@ -397,79 +397,59 @@ TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
     "quality": ("quality", quality_table),
     "quality.synthetic": ("quality", quality_synthetic_table),
 }
+# marker name -> generator; the JSON file is the name's first part (``localize.x``: localize.json)
+_FIGURES: dict[str, Callable[[Benches], str | None]] = {
+    "slam.particles": _figure("slam.intel", "rbpf", "particles"),
+    "slam.gmapping_speedup": gmapping_speedup,
+    "slam.aces_gmapping": lambda b: gmapping(get(b, "slam.aces"))[0].split(" ")[0],
+    "slam.aces_rbpf": _figure("slam.aces", "rbpf", "trans_mean", digits=3),
+    "slam.seeds_intel": seed_range("intel"),
+    "slam.seeds_aces": seed_range("aces"),
+    "slam.seeds_fr079": seed_range("fr079"),
+    "slam.demo_scans": _figure("slam.demo_100", "scans"),
+    "slam.classic_path": _figure("slam.demo_classic_100", "path_length_m", digits=1),
+    "slam.true_path": _figure("slam.demo_classic_100", "true_path_length_m", digits=1),
+    "quality.good_score": _same(
+        _at("quality.intel", "score"), _at("quality.fr079", "score"), digits=2
+    ),
+    "quality.good_worst": _same(
+        _at("quality.intel", "worst_score"), _at("quality.fr079", "worst_score"), digits=2
+    ),
+    "localize.particles": _per_log("localize.tracking_", "particles_mean", 0, " and "),
+    "localize.match_quality": _per_log("localize.tracking_", "mean_match_quality", 2),
+    "localize.peak_rss_intel": _figure("localize.tracking_intel", "peak_rss_mb", digits=0),
+    "localize.map_memory_intel": _figure("localize.tracking_intel", "map_memory_mb", digits=1),
+    "localize.cross_run_mean": _figure(
+        "localize.cross_run_intel", "localize", "trans_mean", digits=3
+    ),
+    "localize.cross_run_std": _figure(
+        "localize.cross_run_intel", "localize", "trans_std", digits=3
+    ),
+    "localize.kidnap_noticed": _figure("localize.kidnap_intel", "noticed_after_s", digits=1),
+    "localize.kidnap_recovered": _figure("localize.kidnap_intel", "recovered_after_s", digits=1),
+    "localize.step_median_ms": _figure(
+        "localize.histogram_step_intel", "step_wall_ms_median", digits=1
+    ),
+    "localize.step_least_ms": _figure(
+        "localize.histogram_step_intel", "step_wall_ms_min", digits=1
+    ),
+    "texture.colour_mae": _figure(TEXTURE, "colour_mae", digits=2),
+    "texture.coverage": _percent(TEXTURE, "coverage"),
+    "texture.frames_per_s": _figure(TEXTURE, "frames_per_s", digits=0),
+    "texture.cpu_ms_per_frame": _figure(TEXTURE, "cpu_ms_per_frame", digits=1),
+    "texture.load": _figure(TEXTURE, "load_average_at_start", digits=0),
+    "coldstart.cold_wall_s": _figure(COLD, "cold", "wall_s", digits=0),
+    "coldstart.cold_cpu_s": _figure(COLD, "cold", "cpu_s", digits=0),
+    "coldstart.cold_compile_s": _figure(COLD, "cold", "compile_s", digits=0),
+    "coldstart.warm_wall_s": _figure(COLD, "warm", "wall_s", digits=0),
+    "coldstart.warm_cpu_s": _figure(COLD, "warm", "cpu_s", digits=0),
+    "coldstart.load": _figure(COLD, "cold", "load_average_at_start", digits=0),
+    "coldstart.warmup_wall_s": _figure(WARMUP, "warmup", "wall_s", digits=0),
+    "coldstart.warmup_cpu_s": _figure(WARMUP, "warmup", "cpu_s", digits=0),
+    "coldstart.after_warmup_compile_s": _figure(WARMUP, "run", "compile_s", digits=1),
+}
 FIGURES: dict[str, tuple[str, Callable[[Benches], str | None]]] = {
-    "slam.particles": ("slam", _figure("slam.intel", "rbpf", "particles")),
-    "slam.gmapping_speedup": ("slam", gmapping_speedup),
-    "slam.aces_gmapping": ("slam", lambda b: gmapping(get(b, "slam.aces"))[0].split(" ")[0]),
-    "slam.aces_rbpf": ("slam", _figure("slam.aces", "rbpf", "trans_mean", digits=3)),
-    "slam.seeds_intel": ("slam", seed_range("intel")),
-    "slam.seeds_aces": ("slam", seed_range("aces")),
-    "slam.seeds_fr079": ("slam", seed_range("fr079")),
-    "slam.demo_scans": ("slam", _figure("slam.demo_100", "scans")),
-    "slam.classic_path": ("slam", _figure("slam.demo_classic_100", "path_length_m", digits=1)),
-    "slam.true_path": ("slam", _figure("slam.demo_classic_100", "true_path_length_m", digits=1)),
-    "quality.good_score": (
-        "quality",
-        _same(_at("quality.intel", "score"), _at("quality.fr079", "score"), digits=2),
-    ),
-    "quality.good_worst": (
-        "quality",
-        _same(_at("quality.intel", "worst_score"), _at("quality.fr079", "worst_score"), digits=2),
-    ),
-    "localize.particles": (
-        "localize",
-        _per_log("localize.tracking_", "particles_mean", 0, " and "),
-    ),
-    "localize.match_quality": ("localize", _per_log("localize.tracking_", "mean_match_quality", 2)),
-    "localize.peak_rss_intel": (
-        "localize",
-        _figure("localize.tracking_intel", "peak_rss_mb", digits=0),
-    ),
-    "localize.map_memory_intel": (
-        "localize",
-        _figure("localize.tracking_intel", "map_memory_mb", digits=1),
-    ),
-    "localize.cross_run_mean": (
-        "localize",
-        _figure("localize.cross_run_intel", "localize", "trans_mean", digits=3),
-    ),
-    "localize.cross_run_std": (
-        "localize",
-        _figure("localize.cross_run_intel", "localize", "trans_std", digits=3),
-    ),
-    "localize.kidnap_noticed": (
-        "localize",
-        _figure("localize.kidnap_intel", "noticed_after_s", digits=1),
-    ),
-    "localize.kidnap_recovered": (
-        "localize",
-        _figure("localize.kidnap_intel", "recovered_after_s", digits=1),
-    ),
-    "localize.step_median_ms": (
-        "localize",
-        _figure("localize.histogram_step_intel", "step_wall_ms_median", digits=1),
-    ),
-    "localize.step_least_ms": (
-        "localize",
-        _figure("localize.histogram_step_intel", "step_wall_ms_min", digits=1),
-    ),
-    "texture.colour_mae": ("texture", _figure(TEXTURE, "colour_mae", digits=2)),
-    "texture.coverage": ("texture", _percent(TEXTURE, "coverage")),
-    "texture.frames_per_s": ("texture", _figure(TEXTURE, "frames_per_s", digits=0)),
-    "texture.cpu_ms_per_frame": ("texture", _figure(TEXTURE, "cpu_ms_per_frame", digits=1)),
-    "texture.load": ("texture", _figure(TEXTURE, "load_average_at_start", digits=0)),
-    "coldstart.cold_wall_s": ("coldstart", _figure(COLD, "cold", "wall_s", digits=0)),
-    "coldstart.cold_cpu_s": ("coldstart", _figure(COLD, "cold", "cpu_s", digits=0)),
-    "coldstart.cold_compile_s": ("coldstart", _figure(COLD, "cold", "compile_s", digits=0)),
-    "coldstart.warm_wall_s": ("coldstart", _figure(COLD, "warm", "wall_s", digits=0)),
-    "coldstart.warm_cpu_s": ("coldstart", _figure(COLD, "warm", "cpu_s", digits=0)),
-    "coldstart.load": ("coldstart", _figure(COLD, "cold", "load_average_at_start", digits=0)),
-    "coldstart.warmup_wall_s": ("coldstart", _figure(WARMUP, "warmup", "wall_s", digits=0)),
-    "coldstart.warmup_cpu_s": ("coldstart", _figure(WARMUP, "warmup", "cpu_s", digits=0)),
-    "coldstart.after_warmup_compile_s": (
-        "coldstart",
-        _figure(WARMUP, "run", "compile_s", digits=1),
-    ),
+    name: (name.split(".")[0], generator) for name, generator in _FIGURES.items()
 }
 
 
