@@ -1,28 +1,20 @@
 """docs/architecture.md's import table matches the code (tools/import_graph.py)."""
 
-import importlib.util
-import sys
 from pathlib import Path
+
+from tool_modules import load_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("import_graph", ROOT / "tools/import_graph.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["import_graph"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_import_table_in_the_architecture_doc_matches_the_code():
-    tool = _tool()
+    tool = load_tool("import_graph")
     text = (ROOT / "docs/architecture.md").read_text(encoding="utf-8")
     assert tool._with_table(text) == text, "run: uv run python tools/import_graph.py --write"
 
 
 def test_the_import_graph_sees_module_level_and_lazy_imports():
-    graph = _tool().import_graph()
+    graph = load_tool("import_graph").import_graph()
     now, later = graph["trajectory"]
     assert now == {"geometry"} and later == set()
     now, later = graph["stages"]
@@ -32,7 +24,7 @@ def test_the_import_graph_sees_module_level_and_lazy_imports():
 
 
 def test_the_check_mode_reports_a_stale_doc(tmp_path, monkeypatch, capsys):
-    tool = _tool()
+    tool = load_tool("import_graph")
     stale = tmp_path / "architecture.md"
     stale.write_text(f"x\n{tool.BEGIN}\n| old |\n{tool.END}\n", encoding="utf-8")
     monkeypatch.setattr(tool, "DOC", stale)

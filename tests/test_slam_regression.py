@@ -8,12 +8,12 @@ machines and numba versions (the filter is seeded, so on one machine the runs re
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from tool_modules import load_tool
 
 from slam.io.tum import read_tum
 
@@ -23,15 +23,6 @@ REFERENCE_DIR = ROOT / "data" / "reference" / "slam"
 MAX_POSITION_DEV_M = 0.05
 MAX_HEADING_DEV_RAD = 0.02
 CELL_TOLERANCE = 0.05
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location(
-        "make_slam_reference", ROOT / "tools" / "make_slam_reference.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _reference(name: str) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -65,12 +56,14 @@ def _compare(name: str, case: dict, tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def small_folder(tmp_path_factory) -> Path:
-    return _tool().small_dataset(tmp_path_factory.mktemp("regression") / "small")
+    return load_tool("make_slam_reference").small_dataset(
+        tmp_path_factory.mktemp("regression") / "small"
+    )
 
 
 @pytest.mark.parametrize("method", ["rbpf", "classic"])
 def test_small_run_matches_its_reference(method, small_folder, tmp_path):
-    tool = _tool()
+    tool = load_tool("make_slam_reference")
     small = tool.SMALL
     case = tool.run_case(
         str(small_folder), method, small_folder.parent, small["scans"], small["particles"]
@@ -79,7 +72,7 @@ def test_small_run_matches_its_reference(method, small_folder, tmp_path):
 
 
 def test_intel_run_matches_its_reference(carmen_dir, tmp_path):
-    tool = _tool()
+    tool = load_tool("make_slam_reference")
     intel = tool.INTEL
     case = tool.run_case("intel", "rbpf", carmen_dir.parent, intel["scans"], intel["particles"])
     _compare("intel-rbpf", case, tmp_path)

@@ -3,7 +3,6 @@ slam grid run --record, slam maze run --record)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import subprocess
@@ -12,23 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rerun.chunk import RrdReader
+from tool_modules import load_tool
 
 from slam.cli import main
 from slam.config import VizConfig
 from slam.errors import ConfigError
 from slam.viz import blueprint as bp
 from slam.viz.stream import rerun_executable, summarize, viewer_env
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _reference_tool():
-    spec = importlib.util.spec_from_file_location(
-        "make_viz_reference", ROOT / "tools" / "make_viz_reference.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def rows(
@@ -53,7 +42,7 @@ def rows(
 @pytest.fixture(scope="module")
 def scripted(tmp_path_factory) -> Path:
     """The golden scripted run (tools/make_viz_reference.py) written to a temporary file."""
-    tool = _reference_tool()
+    tool = load_tool("make_viz_reference")
     return tool.write_reference(tmp_path_factory.mktemp("viz") / "scripted.rrd")
 
 
@@ -82,7 +71,7 @@ def test_scripted_recording_has_every_entity_with_the_documented_row_counts(scri
 
 
 def test_trajectory_segments_join_consecutive_poses(scripted):
-    poses = _reference_tool().scripted_poses()
+    poses = load_tool("make_viz_reference").scripted_poses()
     segments = rows(scripted, bp.TRAJECTORY, "LineStrips2D:strips")
     assert [i for i, _ in segments] == list(range(40))
     for k, strips in segments:
@@ -92,7 +81,7 @@ def test_trajectory_segments_join_consecutive_poses(scripted):
 
 
 def test_particles_scans_and_rates_values(scripted):
-    tool = _reference_tool()
+    tool = load_tool("make_viz_reference")
     poses = tool.scripted_poses()
     particles = rows(scripted, bp.PARTICLES, "Points2D:positions")
     assert [i for i, _ in particles] == [0, 5, 10, 15, 20, 25, 30, 35]

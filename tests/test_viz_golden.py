@@ -8,25 +8,16 @@ When the recording layout changes on purpose, regenerate the reference with
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 from pathlib import Path
 
 import numpy as np
+from tool_modules import load_tool
 
 from slam.viz.stream import rerun_executable, viewer_env
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = ROOT / "data" / "reference" / "viz" / "scripted-run.rrd"
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location(
-        "make_viz_reference", ROOT / "tools" / "make_viz_reference.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _compare(a: Path, b: Path) -> subprocess.CompletedProcess:
@@ -54,7 +45,7 @@ def test_reference_is_small_and_verifies():
 
 
 def test_scripted_run_matches_the_golden_recording(tmp_path):
-    fresh = _tool().write_reference(tmp_path / "fresh.rrd")
+    fresh = load_tool("make_viz_reference").write_reference(tmp_path / "fresh.rrd")
     result = _compare(REFERENCE, fresh)
     assert result.returncode == 0, (
         f"recording differs from {REFERENCE.name} (regenerate with "
@@ -63,7 +54,7 @@ def test_scripted_run_matches_the_golden_recording(tmp_path):
 
 
 def test_compare_catches_a_changed_pose(tmp_path, monkeypatch):
-    tool = _tool()
+    tool = load_tool("make_viz_reference")
     original = tool.scripted_poses
 
     def shifted(steps: int = tool.STEPS) -> np.ndarray:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import signal
 import subprocess
@@ -12,22 +11,17 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from tool_modules import load_tool
 
 from slam.cli import main
 from slam.viz import blueprint as bp
 from slam.viz.stream import free_port, rerun_executable, summarize, wait_for_port
 
-ROOT = Path(__file__).resolve().parent.parent
-
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
     """A run folder holding the golden scripted recording."""
-    spec = importlib.util.spec_from_file_location(
-        "make_viz_reference", ROOT / "tools" / "make_viz_reference.py"
-    )
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = load_tool("make_viz_reference")
     folder = tmp_path_factory.mktemp("run")
     tool.write_reference(folder / "recording.rrd")
     return folder
