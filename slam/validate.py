@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from slam.errors import ConfigError
-from slam.io.text import decode_utf8
+from slam.io.text import decode_utf8, read_input
 
 
 class FieldError(ConfigError):
@@ -447,14 +447,13 @@ def read_toml(path: Path, what: str = "config file") -> dict[str, Any]:
     file when it is missing, unreadable, not UTF-8 text (with the line and byte offset) or not
     valid TOML."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: {what} not found") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: expected a {what} (TOML), found a folder") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    raw = read_input(
+        path,
+        f"{what} not found",
+        f"expected a {what} (TOML), found a folder",
+        f"cannot read {what}",
+        ConfigError,
+    )
     text = decode_utf8(path, raw, ConfigError)
     try:
         return tomllib.loads(text)

@@ -50,7 +50,7 @@ from slam.config import LidarConfig
 from slam.errors import ConfigError, DataError
 from slam.geometry import relative, wrap_angle
 from slam.io.log import Log, OdometryStream, ScanStream, valid_ranges
-from slam.io.text import decode_utf8
+from slam.io.text import decode_utf8, read_input
 
 F64 = NDArray[np.float64]
 
@@ -269,14 +269,12 @@ def _clip(text: str, limit: int = 40) -> str:
 
 def _read_text(path: Path) -> str:
     """The file's text; gzip is recognised by its magic bytes whatever the suffix."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: CARMEN log not found") from None
-    except IsADirectoryError:
-        raise DataError(f"{path}: is a folder, expected a CARMEN log file (.clf/.log)") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read CARMEN log ({exc.strerror or exc})") from None
+    raw = read_input(
+        path,
+        "CARMEN log not found",
+        "is a folder, expected a CARMEN log file (.clf/.log)",
+        "cannot read CARMEN log",
+    )
     if raw[:2] == GZIP_MAGIC:
         try:
             raw = gzip.decompress(raw)

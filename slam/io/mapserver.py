@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from slam.errors import DataError
 from slam.io.atomic import write_files
-from slam.io.text import decode_utf8
+from slam.io.text import decode_utf8, read_input
 
 F64 = NDArray[np.float64]
 
@@ -191,14 +191,9 @@ def read_map_yaml(path: Path) -> MapServerMap:
     """Read a map_server ``map.yaml`` and its image; :class:`DataError` naming file, line and key
     when either is malformed."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: map file not found") from None
-    except IsADirectoryError:
-        raise DataError(f"{path}: is a folder, expected a map_server map.yaml") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    raw = read_input(
+        path, "map file not found", "is a folder, expected a map_server map.yaml", "cannot read"
+    )
     values = parse_map_yaml(decode_utf8(path, raw), str(path))
     image_path = Path(values["image"])
     if not image_path.is_absolute():

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import DataError
-from slam.io.text import decode_utf8
+from slam.io.text import decode_utf8, read_input
 
 F64 = NDArray[np.float64]
 
@@ -53,14 +53,12 @@ class Relations:
 def read_relations(path: Path) -> Relations:
     """Read a relations file; :class:`DataError` names the file and line of any bad entry."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: relations file not found") from None
-    except IsADirectoryError:
-        raise DataError(f"{path}: is a folder, expected a relations file") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read relations file ({exc.strerror or exc})") from None
+    raw = read_input(
+        path,
+        "relations file not found",
+        "is a folder, expected a relations file",
+        "cannot read relations file",
+    )
     text = decode_utf8(path, raw)
 
     rows: list[str] = []

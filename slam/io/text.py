@@ -1,4 +1,4 @@
-"""Decoding the text files the loaders read, with errors that name the file and line."""
+"""Reading and decoding the files the loaders read, with errors that name the file (and line)."""
 
 from __future__ import annotations
 
@@ -18,3 +18,23 @@ def decode_utf8(path: Path, raw: bytes, error: type[SlamError] = DataError) -> s
             f"{path}:{lineno}: expected text, found the non-text byte 0x{raw[exc.start]:02x} "
             f"(byte offset {exc.start}; the file must be UTF-8)"
         ) from None
+
+
+def read_input(
+    path: Path,
+    missing: str,
+    folder: str,
+    unreadable: str,
+    error: type[SlamError] = DataError,
+) -> bytes:
+    """The bytes of the input file ``path``; ``error`` ``"{path}: {missing}"`` when it does not
+    exist, ``"{path}: {folder}"`` when it is a folder, ``"{path}: {unreadable} (reason)"`` when
+    it cannot be read."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise error(f"{path}: {missing}") from None
+    except IsADirectoryError:
+        raise error(f"{path}: {folder}") from None
+    except OSError as exc:
+        raise error(f"{path}: {unreadable} ({exc.strerror or exc})") from None

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from slam.errors import DataError, UsageError
 from slam.io.atomic import write_text
+from slam.io.text import read_input
 
 NORTH, EAST, SOUTH, WEST = 0, 1, 2, 3
 HEADING_NAMES = ("north", "east", "south", "west")
@@ -389,14 +390,9 @@ def read_maze(path: Path, fmt: str | None = None) -> Maze:
 def read_maze_text(path: Path) -> str:
     """The text of a maze file (ASCII); a :class:`DataError` names the file, line and byte."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: maze file not found") from None
-    except IsADirectoryError:
-        raise DataError(f"{path}: is a folder, expected a maze file") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read maze file ({exc.strerror or exc})") from None
+    data = read_input(
+        path, "maze file not found", "is a folder, expected a maze file", "cannot read maze file"
+    )
     try:
         text = data.decode("ascii")
     except UnicodeDecodeError as exc:
