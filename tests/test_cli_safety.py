@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_process import cli_env, slam_cmd
 
 from slam.cli import main
 from slam.errors import UsageError
@@ -29,22 +30,22 @@ from slam.io.atomic import atomic_dir
 OWNER_FILE = ".slam-partial"
 """The owner record of a partial folder (:data:`slam.io.runfolder.OWNER_FILE`)."""
 
-ROOT = Path(__file__).resolve().parent.parent
 SCANS = "20"
 
 
-def env() -> dict[str, str]:
-    """Environment of CLI subprocesses (the worktree's package first on the path)."""
-    return dict(
-        os.environ,
-        RERUN_ANALYTICS="0",
-        RERUN_TELEMETRY="0",
-        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
-    )
+def refuse_inside(
+    monkeypatch: pytest.MonkeyPatch, function: str, folder: Path, error: type[OSError], code: int
+) -> None:
+    """Patch ``os.<function>`` to raise ``error(code)`` for every path inside ``folder`` (a
+    condition a test cannot create for real, e.g. as root)."""
+    real = getattr(os, function)
 
+    def refuse(path, *args, **kwargs):
+        if str(path).startswith(str(folder) + os.sep):
+            raise error(code, os.strerror(code), str(path))
+        return real(path, *args, **kwargs)
 
-def slam_cmd(*args: str) -> list[str]:
-    return [sys.executable, "-m", "slam", *args]
+    monkeypatch.setattr(os, function, refuse)
 
 
 def partials(folder: Path) -> list[Path]:
@@ -233,11 +234,11 @@ def test_two_concurrent_runs_into_one_out_give_one_result_and_one_exit_2(small, 
     out = tmp_path / "X"
     cmd = slam_cmd("run", str(small), "--out", str(out), "--particles", "60", "--quiet")
     first = subprocess.Popen(
-        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     time.sleep(1.0)
     second = subprocess.Popen(
-        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     results = [(p.wait(timeout=300), *p.communicate()) for p in (first, second)]
     codes = sorted(code for code, _, _ in results)
@@ -264,7 +265,7 @@ def test_sigterm_exits_143_and_sigkill_leftovers_go_with_the_next_run(small, tmp
     parent = tmp_path / "runs"
     cmd = slam_cmd("run", str(small), "--out", str(parent / "a"), "--quiet")
     process = subprocess.Popen(
-        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     wait_for_partial(parent, process)
     process.send_signal(signal.SIGTERM)
@@ -274,7 +275,7 @@ def test_sigterm_exits_143_and_sigkill_leftovers_go_with_the_next_run(small, tmp
     assert list(parent.iterdir()) == []
 
     process = subprocess.Popen(
-        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     left = wait_for_partial(parent, process)
     from slam.io.runfolder import read_owner
@@ -303,7 +304,7 @@ def _dead_pid_partial(parent: Path, target: str) -> Path:
         f"p = make_partial(Path({str(parent)!r}), {target!r}); (p / 'map.npz').write_bytes(b'x' * 4096); "
         "os.kill(os.getpid(), 9)"
     )
-    subprocess.run([sys.executable, "-c", code], env=env(), check=False, timeout=60)
+    subprocess.run([sys.executable, "-c", code], env=cli_env(), check=False, timeout=60)
     (found,) = [p for p in partials(parent) if read_owner(p)["target"] == target]
     return found
 
@@ -391,14 +392,7 @@ def test_out_on_a_file_system_that_refuses_writes_is_one_line(small, tmp_path, m
         assert "Operation not permitted" in err or "Permission denied" in err
     readonly = tmp_path / "ro"
     readonly.mkdir()
-    real_mkdir = os.mkdir
-
-    def refuse(path, *args, **kwargs):
-        if str(path).startswith(str(readonly) + os.sep):
-            raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
-        return real_mkdir(path, *args, **kwargs)
-
-    monkeypatch.setattr(os, "mkdir", refuse)
+    refuse_inside(monkeypatch, "mkdir", readonly, OSError, errno.EROFS)
     assert main(["run", str(small), "--out", str(readonly / "out"), "--quiet"]) == 2
     err = one_line(capsys.readouterr().err)
     assert f"{readonly}/" in err and "Read-only file system" in err
@@ -445,7 +439,7 @@ def test_a_really_full_disk_is_one_line_without_rerun_errors(small, tmp_path):
             slam_cmd(
                 "run", str(small), "--out", str(disk / "out"), "--max-scans", SCANS, "--quiet"
             ),
-            env=env(),
+            env=cli_env(),
             capture_output=True,
             text=True,
             timeout=300,
@@ -463,16 +457,9 @@ def test_eval_on_a_folder_that_cannot_be_entered(tmp_path, monkeypatch, capsys):
     us, so entering the folder is refused by a patched ``os.stat``."""
     locked = tmp_path / "locked"
     locked.mkdir()
-    real_stat = os.stat
-
-    def refuse(path, *args, **kwargs):
-        if str(path).startswith(str(locked) + os.sep):
-            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
-        return real_stat(path, *args, **kwargs)
-
     reference = tmp_path / "reference.tum"
     reference.write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n")
-    monkeypatch.setattr(os, "stat", refuse)
+    refuse_inside(monkeypatch, "stat", locked, PermissionError, errno.EACCES)
     assert main(["eval", str(locked), "--reference", str(reference)]) == 2
     err = one_line(capsys.readouterr().err)
     assert f"{locked}/" in err and "Permission denied" in err
@@ -551,7 +538,7 @@ def test_a_closed_pipe_ends_quietly(tmp_path):
     scenario.write_text(GRID_WORLD)
     process = subprocess.Popen(
         slam_cmd("grid", "run", str(scenario), "--json"),
-        env=env(),
+        env=cli_env(),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -644,7 +631,7 @@ def test_the_web_viewer_dies_with_a_killed_slam_view(recording):
     port = free_port()
     process = subprocess.Popen(
         slam_cmd("view", str(recording), "--web", "--port", str(port)),
-        env=env(),
+        env=cli_env(),
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,

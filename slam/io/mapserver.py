@@ -230,12 +230,7 @@ def _occupancy(image: NDArray[np.uint8], values: dict[str, Any]) -> NDArray[np.i
 def read_map_image(path: Path) -> NDArray[np.uint8]:
     """The image of a map as ``(H, W)`` uint8, top row first: PGM (``P5``/``P2``) read here,
     other formats (PNG) through OpenCV with channels averaged as map_server does."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: map image not found") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read map image ({exc.strerror or exc})") from None
+    raw = read_input(path, "map image not found", None, "cannot read map image")
     if raw[:2] in (b"P5", b"P2"):
         return _parse_pgm(path, raw)
     import cv2

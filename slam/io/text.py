@@ -23,18 +23,20 @@ def decode_utf8(path: Path, raw: bytes, error: type[SlamError] = DataError) -> s
 def read_input(
     path: Path,
     missing: str,
-    folder: str,
+    folder: str | None,
     unreadable: str,
     error: type[SlamError] = DataError,
 ) -> bytes:
     """The bytes of the input file ``path``; ``error`` ``"{path}: {missing}"`` when it does not
-    exist, ``"{path}: {folder}"`` when it is a folder, ``"{path}: {unreadable} (reason)"`` when
-    it cannot be read."""
+    exist, ``"{path}: {folder}"`` when it is a folder (``folder`` None: as any other reason),
+    ``"{path}: {unreadable} (reason)"`` when it cannot be read."""
     try:
         return path.read_bytes()
-    except FileNotFoundError:
-        raise error(f"{path}: {missing}") from None
-    except IsADirectoryError:
-        raise error(f"{path}: {folder}") from None
     except OSError as exc:
-        raise error(f"{path}: {unreadable} ({exc.strerror or exc})") from None
+        if isinstance(exc, FileNotFoundError):
+            message = missing
+        elif isinstance(exc, IsADirectoryError) and folder is not None:
+            message = folder
+        else:
+            message = f"{unreadable} ({exc.strerror or exc})"
+        raise error(f"{path}: {message}") from None

@@ -16,7 +16,7 @@ import numpy as np
 from slam.errors import DataError
 from slam.geometry import quaternion_to_yaw, yaw_to_quaternion
 from slam.io.atomic import write_text
-from slam.io.text import decode_utf8
+from slam.io.text import decode_utf8, read_input
 from slam.trajectory import Trajectory
 
 _TUM_LINE = "%.6f %.6f %.6f 0.000000 %.9f %.9f %.9f %.9f"
@@ -43,12 +43,7 @@ def read_tum(path: Path) -> Trajectory:
     """Read a TUM file: the trajectory, with yaw from the quaternion (it unpacks as
     ``times, poses``)."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{path}: trajectory file not found") from None
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read trajectory ({exc.strerror or exc})") from None
+    raw = read_input(path, "trajectory file not found", None, "cannot read trajectory")
     text = decode_utf8(path, raw)
     rows = []
     linenos = []

@@ -1,0 +1,29 @@
+"""``slam`` as a subprocess, for the tests that signal, kill or time a real CLI process.
+
+Not a test module (no ``test_`` prefix); the tests import it (pytest puts ``tests/`` on the path).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def cli_env(**extra: str) -> dict[str, str]:
+    """Environment of CLI subprocesses: the worktree's package first on the path, rerun's
+    analytics off, plus ``extra``."""
+    return dict(
+        os.environ,
+        RERUN_ANALYTICS="0",
+        RERUN_TELEMETRY="0",
+        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+        **extra,
+    )
+
+
+def slam_cmd(*args: str) -> list[str]:
+    """The command line of ``slam ARGS`` run by this interpreter."""
+    return [sys.executable, "-m", "slam", *args]
