@@ -58,6 +58,18 @@ class FieldError(ConfigError):
         super().__init__(f"{names}: {detail}")
 
 
+def _interval_end(
+    strict_mark: str, strict: float | None, mark: str, value: float | None
+) -> tuple[str, float] | None:
+    """One end of an interval as ``(bracket, number)``: the strict bound when there is one, else
+    the inclusive one, else None (unbounded)."""
+    if strict is not None:
+        return strict_mark, strict
+    if value is not None:
+        return mark, value
+    return None
+
+
 @dataclass(frozen=True)
 class Bounds:
     """What a field's value must be, beyond its annotated type."""
@@ -92,20 +104,8 @@ class Bounds:
         ]
         if self.power_of_two:
             noun = "a power of two"
-        low = (
-            ("(", self.gt)
-            if self.gt is not None
-            else ("[", self.ge)
-            if self.ge is not None
-            else None
-        )
-        high = (
-            (")", self.lt)
-            if self.lt is not None
-            else ("]", self.le)
-            if self.le is not None
-            else None
-        )
+        low = _interval_end("(", self.gt, "[", self.ge)
+        high = _interval_end(")", self.lt, "]", self.le)
         if low and high:
             return f"{noun} in {low[0]}{_num(low[1])}, {_num(high[1])}{high[0]}"
         if low:
