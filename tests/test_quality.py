@@ -19,7 +19,7 @@ from slam.eval.quality import (
     summary,
     within_range,
 )
-from slam.geometry import compose, relative
+from slam.geometry import relative
 from slam.io.relations import Relations
 from slam.kernels.quality import (
     AGREE,
@@ -39,6 +39,8 @@ from slam.kernels.quality import (
     to_rows,
     touched_tiles,
 )
+from slam.sim.fixtures import demo_loop as make_demo_loop
+from slam.sim.fixtures import open_the_loop
 
 RES = 0.05
 ORIGIN = (-1.0, -3.0)
@@ -195,35 +197,10 @@ def test_config_rejects_bad_quality_parameters():
 # --- a simulated loop, closed and opened ------------------------------------------------------
 
 
-def open_the_loop(poses: np.ndarray, start: int, yaw_deg: float, scale: float) -> np.ndarray:
-    """The trajectory with a growing drift after row ``start``: every later step is scaled by
-    ``scale`` and turned so that the heading error reaches ``yaw_deg`` at the end (a loop that
-    did not close: the second pass lays its walls beside the first pass's)."""
-    steps = relative(poses[:-1], poses[1:])
-    length = np.hypot(steps[:, 0], steps[:, 1])
-    tail = length[start:].sum()
-    out = poses.copy()
-    for k in range(start, len(poses) - 1):
-        step = steps[k].copy()
-        step[:2] *= scale
-        step[2] += math.radians(yaw_deg) * length[k] / tail
-        out[k + 1] = compose(out[k], step)
-    return out
-
-
 @pytest.fixture(scope="module")
 def demo_loop():
-    """The simulator's demo building (124 s, 4960 scans, one loop around the ring and back past
-    the start) with its true trajectory at the scan times and the rays of every scan."""
-    from slam.sim.dataset import SimOptions, simulate_log
-
-    log = simulate_log(SimOptions(scenario="demo", rgbd=False))
-    lidar = log.options.lidar
-    times = log.lidar_time
-    truth = log.scene.trajectory.pose_at(times)
-    rays = scan_rays(log.ranges, lidar.angles(), np.array([lidar.x, 0.0, 0.0]),
-                     lidar.range_min, lidar.range_max, lidar.range_max)  # fmt: skip
-    return times, truth, rays
+    """The demo building, its true trajectory and its rays (:func:`slam.sim.fixtures.demo_loop`)."""
+    return make_demo_loop()
 
 
 @pytest.fixture(scope="module")

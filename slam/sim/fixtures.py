@@ -7,27 +7,36 @@ real encoder time stamps along the dead-reckoned path, inside a building grown a
 (:func:`slam.sim.world.world_around_path`: corridors containing the path, walls and clutter at a
 clearance from it, a loop wherever the path loops). ``slam run dataset20 --data-dir <data_dir>``
 then exercises the real code path end to end with real encoder and IMU timing.
+
+The map-quality scene of the tests and the bench (:func:`demo_loop`, :func:`open_the_loop`): the
+demo building with its true trajectory, and that trajectory with the loop left open.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from slam.config import RobotConfig
 from slam.errors import DataError
+from slam.geometry import compose, relative
 from slam.io.ece276a import load_ece276a, stream_file
 from slam.io.tum import write_tum
 from slam.odometry import OdometryWarning, dead_reckon_ece276a
-from slam.sim.dataset import hokuyo_arrays, map_arrays, save_npz
+from slam.sim.dataset import SimOptions, hokuyo_arrays, map_arrays, save_npz, simulate_log
 from slam.sim.sensors import LidarSpec, NoiseConfig, measure_ranges, mount_laser, true_ranges
 from slam.sim.world import World, world_around_path
 from slam.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from slam.eval.quality import Rays
 
 REAL_FILES = ("Encoders20.npz", "Imu20.npz", "Kinect20.npz")
 """The real files of dataset20 the fixture links beside its simulated ``Hokuyo20.npz``."""
@@ -103,3 +112,33 @@ def assemble_dataset20_with_sim_lidar(
     write_tum(folder / "groundtruth.tum", trajectory)
     save_npz(folder / "groundtruth_map.npz", map_arrays(world))
     return SimLidarDataset(Path(data_dir), world, trajectory)
+
+
+def demo_loop() -> tuple[np.ndarray, np.ndarray, Rays]:
+    """The simulator's demo building (124 s, 4960 scans, one loop around the ring and back past
+    the start): the scan times, the true poses at them and the rays of every scan."""
+    from slam.eval.quality import scan_rays
+
+    log = simulate_log(SimOptions(scenario="demo", rgbd=False))
+    lidar = log.options.lidar
+    times = log.lidar_time
+    truth = log.scene.trajectory.pose_at(times)
+    rays = scan_rays(log.ranges, lidar.angles(), np.array([lidar.x, 0.0, 0.0]),
+                     lidar.range_min, lidar.range_max, lidar.range_max)  # fmt: skip
+    return times, truth, rays
+
+
+def open_the_loop(poses: np.ndarray, start: int, yaw_deg: float, scale: float) -> np.ndarray:
+    """The trajectory with a growing drift after row ``start``: every later step is scaled by
+    ``scale`` and turned so that the heading error reaches ``yaw_deg`` at the end (a loop that
+    did not close: the second pass lays its walls beside the first pass's)."""
+    steps = relative(poses[:-1], poses[1:])
+    length = np.hypot(steps[:, 0], steps[:, 1])
+    tail = length[start:].sum()
+    out = poses.copy()
+    for k in range(start, len(poses) - 1):
+        step = steps[k].copy()
+        step[:2] *= scale
+        step[2] += math.radians(yaw_deg) * length[k] / tail
+        out[k + 1] = compose(out[k], step)
+    return out

@@ -33,26 +33,11 @@ def _round(value: float | None, digits: int = 4) -> float | None:
 
 def synthetic() -> dict:
     """Scores of the demo building's true trajectory and of the same trajectory, loop opened."""
-    import numpy as np
+    from slam.eval.quality import map_quality, summary
+    from slam.sim.fixtures import demo_loop, open_the_loop
 
-    from slam.eval.quality import map_quality, scan_rays, summary
-    from slam.geometry import compose, relative
-    from slam.sim.dataset import SimOptions, simulate_log
-
-    log = simulate_log(SimOptions(scenario="demo", rgbd=False))
-    lidar = log.options.lidar
-    times = log.lidar_time
-    truth = log.scene.trajectory.pose_at(times)
-    rays = scan_rays(log.ranges, lidar.angles(), np.array([lidar.x, 0.0, 0.0]),
-                     lidar.range_min, lidar.range_max, lidar.range_max)  # fmt: skip
-    steps = relative(truth[:-1], truth[1:])
-    length = np.hypot(steps[:, 0], steps[:, 1])
-    half = len(truth) // 2
-    opened = truth.copy()
-    for k in range(half, len(truth) - 1):
-        step = steps[k] * np.array([1.015, 1.015, 1.0])
-        step[2] += math.radians(5.0) * length[k] / length[half:].sum()
-        opened[k + 1] = compose(opened[k], step)
+    times, truth, rays = demo_loop()
+    opened = open_the_loop(truth, len(truth) // 2, 5.0, 1.015)
     out: dict = {"scans": int(len(times))}
     for name, poses in (("truth", truth), ("opened_loop", opened)):
         start = time.perf_counter()
