@@ -219,6 +219,18 @@ class Scan:
         return ends, hit[keep]
 
 
+def odometry_pose(scan: Scan, odometry: ArrayLike) -> NDArray[np.float64]:
+    """``odometry``, the pose the robot's odometry gave at ``scan``, as ``(3,)`` float64;
+    :class:`DataError` naming the scan's time when it is not a finite ``(x, y, theta)``."""
+    pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise DataError(
+            f"scan at t={scan.time:.6f}: odometry must be a finite pose (x, y, theta), "
+            f"found {odometry!r}"
+        )
+    return pose
+
+
 def surface_normals(
     ex: F64, ey: F64, sx: float, sy: float, gap: float = 0.1, relative_gap: float = 0.02
 ) -> tuple[F64, F64]:
@@ -285,12 +297,7 @@ class ScanSequence:
         """Add a resolved scan taken at the odometry pose ``odometry``; return its number."""
         if not scan.is_resolved:
             raise UsageError(f"scan at t={scan.time:.6f}: resolve it (Scan.resolved) before a run")
-        pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise DataError(
-                f"scan at t={scan.time:.6f}: odometry must be a finite pose (x, y, theta), "
-                f"found {odometry!r}"
-            )
+        pose = odometry_pose(scan, odometry)
         k = len(self._scans)
         if k == self._times.shape[0]:
             self._times = np.concatenate([self._times, np.empty(k)])

@@ -1,4 +1,4 @@
-"""Resampling kernels: effective sample size and systematic resampling."""
+"""Resampling kernels: effective sample size and systematic (low-variance) draws."""
 
 from __future__ import annotations
 
@@ -22,12 +22,20 @@ def systematic_resample(weights: np.ndarray, u0: float) -> np.ndarray:
     Particle ``i`` is copied ``floor(N w_i)`` or ``ceil(N w_i)`` times (low variance). ``weights``
     must be normalised; ``u0`` is drawn by the caller so the kernel stays deterministic.
     """
+    return systematic_draws(weights, weights.shape[0], u0)
+
+
+@njit(cache=True)
+def systematic_draws(weights: np.ndarray, count: int, u0: float) -> np.ndarray:
+    """Indices of ``count`` low-variance draws from normalised ``weights``: one random offset
+    ``u0 ∈ [0, 1)``, stride ``1/count`` (particle ``i`` is drawn ``⌊count·w_i⌋`` or
+    ``⌈count·w_i⌉`` times; :func:`systematic_resample` is ``count = N``)."""
     n = weights.shape[0]
-    out = np.empty(n, dtype=np.int64)
+    out = np.empty(count, dtype=np.int64)
     cumulative = weights[0]
     i = 0
-    for m in range(n):
-        u = (u0 + m) / n
+    for m in range(count):
+        u = (u0 + m) / count
         while u > cumulative and i < n - 1:
             i += 1
             cumulative += weights[i]
