@@ -25,6 +25,15 @@ def _shared_data_dir() -> Path | None:
     return None
 
 
+def _logs_in(data_dir: Path, folder: str, probe: str, what: str) -> Path:
+    """``data_dir / folder``; skips the test when the file ``probe`` is not in it (``what``: the
+    logs that are then unavailable)."""
+    path = data_dir / folder
+    if not (path / probe).is_file():
+        pytest.skip(f"{path}/{probe} is absent: {what} unavailable")
+    return path
+
+
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     """The real data directory (``$SLAM_DATA_DIR``); skips the test when it is absent."""
@@ -37,19 +46,13 @@ def data_dir() -> Path:
 @pytest.fixture(scope="session")
 def ece276a_dir(data_dir: Path) -> Path:
     """``<data dir>/ece276a`` with the real encoder, IMU and Kinect files."""
-    path = data_dir / "ece276a"
-    if not (path / "Encoders20.npz").is_file():
-        pytest.skip(f"{path}/Encoders20.npz is absent: ECE276A logs unavailable")
-    return path
+    return _logs_in(data_dir, "ece276a", "Encoders20.npz", "ECE276A logs")
 
 
 @pytest.fixture(scope="session")
 def carmen_dir(data_dir: Path) -> Path:
     """``<data dir>/carmen`` with the CARMEN logs and relations."""
-    path = data_dir / "carmen"
-    if not (path / "intel.clf.gz").is_file():
-        pytest.skip(f"{path}/intel.clf.gz is absent: CARMEN logs unavailable")
-    return path
+    return _logs_in(data_dir, "carmen", "intel.clf.gz", "CARMEN logs")
 
 
 @pytest.fixture(scope="session")
