@@ -21,30 +21,16 @@ from argparse import Namespace
 from pathlib import Path
 
 import pytest
+from cli_process import cli_env as env
+from cli_process import slam_cmd
 
 from slam.cli import main
 from slam.errors import UsageError
 from slam.sweep.cell import sha256_of
 from slam.sweep.spec import build_spec, parse_seeds, split_values
 
-ROOT = Path(__file__).resolve().parent.parent
 SCANS = "40"
 RUN_OPTIONS = ["--particles", "10", "--max-scans", SCANS, "--no-record", "--no-texture"]
-
-
-def env(**extra: str) -> dict[str, str]:
-    """Environment of CLI subprocesses (the worktree's package first on the path)."""
-    return dict(
-        os.environ,
-        RERUN_ANALYTICS="0",
-        RERUN_TELEMETRY="0",
-        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
-        **extra,
-    )
-
-
-def slam_cmd(*args: str) -> list[str]:
-    return [sys.executable, "-m", "slam", *args]
 
 
 @pytest.fixture(scope="module")

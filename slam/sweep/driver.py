@@ -44,6 +44,17 @@ PLOT = "sweep.png"
 LOG_DIR = "logs"
 EVAL_FILE = "eval.json"
 
+RELATION_FIGURES = (
+    "trans_mean",
+    "trans_std",
+    "trans_median",
+    "rot_mean_deg",
+    "rot_std_deg",
+    "rot_median_deg",
+    "share_over_0.2m",
+)
+"""The relation-metric figures of a cell (a row of results.csv; empty for other metrics)."""
+
 CSV_COLUMNS = (
     "cell",
     "log",
@@ -52,13 +63,7 @@ CSV_COLUMNS = (
     "status",
     "metric",
     "error",
-    "trans_mean",
-    "trans_std",
-    "trans_median",
-    "rot_mean_deg",
-    "rot_std_deg",
-    "rot_median_deg",
-    "share_over_0.2m",
+    *RELATION_FIGURES,
     "relations",
     "ate_rmse",
     "quality_score",
@@ -324,18 +329,36 @@ def format_summary(summary: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + ("\n" if lines else "")
 
 
-def write_plot(folder: Path, rows: list[dict[str, Any]], name: str = PLOT) -> str | None:
-    """``sweep.png``: error per setting and log (mean, bars = std over seeds), wall time per
-    setting. Returns a note when matplotlib is missing (the plot is then skipped)."""
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the Agg backend, or None when matplotlib is not installed (the
+    ``plot`` extra)."""
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        return f"matplotlib is not installed (uv sync --extra plot): {name} skipped"
+        return None
+    return plt
+
+
+def save_figure(plt: Any, fig: Any, path: Path) -> None:
+    """Lay out ``fig``, write it to ``path`` as a PNG (atomically) and close it."""
     from slam.io.atomic import write_bytes
 
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
+    plt.close(fig)
+    write_bytes(path, buffer.getvalue())
+
+
+def write_plot(folder: Path, rows: list[dict[str, Any]], name: str = PLOT) -> str | None:
+    """``sweep.png``: error per setting and log (mean, bars = std over seeds), wall time per
+    setting. Returns a note when matplotlib is missing (the plot is then skipped)."""
+    plt = pyplot()
+    if plt is None:
+        return f"matplotlib is not installed (uv sync --extra plot): {name} skipped"
     ok = [r for r in rows if r["status"] == "ok" and r.get("error") is not None]
     if not ok:
         return f"no finished cell: {name} not drawn"
@@ -367,11 +390,7 @@ def write_plot(folder: Path, rows: list[dict[str, Any]], name: str = PLOT) -> st
     ax_err.legend(fontsize=8)
     ax_wall.set_ylabel("wall time per cell (s)")
     ax_wall.set_title("wall time per setting")
-    fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100)
-    plt.close(fig)
-    write_bytes(folder / name, buffer.getvalue())
+    save_figure(plt, fig, folder / name)
     return None
 
 

@@ -309,15 +309,17 @@ def _explicit_settings(items: Any, where: str) -> tuple[Setting, ...]:
 
 def read_spec_file(path: Path) -> dict[str, Any]:
     """The TOML of a spec file; unreadable or malformed is one line naming it."""
+    from slam.io.text import read_input
+
+    data = read_input(
+        Path(path),
+        "spec file not found",
+        "expected a spec file (TOML), found a folder",
+        "cannot read",
+        UsageError,
+    )
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise UsageError(f"{path}: spec file not found") from None
-    except IsADirectoryError:
-        raise UsageError(f"{path}: expected a spec file (TOML), found a folder") from None
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        return tomllib.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"{path}: not valid TOML ({exc})") from None
 

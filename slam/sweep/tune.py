@@ -14,7 +14,6 @@ trade-off goes to ``tune.json`` (with the Pareto front), the printed table and `
 
 from __future__ import annotations
 
-import io
 import itertools
 import json
 import math
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from slam.errors import UsageError
+from slam.sweep.driver import pyplot, save_figure
 from slam.sweep.spec import Setting, SweepSpec
 
 SEARCHES = ("random", "grid")
@@ -279,14 +279,9 @@ def format_trials(trials: list[dict[str, Any]], best: dict[str, Any] | None) -> 
 
 def write_tune_plot(folder: Path, trials: list[dict[str, Any]]) -> str | None:
     """``tune.png``: mean error vs mean wall time per trial, the Pareto front joined."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return f"matplotlib is not installed (uv sync --extra plot): {PLOT} skipped"
-    from slam.io.atomic import write_bytes
 
     ranked = [t for t in trials if "error_mean" in t]
     if not ranked:
@@ -308,11 +303,7 @@ def write_tune_plot(folder: Path, trials: list[dict[str, Any]]) -> str | None:
     ax.set_ylabel("mean error")
     ax.set_title("slam tune: error vs wall time")
     ax.legend()
-    fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100)
-    plt.close(fig)
-    write_bytes(folder / PLOT, buffer.getvalue())
+    save_figure(plt, fig, folder / PLOT)
     return None
 
 

@@ -30,6 +30,8 @@ from pathlib import Path
 
 from benches._util import data_dir, skip
 
+from slam.sweep.driver import RELATION_FIGURES
+
 REFERENCES = {
     "intel": {"gmapping_published": 0.070, "gmapping_measured": "0.029 ± 0.022 m in 70 s"},
     "aces": {"gmapping_published": 0.060, "gmapping_measured": "0.046 ± 0.040 m in 36 s"},
@@ -120,15 +122,7 @@ def _accuracy(name: str, method: str = "rbpf", extra: list[str] | None = None) -
 SPEC = Path(__file__).resolve().parent.parent / "sweeps" / "slam_bench.toml"
 """The sweep spec of the accuracy benches."""
 
-SEED_FIGURES = (
-    "trans_mean",
-    "trans_std",
-    "trans_median",
-    "rot_mean_deg",
-    "rot_std_deg",
-    "rot_median_deg",
-    "share_over_0.2m",
-)
+SEED_FIGURES = RELATION_FIGURES
 """Relation-metric figures kept per seed (rounded)."""
 
 
