@@ -608,6 +608,10 @@ class LocalizeConfig(Validated):
     must be 1."""
     temperature: float = bounded(4.0, ge=1.0, le=1000.0)
     """Scan log-likelihoods are divided by this before weighting (beams are not independent)."""
+    subdivision: int = bounded(2, ge=1, le=8)
+    """MCL and the pose refinement read the distance to the walls at sub-cell precision on a
+    grid this many times finer than the map (:func:`slam.localize.maps.wall_surface`; memory
+    grows with its square)."""
     field_max: float = bounded(2.0, gt=0.0, le=100.0)
     """Distances to the nearest wall are tabulated up to this far (m); beyond, the Gaussian term
     is 0 anyway."""

@@ -155,7 +155,9 @@ class Localizer:
             cfg.kld_bin_xy, cfg.kld_bin_theta, cfg.kld_epsilon, cfg.kld_delta,
             cfg.min_particles, cfg.max_particles,
         )  # fmt: skip
-        self.particles = ParticleSet(self.map, self.motion, kld, cfg.temperature, self.rng)
+        self.particles = ParticleSet(
+            self.map, self.motion, kld, cfg.temperature, self.rng, cfg.subdivision
+        )
         self.monitor = LostMonitor(
             cfg.alpha_slow, cfg.alpha_fast, cfg.lost_ratio, cfg.monitor_warmup
         )
@@ -343,10 +345,9 @@ class Localizer:
         ex, ey = beams.refine
         model = beams.model
         out = np.array(start, dtype=np.float64)
-        lmap = self.map
         peak = model.z_hit / (model.sigma * math.sqrt(2.0 * math.pi))
         cost = refine_pose(
-            lmap.view(), np.ascontiguousarray(start, dtype=np.float64), ex, ey, model.sigma,
+            self.particles.view, np.ascontiguousarray(start, dtype=np.float64), ex, ey, model.sigma,
             model.z_rand / model.z_range / peak, cfg.refine_iterations, 1e-4, out,
         )  # fmt: skip
         return out, float(cost)

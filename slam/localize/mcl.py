@@ -54,7 +54,9 @@ def weighted_mean_pose(poses: F64, weights: F64) -> tuple[F64, F64]:
 
 
 class ParticleSet:
-    """The particles, their weights and the last update's likelihoods."""
+    """The particles, their weights and the last update's likelihoods; they are weighed on the
+    map's wall-surface field ``subdivision`` times finer than the map
+    (:meth:`~slam.localize.maps.LikelihoodMap.surface_view`)."""
 
     def __init__(
         self,
@@ -63,8 +65,10 @@ class ParticleSet:
         kld: KldCounter,
         temperature: float,
         rng: np.random.Generator,
+        subdivision: int = 1,
     ) -> None:
         self.map = lmap
+        self.view = lmap.surface_view(subdivision)
         self.motion = motion
         self.kld = kld
         self.temperature = float(temperature)
@@ -145,7 +149,7 @@ class ParticleSet:
         """``log p(z | x)`` of the returns at the given ``poses`` (not the particles)."""
         out = np.empty(poses.shape[0])
         particle_loglik(
-            self.map.view(), np.ascontiguousarray(poses, dtype=np.float64), ex, ey, table[0],
+            self.view, np.ascontiguousarray(poses, dtype=np.float64), ex, ey, table[0],
             table[1], out,
         )  # fmt: skip
         return out

@@ -417,6 +417,20 @@ def _histogram_step() -> dict:
     }  # fmt: skip
 
 
+def _with_load(bench):
+    """``bench`` with the machine's 1-minute load average before and after it (the machine may
+    be shared: the wall times are read against it)."""
+
+    def run() -> dict:
+        before = os.getloadavg()[0]
+        out = bench()
+        if "skipped" not in out:
+            out["load_average"] = [round(before, 2), round(os.getloadavg()[0], 2)]
+        return out
+
+    return run
+
+
 def benches() -> dict:
     """The localization benches."""
     out = {f"tracking_{name}": (lambda n=name: _tracking(n)) for name in LOGS}
@@ -424,4 +438,4 @@ def benches() -> dict:
     out.update({f"global_{name}": (lambda n=name: _global(n)) for name in LOGS})
     out["kidnap_intel"] = _kidnap
     out["histogram_step_intel"] = _histogram_step
-    return out
+    return {name: _with_load(bench) for name, bench in out.items()}
