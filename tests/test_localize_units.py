@@ -10,9 +10,9 @@ import pytest
 
 from slam.config import LocalizeConfig
 from slam.localize.histogram import LEVELS, QUANTUM, PoseHistogram, cell_weights
-from slam.localize.kernels import DistanceView, particle_loglik
+from slam.localize.kernels import DistanceView, particle_loglik, refine_pose
 from slam.localize.kld import KldCounter, kld_bound, normal_quantile
-from slam.localize.maps import LikelihoodMap
+from slam.localize.maps import LikelihoodMap, wall_points, wall_surface
 from slam.localize.mcl import MotionModel, weighted_mean_pose
 from slam.localize.recovery import LostMonitor
 from slam.localize.sensor import BeamModel
@@ -302,3 +302,89 @@ def test_lost_monitor_fires_when_the_short_average_drops():
     fired = [monitor.observe(0.1) for _ in range(6)]
     assert fired.index(True) == 4
     assert monitor.injection_probability > 0.5
+
+
+# -- the wall surface (sub-cell walls)
+
+
+def test_wall_points_are_log_odds_weighted_centroids():
+    # a wall along x: row 3 saturated (+10), row 4 hit less often (+2), the rest free (-5)
+    log_odds = np.full((7, 9), -5.0)
+    log_odds[3, :] = 10.0
+    log_odds[4, :] = 2.0
+    rows, cols, px, py = wall_points(log_odds, log_odds > 0, 0.0)
+    inner = (cols > 0) & (cols < 8)
+    # row 3's cell centre is at 3.5 cells, row 4's at 4.5: the centroid is 2/12 of a cell
+    # from the saturated row, for the cells of both rows
+    assert py[inner] == pytest.approx(np.full(inner.sum(), 3.5 + 2.0 / 12.0), abs=1e-12)
+    assert px[inner] == pytest.approx(cols[inner] + 0.5, abs=1e-12)
+    # equal weights (a wall on the boundary between the rows): the boundary; a one-cell wall
+    # stays on its cells' centres
+    _, _, _, py = wall_points(np.where(log_odds > 0, 10.0, -5.0), log_odds > 0, 0.0)
+    assert np.abs(py[inner] - 4.0).max() < 1e-12
+    thin = np.full((7, 9), -5.0)
+    thin[3, :] = 7.0
+    _, cols, _, py = wall_points(thin, thin > 0, 0.0)
+    assert np.abs(py - 3.5).max() < 1e-12
+
+
+@pytest.mark.parametrize("subdivision", [1, 2, 4])
+def test_wall_surface_is_the_distance_to_the_sub_cell_wall(subdivision):
+    log_odds = np.full((40, 30), -5.0)
+    log_odds[20, :] = 10.0
+    log_odds[21, :] = 2.0
+    resolution = 0.05
+    field = wall_surface(log_odds, log_odds > 0, 0.0, resolution, subdivision)
+    assert field.shape == (40 * subdivision, 30 * subdivision)
+    wall_y = (20.5 + 2.0 / 12.0) * resolution  # 1.0333 m
+    fine = resolution / subdivision
+    centres = (np.arange(40 * subdivision) + 0.5) * fine
+    column = field[:, 15 * subdivision]
+    # every fine cell centre reads its distance to the wall line, to within one fine cell (the
+    # line is drawn into the fine cells it crosses)
+    assert np.abs(column - np.abs(centres - wall_y)).max() <= fine + 1e-6
+    # the field's zero lies on the wall: within half a fine cell
+    assert abs(centres[np.argmin(column)] - wall_y) <= fine / 2 + 1e-9
+
+
+def box_room(resolution: float = 0.05) -> tuple[LikelihoodMap, float, float]:
+    """A 6 m room whose walls are two cells thick, both cells saturated: each wall lies on the
+    boundary between its two cells (1.05 m and 5.0 m in x and y)."""
+    occupied = np.zeros((120, 120), dtype=bool)
+    for k in (20, 21, 99, 100):
+        occupied[k, 20:101] = True
+        occupied[20:101, k] = True
+    inside = np.zeros_like(occupied)
+    inside[22:99, 22:99] = True
+    return LikelihoodMap.from_masks(occupied, inside, resolution, (0.0, 0.0)), 1.05, 5.0
+
+
+def box_scan(pose, low: float, high: float, beams: int = 180):
+    """Robot-frame endpoints of a 360° scan from ``pose`` inside the box ``[low, high]²``."""
+    x, y, th = pose
+    angles = th + np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    c, s = np.cos(angles), np.sin(angles)
+    with np.errstate(divide="ignore"):
+        tx = np.where(c > 0, (high - x) / c, (low - x) / c)
+        ty = np.where(s > 0, (high - y) / s, (low - y) / s)
+    r = np.minimum(np.abs(tx), np.abs(ty))
+    rel = angles - th
+    return r * np.cos(rel), r * np.sin(rel)
+
+
+def test_refinement_on_the_wall_surface_finds_walls_between_cells():
+    # the cell-centre field is 0 across each 2-cell wall (a flat valley a cell wide): the pose
+    # is not pinned there; the wall surface puts the wall on the cells' boundary
+    lmap, low, high = box_room()
+    truth = np.array([2.5, 2.7, 0.3])
+    ex, ey = box_scan(truth, low, high)
+    start = truth + np.array([0.02, -0.018, 0.0])
+    model = BeamModel(0.9, 0.05, 0.05, 0.1, 27.0)
+    outlier = model.z_rand / model.z_range / (model.z_hit / (model.sigma * math.sqrt(2 * math.pi)))
+    errors = {}
+    for name, view in (("cells", lmap.view()), ("surface", lmap.surface_view(2))):
+        out = np.empty(3)
+        refine_pose(view, start, ex, ey, model.sigma, outlier, 30, 1e-6, out)
+        errors[name] = float(np.hypot(*(out[:2] - truth[:2])))
+    assert errors["surface"] < 0.004, errors  # a flat valley one fine cell wide is left
+    assert errors["cells"] > 0.01, errors  # stays where it started, 2.7 cm off

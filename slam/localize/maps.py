@@ -23,12 +23,14 @@ hold what the binary mask drops: how often each cell was hit. Each occupied cell
 is the log-odds-weighted centroid of the occupied cells of its 3 × 3 neighbourhood (a band of a
 saturated cell and an overshoot cell collapses onto one line near the saturated one; a thin
 wall stays on its cells); wall points of neighbouring occupied cells are joined by segments,
-drawn on the finer grid, and the field is the exact distance transform of that drawing.
-Measured on the maps of the default configuration (tools/benches/localize.py, seed 0),
-relation error with ``localize.subdivision`` 2 (4): intel 0.0254 → 0.0232 (0.0229) m, SLAM
-0.0223; aces 0.0516 → 0.0460 (0.0456) m; fr079 0.0423 → 0.0381 (0.0382) m. On intel, equal
-weights (the geometric centroid) gave 0.0238 m at 4, and blurring the cell-centre field by one
-cell 0.0267 m.
+sampled on the finer grid, and the field is the distance from each fine cell centre to the
+nearest sample. Measured on the maps of the default configuration (tools/benches/localize.py,
+seed 0), relation error with ``localize.subdivision`` = 2: intel 0.0254 → 0.0230 m (SLAM
+0.0223), aces 0.0516 → 0.0451 m, fr079 0.0423 → 0.0375 m. Found on the way (intel): the wall
+points drawn into fine cells and measured cell centre to cell centre, 0.0232 m at 2 and 0.0229 m
+at 4 (16 times the map's memory); equal weights (the geometric centroid), 0.0238 m at 4;
+blurring the cell-centre field by one cell, 0.0267 m. A wall between two fine cell centres is
+still a flat valley one fine cell wide (bilinear interpolation of a distance).
 
 :func:`load_map` reads ``RUN_DIR/map.npz`` (what ``slam run`` writes) or a ``map.npz`` file.
 """
@@ -185,10 +187,11 @@ def wall_surface(
 ) -> NDArray[np.float32]:
     """Distance (m) from the centre of every cell of a grid ``subdivision`` times finer than the
     map to the nearest wall, the walls being the segments between the :func:`wall_points` of
-    8-neighbouring occupied cells (an isolated cell: its point), drawn into the fine grid
-    (samples every ``1/(2·subdivision)`` cell along each segment) and measured by an exact
-    distance transform (``cv2.distanceTransform``). ``(H·subdivision, W·subdivision)`` float32,
-    the same origin as the map."""
+    8-neighbouring occupied cells (an isolated cell: its point), sampled at the mid-points of
+    ``2·subdivision`` equal parts; each fine cell holding samples keeps their mean, and every fine
+    cell centre reads its Euclidean distance to that point of the nearest such cell
+    (``cv2.distanceTransformWithLabels``). ``(H·subdivision, W·subdivision)`` float32, the same
+    origin as the map."""
     import cv2
 
     h, w = occupied.shape
@@ -206,15 +209,30 @@ def wall_surface(
         starts.append(np.flatnonzero(linked))
         ends.append(other[linked])
     a, b = np.concatenate(starts), np.concatenate(ends)
-    t = np.linspace(0.0, 1.0, 2 * f + 1)[None, :]
+    t = ((np.arange(2 * f) + 0.5) / (2 * f))[None, :]  # mid-points: no end counted twice
     x = (px[a, None] + t * (px[b] - px[a])[:, None]) * f
     y = (py[a, None] + t * (py[b] - py[a])[:, None]) * f
+    x, y = x.ravel(), y.ravel()
+    pixel = np.clip(y.astype(np.int64), 0, h * f - 1) * (w * f) + np.clip(
+        x.astype(np.int64), 0, w * f - 1
+    )
+    # each drawn fine cell keeps the mean of the samples it holds: a point on the walls
+    drawn, which = np.unique(pixel, return_inverse=True)
+    count = np.bincount(which)
+    mean_x = np.bincount(which, weights=x) / count
+    mean_y = np.bincount(which, weights=y) / count
     fine = np.full((h * f, w * f), 255, dtype=np.uint8)
-    ix = np.clip(x.astype(np.int64), 0, w * f - 1).ravel()
-    iy = np.clip(y.astype(np.int64), 0, h * f - 1).ravel()
-    fine[iy, ix] = 0
-    pixels = cv2.distanceTransform(fine, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return np.ascontiguousarray(pixels * np.float32(resolution / f), dtype=np.float32)
+    fine.reshape(-1)[drawn] = 0
+    # nearest drawn cell of every fine cell (labels number the drawn cells in row-major order,
+    # the order of np.unique), then the exact distance to that cell's wall point: a wall
+    # between fine cell centres is not moved onto one
+    _, labels = cv2.distanceTransformWithLabels(
+        fine, cv2.DIST_L2, cv2.DIST_MASK_5, labelType=cv2.DIST_LABEL_PIXEL
+    )
+    nearest = labels.astype(np.int64) - 1
+    cy, cx = np.mgrid[0 : h * f, 0 : w * f]
+    distance = np.hypot(cx + 0.5 - mean_x[nearest], cy + 0.5 - mean_y[nearest])
+    return np.ascontiguousarray(distance * (resolution / f), dtype=np.float32)
 
 
 def _read_npz(path: Path) -> OccupancyGrid:
