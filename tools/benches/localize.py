@@ -3,7 +3,8 @@
 Every bench localizes a CARMEN log on the map that ``slam run`` builds from it (default
 configuration, seed 0; built in a temporary folder, or taken from ``$SLAM_BENCH_MAPS/<log>`` when
 that names a folder of such runs) and compares the poses with that run's own trajectory, the
-map's frame:
+map's frame (scan by scan in the log's order: ``trajectory_file_order.tum`` when the log's clock
+runs backwards; relation errors match times, from ``trajectory.tum`` as ``slam eval`` does):
 
 * ``tracking_<log>``: from the true start pose (the SLAM trajectory's first pose, σ 0.1 m /
   0.05 rad): relation error (Kümmerle et al.) beside the SLAM run's own, speed (wall and CPU time
@@ -82,6 +83,16 @@ def _relation_summary(times, poses, relations) -> dict:
     }
 
 
+def _file_order(folder: Path):
+    """The SLAM run's trajectory in the log's scan order (``trajectory_file_order.tum`` when the
+    log's clock runs backwards and ``trajectory.tum`` is sorted by time, as on intel), so that
+    pose ``k`` is the pose of scan ``k``."""
+    from slam.io.tum import read_tum
+
+    path = folder / "trajectory_file_order.tum"
+    return read_tum(path if path.is_file() else folder / "trajectory.tum")
+
+
 def _errors(poses, truth):
     from slam.geometry import relative
 
@@ -134,8 +145,8 @@ def _tracking(name: str) -> dict:
     relations = _relations(name)
     out: dict = {"log": name}
     with _map_run(name) as folder, tempfile.TemporaryDirectory(prefix="slam-bench-") as tmp:
-        slam_trajectory = read_tum(folder / "trajectory.tum")
-        out["slam"] = _relation_summary(*slam_trajectory, relations)
+        out["slam"] = _relation_summary(*read_tum(folder / "trajectory.tum"), relations)
+        slam_trajectory = _file_order(folder)
         first = slam_trajectory.poses[0]
         settings = ["viz.record=false", "localize.initial_sigma_theta=0.05"]
         config = load_config(name, None, settings)
@@ -213,7 +224,7 @@ def _cross_run() -> dict:
     ):
         config = load_config("intel")
         scans = _scans("intel", config)
-        half_trajectory = read_tum(half_run / "trajectory.tum")
+        half_trajectory = _file_order(half_run)
         full = read_tum(full_run / "trajectory.tum")
         start = half - 1
         initial = (*half_trajectory.poses[start], 0.1)
@@ -244,12 +255,11 @@ def _global(name: str, count: int = 20, max_s: float = 300.0, after_s: float = 3
     if reason:
         return skip(reason)
     from slam.config import load_config
-    from slam.io.tum import read_tum
     from slam.localize.localizer import Localizer
     from slam.localize.maps import load_map
 
     with _map_run(name) as folder:
-        slam_poses = read_tum(folder / "trajectory.tum").poses
+        slam_poses = _file_order(folder).poses
         lmap = load_map(folder)
         config = load_config(name)
         scans = _scans(name, config)
@@ -325,14 +335,13 @@ def _kidnap() -> dict:
     if reason:
         return skip(reason)
     from slam.config import load_config
-    from slam.io.tum import read_tum
     from slam.localize.localizer import Localizer
     from slam.localize.maps import load_map
     from slam.localize.run import run_localizer, splice
 
     first, second = (500, 2500), (9500, 11500)
     with _map_run("intel") as folder:
-        slam_poses = read_tum(folder / "trajectory.tum").poses
+        slam_poses = _file_order(folder).poses
         lmap = load_map(folder)
     config = load_config("intel")
     scans = _scans("intel", config)
