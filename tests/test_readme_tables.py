@@ -197,7 +197,9 @@ def test_localize_and_quality_tables_show_the_json_figures():
     page = (ROOT / "docs" / "localize.md").read_text()
     aces = localize["localize.global_aces"]
     assert f"| aces | **{aces['success']}/{aces['starts']}** |" in page
-    assert f"{tables.thousands(aces['histogram_states'])} | 106 MB | 126 / 72 ms |" in page
+    step = f"{tables.fixed(aces['median_step_wall_ms'], 0)} / {tables.fixed(aces['median_step_cpu_ms'], 0)} ms"
+    memory = f"{tables.fixed(aces['histogram_memory_mb'], 0)} MB"
+    assert f"{tables.thousands(aces['histogram_states'])} | {memory} | {step} |" in page
     evaluation = (ROOT / "docs" / "evaluation.md").read_text()
     assert "@@" not in evaluation
     clinic = quality["quality.fr_clinic"]
