@@ -38,13 +38,13 @@ from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import LocalizeConfig
 from slam.discrete.filter import normalize
 from slam.errors import ConfigError, DataError
+from slam.kernels.resample import systematic_draws
 from slam.localize.kernels import (
     apply_likelihood,
     heading_mix,
     shift_columns,
     shift_rows,
     state_loglik,
-    systematic_draws,
 )
 from slam.localize.maps import LikelihoodMap
 from slam.localize.mcl import MotionModel

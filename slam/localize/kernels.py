@@ -3,7 +3,7 @@
 * :func:`particle_loglik` — the likelihood-field beam model summed over a scan's returns, for
   every particle (parallel over particles; each writes only its own entry, so the result does
   not depend on the number of threads);
-* :func:`systematic_draws` — low-variance (systematic) resampling of any number of draws;
+* (low-variance resampling of any number of draws is :func:`slam.kernels.resample.systematic_draws`);
 * :func:`kld_count` — how many of a stream of samples KLD-sampling keeps (Fox 2003), with the
   bins seen so far carried between calls;
 * :func:`state_loglik`, :func:`heading_mix`, :func:`shift_columns`, :func:`shift_rows` — the
@@ -93,24 +93,6 @@ def particle_loglik(
             d = distance_bilinear(view, wx, wy)
             acc += table_lookup(table, step_inv, d)
         out[i] = acc
-
-
-@njit(cache=True)
-def systematic_draws(weights: np.ndarray, count: int, u0: float) -> np.ndarray:
-    """Indices of ``count`` low-variance draws from normalised ``weights``: one random offset
-    ``u0 ∈ [0, 1)``, stride ``1/count`` (particle ``i`` is drawn ``⌊count·w_i⌋`` or
-    ``⌈count·w_i⌉`` times)."""
-    n = weights.shape[0]
-    out = np.empty(count, dtype=np.int64)
-    cumulative = weights[0]
-    i = 0
-    for m in range(count):
-        u = (u0 + m) / count
-        while u > cumulative and i < n - 1:
-            i += 1
-            cumulative += weights[i]
-        out[m] = i
-    return out
 
 
 @njit(cache=True)

@@ -27,7 +27,8 @@ from numpy.typing import NDArray
 
 from slam.geometry import wrap_angle
 from slam.kernels.motion import sample_motion
-from slam.localize.kernels import particle_loglik, systematic_draws
+from slam.kernels.resample import systematic_draws
+from slam.localize.kernels import particle_loglik
 from slam.localize.kld import KldCounter
 from slam.localize.maps import LikelihoodMap
 
