@@ -217,6 +217,27 @@ def normal_equations(
     ``exp`` and a ``log`` per beam. Only every ``stride``-th beam is used. Returns the cost and
     the number of beams on known cells.
     """
+    return _normal_equations(
+        view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, np.int64(stride)
+    )  # one compiled body whether ``stride`` is given or not (an omitted argument is a type)
+
+
+@njit(cache=True)
+def _normal_equations(
+    view: FieldView,
+    x: float,
+    y: float,
+    th: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    cost_row: np.ndarray,
+    weight_row: np.ndarray,
+    step_inv: float,
+    h: np.ndarray,
+    g: np.ndarray,
+    stride: int,
+) -> tuple[float, int]:
+    """:func:`normal_equations` with every argument given."""
     c = np.cos(th)
     s = np.sin(th)
     cost = 0.0
@@ -298,12 +319,14 @@ def match_one(
         cost_row = luts[level, 0]
         weight_row = luts[level, 1]
         stride = 1 if level == last else coarse_stride
-        cost, inliers = normal_equations(
+        cost, inliers = _normal_equations(
             view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, stride
         )
         lam = 1e-3
         for _ in range(max_iter):
-            hd[:, :] = h
+            for a in range(3):
+                for b in range(3):
+                    hd[a, b] = h[a, b]
             for k in range(3):
                 hd[k, k] += lam * h[k, k] + 1e-9
             s0, s1, s2, _ = solve_sym3(
@@ -312,13 +335,15 @@ def match_one(
             nx = x - s0
             ny = y - s1
             nth = th - s2
-            new_cost, new_inliers = normal_equations(
+            new_cost, new_inliers = _normal_equations(
                 view, nx, ny, nth, ex, ey, cost_row, weight_row, step_inv, hc, gc, stride
             )
             if new_cost < cost:
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
-                h[:, :] = hc
-                g[:] = gc
+                for a in range(3):
+                    g[a] = gc[a]
+                    for b in range(3):
+                        h[a, b] = hc[a, b]
                 lam = max(lam * 0.3, 1e-7)
                 if abs(s0) < tolerance and abs(s1) < tolerance and abs(s2) < tolerance:
                     break
@@ -359,30 +384,67 @@ def match_particles(
     ``out_hessian`` the Gauss-Newton Hessian of the negative log-likelihood there (its inverse is
     the covariance of the match, the spread of the proposal).
     """
+    for p in prange(poses.shape[0]):
+        _match_particle(
+            view, np.int64(p), poses, ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride,
+            min_inliers, out_poses, out_loglik, out_inliers, out_hessian,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def _match_particle(
+    view: FieldView,
+    p: int,
+    poses: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    luts: np.ndarray,
+    step_inv: float,
+    max_iter: int,
+    tolerance: float,
+    coarse_stride: int,
+    min_inliers: float,
+    out_poses: np.ndarray,
+    out_loglik: np.ndarray,
+    out_inliers: np.ndarray,
+    out_hessian: np.ndarray,
+) -> None:
+    """:func:`match_particles` for particle ``p`` (a serial function: the parallel loop only
+    calls it, which keeps numba's parallel region, slow to compile, tiny)."""
     last = luts.shape[0] - 1
     nbeams = max(ex.shape[0], 1)
-    for p in prange(poses.shape[0]):
-        own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
-        refined, cost, inliers = match_one(
-            own, poses[p], ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride
-        )
-        frac = inliers / nbeams
-        if frac < min_inliers:
-            refined = poses[p].copy()
-        h = np.zeros((3, 3))
-        g = np.zeros(3)
-        fine = luts[last]
-        cost, inliers = normal_equations(
-            own, refined[0], refined[1], refined[2], ex, ey, fine[0], fine[1], step_inv, h, g
-        )
-        for a in range(3):
-            for b in range(3):
-                out_hessian[p, a, b] = h[a, b]
-        out_poses[p, 0] = refined[0]
-        out_poses[p, 1] = refined[1]
-        out_poses[p, 2] = refined[2]
-        out_inliers[p] = frac
-        out_loglik[p] = -cost
+    own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
+    refined, cost, inliers = match_one(
+        own, poses[p], ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride
+    )
+    frac = inliers / nbeams
+    if frac < min_inliers:
+        refined = poses[p].copy()
+    h = np.zeros((3, 3))
+    g = np.zeros(3)
+    fine = luts[last]
+    cost, inliers = _normal_equations(
+        own,
+        refined[0],
+        refined[1],
+        refined[2],
+        ex,
+        ey,
+        fine[0],
+        fine[1],
+        step_inv,
+        h,
+        g,
+        np.int64(1),
+    )
+    for a in range(3):
+        for b in range(3):
+            out_hessian[p, a, b] = h[a, b]
+    out_poses[p, 0] = refined[0]
+    out_poses[p, 1] = refined[1]
+    out_poses[p, 2] = refined[2]
+    out_inliers[p] = frac
+    out_loglik[p] = -cost
 
 
 @njit(cache=True, parallel=True)
@@ -469,15 +531,35 @@ def claim_tiles(
                     free_top[0] -= 1
                     new = free_stack[free_top[0]]
                     if t < 0:
-                        dist[new, :, :] = dmax
-                        surface[new, :, :] = np.nan
+                        _fill_tile(dist, surface, new, dmax)
                     else:
-                        dist[new, :, :] = dist[t, :, :]
-                        surface[new, :, :] = surface[t, :, :]
+                        _copy_tile(dist, surface, t, new)
                         refcount[t] -= 1
                     refcount[new] = 1
                     table[ty, tx] = new
     return -1
+
+
+@njit(cache=True)
+def _fill_tile(dist: np.ndarray, surface: np.ndarray, tile: int, dmax: float) -> None:
+    """Make ``tile`` an empty tile: distance ``dmax``, surface unknown (NaN).
+
+    Loops rather than ``dist[tile, :, :] = dmax``-style slice assignments: those compile numba's
+    shape-mismatch error path (string formatting), seconds of compilation each.
+    """
+    for r in range(dist.shape[1]):
+        for c in range(dist.shape[2]):
+            dist[tile, r, c] = dmax
+            surface[tile, r, c] = np.nan
+
+
+@njit(cache=True)
+def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int) -> None:
+    """Copy tile ``src`` (both layers) into tile ``dst``."""
+    for r in range(dist.shape[1]):
+        for c in range(dist.shape[2]):
+            dist[dst, r, c] = dist[src, r, c]
+            surface[dst, r, c] = surface[src, r, c]
 
 
 @njit(cache=True, parallel=True)
@@ -581,13 +663,13 @@ def match_scans(
     """
     for k in prange(poses.shape[0]):
         n = counts[k]
-        if n == 0:
-            out_poses[k] = poses[k]
-            continue
-        refined, _, inliers = match_one(
-            view, poses[k], ex[k, :n], ey[k, :n], luts, step_inv, max_iter, tolerance, coarse_stride
-        )
-        if inliers < min_inliers * n:
-            out_poses[k] = poses[k]
-        else:
-            out_poses[k] = refined
+        kept = poses[k]
+        if n > 0:
+            refined, _, inliers = match_one(
+                view, poses[k], ex[k, :n], ey[k, :n], luts, step_inv, max_iter, tolerance,
+                coarse_stride,
+            )  # fmt: skip
+            if inliers >= min_inliers * n:
+                kept = refined
+        for a in range(3):
+            out_poses[k, a] = kept[a]

@@ -18,47 +18,39 @@ from numba import njit
 from slam.kernels.field import FieldView, surface_at, table_lookup
 
 
-@njit(cache=True, inline="always")
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """3×3 matrix product (numba's ``@`` needs BLAS from SciPy; these blocks are tiny)."""
-    out = np.empty((3, 3))
+@njit(cache=True)
+def _mul(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out = a b`` for 3×3 blocks (numba's ``@`` needs BLAS from SciPy; these blocks are tiny)."""
     for r in range(3):
         for c in range(3):
             out[r, c] = a[r, 0] * b[0, c] + a[r, 1] * b[1, c] + a[r, 2] * b[2, c]
-    return out
-
-
-@njit(cache=True, inline="always")
-def _mul_t(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``aᵀ b`` for 3×3 blocks."""
-    out = np.empty((3, 3))
-    for r in range(3):
-        for c in range(3):
-            out[r, c] = a[0, r] * b[0, c] + a[1, r] * b[1, c] + a[2, r] * b[2, c]
-    return out
-
-
-@njit(cache=True, inline="always")
-def _vec(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``a v`` for a 3×3 block."""
-    out = np.empty(3)
-    for r in range(3):
-        out[r] = a[r, 0] * v[0] + a[r, 1] * v[1] + a[r, 2] * v[2]
-    return out
-
-
-@njit(cache=True, inline="always")
-def _vec_t(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``aᵀ v`` for a 3×3 block."""
-    out = np.empty(3)
-    for r in range(3):
-        out[r] = a[0, r] * v[0] + a[1, r] * v[1] + a[2, r] * v[2]
-    return out
 
 
 @njit(cache=True)
-def _inv(m: np.ndarray) -> np.ndarray:
-    """Inverse of a 3×3 matrix by cofactors."""
+def _mul_t(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out = aᵀ b`` for 3×3 blocks."""
+    for r in range(3):
+        for c in range(3):
+            out[r, c] = a[0, r] * b[0, c] + a[1, r] * b[1, c] + a[2, r] * b[2, c]
+
+
+@njit(cache=True)
+def _vec(a: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """``out = a v`` for a 3×3 block."""
+    for r in range(3):
+        out[r] = a[r, 0] * v[0] + a[r, 1] * v[1] + a[r, 2] * v[2]
+
+
+@njit(cache=True)
+def _vec_t(a: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """``out = aᵀ v`` for a 3×3 block."""
+    for r in range(3):
+        out[r] = a[0, r] * v[0] + a[1, r] * v[1] + a[2, r] * v[2]
+
+
+@njit(cache=True)
+def _inv(m: np.ndarray, out: np.ndarray) -> None:
+    """``out`` = inverse of a 3×3 matrix by cofactors."""
     a, b, c = m[0, 0], m[0, 1], m[0, 2]
     d, e, f = m[1, 0], m[1, 1], m[1, 2]
     g, h, i = m[2, 0], m[2, 1], m[2, 2]
@@ -66,7 +58,6 @@ def _inv(m: np.ndarray) -> np.ndarray:
     co01 = -(d * i - f * g)
     co02 = d * h - e * g
     det = a * co00 + b * co01 + c * co02
-    out = np.empty((3, 3))
     out[0, 0] = co00 / det
     out[1, 0] = co01 / det
     out[2, 0] = co02 / det
@@ -76,7 +67,16 @@ def _inv(m: np.ndarray) -> np.ndarray:
     out[0, 2] = (b * f - c * e) / det
     out[1, 2] = -(a * f - c * d) / det
     out[2, 2] = (a * e - b * d) / det
-    return out
+
+
+@njit(cache=True)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``Σ a·b`` over ``(n, 3)`` arrays, summed in memory order (what ``np.sum(a * b)`` does)."""
+    total = 0.0
+    for k in range(a.shape[0]):
+        for c in range(3):
+            total += a[k, c] * b[k, c]
+    return total
 
 
 @njit(cache=True)
@@ -212,6 +212,12 @@ def linearize(
     far[:] = 0.0
     grad[:] = 0.0
     total = 0.0
+    # 3×3 scratch blocks, filled in place: no array expressions (each costs a compilation)
+    wom = np.empty((3, 3))
+    at_om = np.empty((3, 3))
+    bt_om = np.empty((3, 3))
+    block = np.empty((3, 3))
+    vec = np.empty(3)
     for e in range(edge_i.shape[0]):
         i = edge_i[e]
         j = edge_j[e]
@@ -229,21 +235,45 @@ def linearize(
         else:
             total += s
         a, b = _jacobians(poses[i], poses[j], meas[e])
-        wom = w * om
-        at_om = _mul_t(a, wom)
-        bt_om = _mul_t(b, wom)
-        diag[i] += _mul(at_om, a)
-        diag[j] += _mul(bt_om, b)
-        hij = _mul(at_om, b)
+        for r in range(3):
+            for c in range(3):
+                wom[r, c] = w * om[r, c]
+        _mul_t(a, wom, at_om)
+        _mul_t(b, wom, bt_om)
+        _mul(at_om, a, block)
+        _add(diag[i], block)
+        _mul(bt_om, b, block)
+        _add(diag[j], block)
+        _mul(at_om, b, block)  # H_ij
         if j == i + 1:
-            band[i] += hij
+            _add(band[i], block)
         elif i == j + 1:
-            band[j] += hij.T
+            _add_t(band[j], block)
         else:
-            far[e] += hij
-        grad[i] += _vec(at_om, err)
-        grad[j] += _vec(bt_om, err)
+            _add(far[e], block)
+        _vec(at_om, err, vec)
+        for r in range(3):
+            grad[i, r] += vec[r]
+        _vec(bt_om, err, vec)
+        for r in range(3):
+            grad[j, r] += vec[r]
     return total
+
+
+@njit(cache=True)
+def _add(out: np.ndarray, block: np.ndarray) -> None:
+    """``out += block`` for 3×3 blocks."""
+    for r in range(3):
+        for c in range(3):
+            out[r, c] += block[r, c]
+
+
+@njit(cache=True)
+def _add_t(out: np.ndarray, block: np.ndarray) -> None:
+    """``out += blockᵀ`` for 3×3 blocks."""
+    for r in range(3):
+        for c in range(3):
+            out[r, c] += block[c, r]
 
 
 @njit(cache=True)
@@ -251,11 +281,18 @@ def _chain_factor(diag: np.ndarray, band: np.ndarray) -> tuple[np.ndarray, np.nd
     """Block LDLᵀ-style elimination of the block-tridiagonal chain part (for the preconditioner)."""
     n = diag.shape[0]
     dinv = np.empty((n, 3, 3))
-    dinv[0] = _inv(diag[0])
+    _inv(diag[0], dinv[0])
+    m = np.empty((3, 3))
+    t = np.empty((3, 3))
+    d = np.empty((3, 3))
     for k in range(1, n):
         u = band[k - 1]
-        d = diag[k] - _mul_t(u, _mul(dinv[k - 1], u))
-        dinv[k] = _inv(d)
+        _mul(dinv[k - 1], u, m)
+        _mul_t(u, m, t)
+        for r in range(3):
+            for c in range(3):
+                d[r, c] = diag[k, r, c] - t[r, c]
+        _inv(d, dinv[k])
     return dinv, band
 
 
@@ -264,15 +301,24 @@ def _chain_solve(dinv: np.ndarray, band: np.ndarray, r: np.ndarray) -> np.ndarra
     """Solve ``M y = r`` for the block-tridiagonal ``M`` factored by :func:`_chain_factor`."""
     n = r.shape[0]
     y = np.empty_like(r)
+    v = np.empty(3)
+    w = np.empty(3)
     # forward: z_k = r_k - U_{k-1}^T D_{k-1}^{-1} z_{k-1}
-    y[0] = r[0]
+    for c in range(3):
+        y[0, c] = r[0, c]
     for k in range(1, n):
-        y[k] = r[k] - _vec_t(band[k - 1], _vec(dinv[k - 1], y[k - 1]))
+        _vec(dinv[k - 1], y[k - 1], v)
+        _vec_t(band[k - 1], v, w)
+        for c in range(3):
+            y[k, c] = r[k, c] - w[c]
     # backward: x_k = D_k^{-1} (z_k - U_k x_{k+1})
     x = np.empty_like(r)
-    x[n - 1] = _vec(dinv[n - 1], y[n - 1])
+    _vec(dinv[n - 1], y[n - 1], x[n - 1])
     for k in range(n - 2, -1, -1):
-        x[k] = _vec(dinv[k], y[k] - _vec(band[k], x[k + 1]))
+        _vec(band[k], x[k + 1], v)
+        for c in range(3):
+            w[c] = y[k, c] - v[c]
+        _vec(dinv[k], w, x[k])
     return x
 
 
@@ -287,18 +333,27 @@ def _matvec(
 ) -> np.ndarray:
     n = v.shape[0]
     out = np.empty_like(v)
+    t = np.empty(3)
     for k in range(n):
-        out[k] = _vec(diag[k], v[k])
+        _vec(diag[k], v[k], out[k])
     for k in range(n - 1):
-        out[k] += _vec(band[k], v[k + 1])
-        out[k + 1] += _vec_t(band[k], v[k])
+        _vec(band[k], v[k + 1], t)
+        for c in range(3):
+            out[k, c] += t[c]
+        _vec_t(band[k], v[k], t)
+        for c in range(3):
+            out[k + 1, c] += t[c]
     for e in range(edge_i.shape[0]):
         i = edge_i[e]
         j = edge_j[e]
         if j == i + 1 or i == j + 1:
             continue
-        out[i] += _vec(far[e], v[j])
-        out[j] += _vec_t(far[e], v[i])
+        _vec(far[e], v[j], t)
+        for c in range(3):
+            out[i, c] += t[c]
+        _vec_t(far[e], v[i], t)
+        for c in range(3):
+            out[j, c] += t[c]
     return out
 
 
@@ -315,27 +370,39 @@ def solve_system(
 ) -> tuple[np.ndarray, int]:
     """Solve ``H x = rhs`` by conjugate gradients preconditioned with the chain part of ``H``.
 
-    Returns the solution and the number of iterations used.
+    Returns the solution and the number of iterations used. Written with scalar loops over the
+    ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the same order, but
+    numba compiles every distinct array expression as a function of its own.
     """
+    n = rhs.shape[0]
     dinv, _ = _chain_factor(diag, band)
     x = _chain_solve(dinv, band, rhs)
-    r = rhs - _matvec(diag, band, far, edge_i, edge_j, x)
+    hx = _matvec(diag, band, far, edge_i, edge_j, x)
+    r = np.empty_like(rhs)
+    for k in range(n):
+        for c in range(3):
+            r[k, c] = rhs[k, c] - hx[k, c]
     z = _chain_solve(dinv, band, r)
     p = z.copy()
-    rz = np.sum(r * z)
-    norm0 = np.sqrt(np.sum(rhs * rhs)) + 1e-300
+    rz = _dot(r, z)
+    norm0 = np.sqrt(_dot(rhs, rhs)) + 1e-300
     used = 0
     for _ in range(max_iter):
-        if np.sqrt(np.sum(r * r)) <= tolerance * norm0:
+        if np.sqrt(_dot(r, r)) <= tolerance * norm0:
             break
         used += 1
         hp = _matvec(diag, band, far, edge_i, edge_j, p)
-        alpha = rz / np.sum(p * hp)
-        x += alpha * p
-        r -= alpha * hp
+        alpha = rz / _dot(p, hp)
+        for k in range(n):
+            for c in range(3):
+                x[k, c] += alpha * p[k, c]
+                r[k, c] -= alpha * hp[k, c]
         z = _chain_solve(dinv, band, r)
-        rz_new = np.sum(r * z)
-        p = z + (rz_new / rz) * p
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        for k in range(n):
+            for c in range(3):
+                p[k, c] = z[k, c] + beta * p[k, c]
         rz = rz_new
     return x, used
 
