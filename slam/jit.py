@@ -5,10 +5,13 @@ called with a new type signature, unless its machine code is in numba's cache (`
 ``__pycache__`` beside the sources or ``$NUMBA_CACHE_DIR``). On a fresh cache the first
 ``slam run demo`` therefore spends tens of seconds compiling inside the filter. A listener on
 numba's ``numba:compile`` event (fired only for real compilations, never for cache loads) adds up
-the seconds spent in outermost compilations (:func:`compile_seconds`), counts the kernels
-(:func:`compiled_kernels`), and tells the progress bar when one starts and ends
-(:func:`on_compile`), so that ``metrics.json`` reports ``compile_s`` apart from
-``estimate_wall_s`` and the bar says "compiling kernels (first run only)".
+the seconds spent in outermost compilations (:func:`compile_seconds`; CPU seconds of the
+compiling thread: :func:`compile_cpu_seconds`), counts the kernels (:func:`compiled_kernels`),
+keeps what each outermost compilation cost (:func:`compile_table`), and tells the progress bar
+when one starts and ends (:func:`on_compile`), so that ``metrics.json`` reports ``compile_s``
+apart from ``estimate_wall_s`` and the bar says "compiling kernels (first run only)". With
+``$SLAM_COMPILE_REPORT`` set to a file name, the process writes that table there as JSON when it
+exits (the cold-start bench reads it).
 
 :func:`warmup` (``slam warmup``) fills the cache with the kernels ``slam run demo`` uses by
 running that pipeline once into a temporary folder: the very calls, so the very signatures,
@@ -17,6 +20,9 @@ whatever the kernels look like.
 
 from __future__ import annotations
 
+import atexit
+import json
+import os
 import tempfile
 import threading
 import time
@@ -27,7 +33,14 @@ from pathlib import Path
 from typing import Any
 
 _lock = threading.Lock()
-_state: dict[str, Any] = {"seconds": 0.0, "kernels": [], "depth": {}, "installed": False}
+_state: dict[str, Any] = {
+    "seconds": 0.0,
+    "cpu_seconds": 0.0,
+    "kernels": [],
+    "depth": {},
+    "table": [],
+    "installed": False,
+}
 _callbacks: list[Callable[[bool], None]] = []
 
 
@@ -52,9 +65,12 @@ def install() -> None:
         def on_start(self, ev: event.Event) -> None:
             ident = threading.get_ident()
             with _lock:
-                depth = _state["depth"].get(ident, (0, 0.0))
-                start = time.perf_counter() if depth[0] == 0 else depth[1]
-                _state["depth"][ident] = (depth[0] + 1, start)
+                depth = _state["depth"].get(ident, (0, 0.0, 0.0))
+                if depth[0] == 0:
+                    start, cpu = time.perf_counter(), time.thread_time()
+                else:
+                    start, cpu = depth[1], depth[2]
+                _state["depth"][ident] = (depth[0] + 1, start, cpu)
                 outermost = depth[0] == 0
             if outermost:
                 for callback in list(_callbacks):
@@ -63,23 +79,57 @@ def install() -> None:
         def on_end(self, ev: event.Event) -> None:
             ident = threading.get_ident()
             with _lock:
-                level, start = _state["depth"].get(ident, (1, time.perf_counter()))
-                _state["depth"][ident] = (level - 1, start)
-                _state["kernels"].append(_kernel_name(ev.data))
+                now, cpu_now = time.perf_counter(), time.thread_time()
+                level, start, cpu = _state["depth"].get(ident, (1, now, cpu_now))
+                _state["depth"][ident] = (level - 1, start, cpu)
+                name = _kernel_name(ev.data)
+                _state["kernels"].append(name)
                 outermost = level == 1
                 if outermost:
-                    _state["seconds"] += time.perf_counter() - start
+                    _state["seconds"] += now - start
+                    _state["cpu_seconds"] += cpu_now - cpu
+                    _state["table"].append((name, now - start, cpu_now - cpu))
             if outermost:
                 for callback in list(_callbacks):
                     callback(False)
 
     event.register("numba:compile", _Listener())
+    report = os.environ.get("SLAM_COMPILE_REPORT")
+    if report:
+        atexit.register(_write_report, Path(report))
 
 
 def compile_seconds() -> float:
     """Seconds this process has spent compiling kernels (outermost compilations only)."""
     with _lock:
         return float(_state["seconds"])
+
+
+def compile_cpu_seconds() -> float:
+    """CPU seconds of the compiling threads in outermost compilations (steadier than the wall
+    seconds of :func:`compile_seconds` on a loaded machine)."""
+    with _lock:
+        return float(_state["cpu_seconds"])
+
+
+def compile_table() -> list[dict[str, Any]]:
+    """Every outermost compilation so far, in order: ``kernel`` (``module.name``), ``wall_s`` and
+    ``cpu_s`` (the kernel with the functions it compiled on the way)."""
+    with _lock:
+        return [
+            {"kernel": name, "wall_s": round(wall, 3), "cpu_s": round(cpu, 3)}
+            for name, wall, cpu in _state["table"]
+        ]
+
+
+def _write_report(path: Path) -> None:
+    report = {
+        "compile_s": round(compile_seconds(), 3),
+        "compile_cpu_s": round(compile_cpu_seconds(), 3),
+        "kernels_compiled": len(compiled_kernels()),
+        "outermost": compile_table(),
+    }
+    path.write_text(json.dumps(report, indent=1) + "\n")
 
 
 def compiled_kernels() -> list[str]:

@@ -56,3 +56,31 @@ def test_slam_warmup_prints_what_it_compiled(monkeypatch, capsys, tmp_path) -> N
     out = capsys.readouterr().out
     assert "2 kernels compiled in 12.3 s (20.0 s in all)" in out
     assert seen == {"data_dir": tmp_path, "progress": False}
+
+
+def test_compile_cpu_seconds_and_the_table_of_outermost_compilations() -> None:
+    @njit  # no cache: compiled here
+    def thrice(x):
+        return 3 * x
+
+    cpu, rows = jit.compile_cpu_seconds(), len(jit.compile_table())
+    assert thrice(2) == 6
+    table = jit.compile_table()[rows:]
+    assert [row["kernel"].endswith("thrice") for row in table] == [True]
+    assert table[0]["cpu_s"] > 0.0 and table[0]["wall_s"] >= table[0]["cpu_s"] * 0.5
+    assert jit.compile_cpu_seconds() >= cpu + table[0]["cpu_s"] - 1e-3
+
+
+def test_the_compile_report_is_written_at_exit(tmp_path) -> None:
+    import json
+    import os
+    import subprocess
+    import sys
+
+    report = tmp_path / "compiled.json"
+    code = "from numba import njit\nimport slam.jit\nf = njit(lambda x: x + 1)\nassert f(1) == 2\n"
+    env = dict(os.environ, SLAM_COMPILE_REPORT=str(report))
+    subprocess.run([sys.executable, "-c", code], env=env, check=True)
+    data = json.loads(report.read_text())
+    assert data["compile_cpu_s"] > 0.0 and data["compile_s"] >= data["compile_cpu_s"] * 0.5
+    assert len(data["outermost"]) == 1 and data["kernels_compiled"] >= 1

@@ -8,6 +8,9 @@ interpreter running this bench):
 * ``demo_cold_then_warm`` — ``slam run demo`` (default: 30 particles, texture, recording) on the
   fresh cache, then the same command again: wall and CPU seconds (user + system of the child, all
   its threads) of each, and ``compile_s`` / ``estimate_wall_s`` from their ``metrics.json``;
+  the cold run also reports the CPU seconds of compilation (``compile_cpu_s``, the compiling
+  thread's, from ``$SLAM_COMPILE_REPORT``: :mod:`slam.jit`) and the kernels that cost most
+  (``compile_top``: outermost compilations, each with the functions compiled on the way);
 * ``warmup_then_run`` — ``slam warmup`` on a fresh cache, then ``slam run demo``: what the warm-up
   costs and that the run after it compiles nothing (``compile_s`` 0).
 
@@ -36,9 +39,15 @@ def _ensure_demo() -> None:
     ensure_demo(resolve_cache_dir(data_dir()))
 
 
+TOP_KERNELS = 15
+"""How many of the costliest compilations a cold run lists."""
+
+
 def _slam(args: list[str], cache: Path) -> dict:
-    """Run ``slam ARGS`` in a child process with ``NUMBA_CACHE_DIR=cache``; wall, CPU, output."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    """Run ``slam ARGS`` in a child process with ``NUMBA_CACHE_DIR=cache``; wall, CPU, output,
+    and what it compiled (:mod:`slam.jit`'s report)."""
+    report = cache.parent / f"compile-{time.monotonic_ns()}.json"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), SLAM_COMPILE_REPORT=str(report))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load = os.getloadavg()[0]
     start = time.perf_counter()
@@ -50,11 +59,17 @@ def _slam(args: list[str], cache: Path) -> dict:
     if proc.returncode != 0:
         raise RuntimeError(f"slam {' '.join(args)}: exit {proc.returncode}: {proc.stderr[-400:]}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    compiled = json.loads(report.read_text())
+    top = sorted(compiled["outermost"], key=lambda row: -row["cpu_s"])[:TOP_KERNELS]
     return {
         "wall_s": round(wall, 2),
         "cpu_s": round(cpu, 2),
         "load_average_at_start": round(load, 2),
+        "load_average_at_end": round(os.getloadavg()[0], 2),
         "stdout": proc.stdout.strip().splitlines()[-1:],
+        "compile_cpu_s": compiled["compile_cpu_s"],
+        "kernels_compiled": compiled["kernels_compiled"],
+        "compile_top": top,
     }
 
 
