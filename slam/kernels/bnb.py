@@ -60,7 +60,9 @@ def max_pyramid(grid: np.ndarray, levels: int) -> np.ndarray:
     """
     h, w = grid.shape
     out = np.zeros((levels, h, w), dtype=np.float32)
-    out[0] = grid
+    for iy in range(h):  # a loop, not `out[0] = grid`: that compiles numba's shape-error message
+        for ix in range(w):
+            out[0, iy, ix] = grid[iy, ix]
     for lev in range(1, levels):
         s = 1 << (lev - 1)
         prev = out[lev - 1]
