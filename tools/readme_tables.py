@@ -441,6 +441,7 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "coldstart.cold_wall_s": _figure(COLD, "cold", "wall_s", digits=0),
     "coldstart.cold_cpu_s": _figure(COLD, "cold", "cpu_s", digits=0),
     "coldstart.cold_compile_s": _figure(COLD, "cold", "compile_s", digits=0),
+    "coldstart.cold_compile_cpu_s": _figure(COLD, "cold", "compile_cpu_s", digits=0),
     "coldstart.warm_wall_s": _figure(COLD, "warm", "wall_s", digits=0),
     "coldstart.warm_cpu_s": _figure(COLD, "warm", "cpu_s", digits=0),
     "coldstart.load": _figure(COLD, "cold", "load_average_at_start", digits=0),
