@@ -385,8 +385,10 @@ class BackendConfig(Validated):
     min_score: float = bounded(0.55, ge=0.0, le=1.0)
     """A match must score this mean likelihood in the branch-and-bound grid ..."""
     min_fit: float = bounded(0.6, ge=0.0, le=1.0)
-    """... and, refined, put this share of its beams within ``loops.fit_distance`` of the
-    submap's surfaces."""
+    """... and, refined, put this share of its beams that land on the submap's known cells
+    within ``loops.fit_distance`` of the submap's surfaces ..."""
+    min_overlap: float = bounded(0.3, ge=0.0, le=1.0)
+    """... those beams being at least this share of all the scan's beams."""
     agree_xy: float = bounded(0.3, gt=0.0, le=100.0)
     """Two closures agree when the corrections they imply move a keyframe to within this (m) ..."""
     agree_th: float = bounded(0.05, gt=0.0, le=math.pi)

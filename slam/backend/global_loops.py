@@ -13,8 +13,10 @@ module adds, in the same pose graph and the same rounds:
    ``backend.candidates`` submaps nearest relative to their window are searched by
    branch-and-bound (:func:`slam.kernels.bnb.bnb_search`), exact over the whole window.
 3. **Verification.** The best pose must score ``min_score``; refined by Levenberg-Marquardt
-   against the submap's distance field it must stay within two search cells and put
-   ``backend.min_fit`` of the beams within ``loops.fit_distance`` of the submap's surfaces.
+   against the submap's distance field it must stay within two search cells, and of the beams
+   that land on the submap's known cells ``backend.min_fit`` must lie within
+   ``loops.fit_distance`` of its surfaces, those being at least ``backend.min_overlap`` of all
+   the scan's beams (:func:`_fits`).
 4. **Consistency.** A closure counts only when another closure, found from a different
    keyframe within ``agree_path`` metres of path (and to a submap as near), implies the same
    correction of the trajectory (``agree_xy``, ``agree_th``, plus the drift allowed between
@@ -132,8 +134,7 @@ def detect_global(
             )
             if np.hypot(*(refined[:2] - found[:2])) > 2.0 * bc.resolution:
                 continue
-            _, close = fit_counts(view, refined, ex, ey, lc.fit_distance)
-            if close < bc.min_fit * ex.size or close < lc.min_beams:
+            if not _fits(view, refined, ex, ey, config):
                 continue
             hessian, gradient = np.zeros((3, 3)), np.zeros(3)
             normal_equations(
@@ -144,6 +145,25 @@ def detect_global(
                 (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
             )
     return edges, searched
+
+
+def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
+    """Whether scan ``(ex, ey)`` at ``pose`` fits the submap ``view`` (module docstring, step 3).
+
+    Of the beams that land on the submap's known cells, ``backend.min_fit`` must lie within
+    ``loops.fit_distance`` of its surfaces, and those must be ``backend.min_overlap`` of all the
+    scan's beams (and ``loops.min_beams``). A submap covers ``submap_length`` metres of path: a
+    scan taken from elsewhere (the other end of a hall, the other direction of a corridor) sees
+    much that the submap never saw, and counting those beams against the match rejects true
+    returns; a wrong match puts the beams that do land on the submap off its surfaces.
+    """
+    bc, lc = config.backend, config.loops
+    known, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
+    return (
+        close >= bc.min_fit * known
+        and close >= bc.min_overlap * ex.size
+        and close >= lc.min_beams
+    )
 
 
 def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
