@@ -293,6 +293,9 @@ class RbpfFilter:
         self.max_weight_log = [1.0 / p]
         self.resamples = 0
         self.fallbacks = 0
+        self.retries = 0
+        self.recent_loglik: list[float] = []
+        """Best per-beam log-likelihood of the last ``rbpf.retry_window`` updates."""
         self.peak_tiles = self.maps.tiles_in_use
         self.peak_map_bytes = self.maps.memory_bytes()
         self.first = StepOutcome(0, start, self.particles, self.weights, p, 1.0 / p, True, False)
@@ -354,6 +357,7 @@ class RbpfFilter:
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
             rc.min_inliers, rc.coarse_stride,
         )  # fmt: skip
+        match = self._retry(predicted, hits, match)
         self.particles = match.poses
         if rc.proposal_spread > 0:
             motion_cov = None
@@ -364,6 +368,36 @@ class RbpfFilter:
                 self.rng,
             )  # fmt: skip
         self.fallbacks += int(np.count_nonzero(match.inliers < rc.min_inliers))
+        return match
+
+    def _retry(self, predicted: F64, hits: tuple[F64, F64], match: MatchResult) -> MatchResult:
+        """``match``, or, when its best per-beam log-likelihood is ``rbpf.retry_ratio`` times
+        worse than the recent median, the best per particle of it and the matches from the
+        predicted poses rotated by ±``rbpf.retry_yaw`` (no random draw: a run that never retries
+        is the run without the rule)."""
+        rc = self.config.rbpf
+        beams = max(hits[0].size, 1)
+        best = float(match.loglik.max()) / beams
+        recent = self.recent_loglik
+        if rc.retry_ratio > 0 and len(recent) >= 5 and best < rc.retry_ratio * np.median(recent):
+            self.retries += 1
+            for yaw in rc.retry_yaw:
+                for sign in (1.0, -1.0):
+                    start = predicted.copy()
+                    start[:, 2] = wrap_angle(start[:, 2] + sign * yaw)
+                    alt = self.maps.match(
+                        start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
+                        rc.min_inliers, rc.coarse_stride,
+                    )  # fmt: skip
+                    better = (alt.loglik > match.loglik) & (alt.inliers >= rc.min_inliers)
+                    match.poses[better] = alt.poses[better]
+                    match.loglik[better] = alt.loglik[better]
+                    match.inliers[better] = alt.inliers[better]
+                    match.hessian[better] = alt.hessian[better]
+            best = float(match.loglik.max()) / beams
+        recent.append(best)
+        if len(recent) > rc.retry_window:
+            del recent[0]
         return match
 
     def weight(self, match: MatchResult, moved: F64) -> tuple[float, float]:
@@ -418,6 +452,7 @@ class RbpfFilter:
                 "updates": int(len(steps)),
                 "resamples": self.resamples,
                 "match_fallbacks": self.fallbacks,
+                "match_retries": self.retries,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
             },

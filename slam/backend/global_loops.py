@@ -160,9 +160,7 @@ def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
     bc, lc = config.backend, config.loops
     known, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
     return (
-        close >= bc.min_fit * known
-        and close >= bc.min_overlap * ex.size
-        and close >= lc.min_beams
+        close >= bc.min_fit * known and close >= bc.min_overlap * ex.size and close >= lc.min_beams
     )
 
 
