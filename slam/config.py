@@ -823,6 +823,25 @@ def load_config(
     return config
 
 
+def config_for(owner: str, config: Config | None, seed: int | None = None) -> Config:
+    """The configuration an object ``owner`` (``"Slam"``, ``"Localizer"``) is built with:
+    ``Config()`` for None, a :class:`UsageError` for anything that is not a :class:`Config`,
+    ``filter.seed`` replaced by ``seed`` when given."""
+    from slam.errors import UsageError
+
+    config = Config() if config is None else config
+    if not isinstance(config, Config):
+        raise UsageError(
+            f"{owner}(config): expected a slam.Config (slam.load_config(...)), found "
+            f"{type(config).__name__}"
+        )
+    if seed is not None:
+        config = dataclasses.replace(
+            config, filter=dataclasses.replace(config.filter, seed=int(seed))
+        )
+    return config
+
+
 def to_dict(config: Any) -> dict[str, Any]:
     """Nested plain-dict view of a config dataclass."""
     return dataclasses.asdict(config)

@@ -23,7 +23,6 @@ gives the odometry at each scan. docs/api.md describes the whole interface.
 from __future__ import annotations
 
 import bisect
-import dataclasses
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from slam.config import Config
+from slam.config import Config, config_for
 from slam.errors import ConfigError, UsageError
 from slam.geometry import compose, transform_points
 from slam.mapping import OccupancyGrid
@@ -160,16 +159,7 @@ class Slam:
         stages: Iterable[Stage] | None = None,
         scan_period: float | None = None,
     ) -> None:
-        config = Config() if config is None else config
-        if not isinstance(config, Config):
-            raise UsageError(
-                f"Slam(config): expected a slam.Config (slam.load_config(...)), found "
-                f"{type(config).__name__}"
-            )
-        if seed is not None:
-            config = dataclasses.replace(
-                config, filter=dataclasses.replace(config.filter, seed=int(seed))
-            )
+        config = config_for("Slam", config, seed)
         if config.filter.method not in ("rbpf", "classic"):
             raise ConfigError(
                 f"filter.method: Slam runs the particle filters 'rbpf' and 'classic', found "

@@ -28,14 +28,13 @@ thins the scan's returns to ``localize.beams`` (MCL), ``localize.refine_beams`` 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from slam.config import Config
+from slam.config import Config, config_for
 from slam.errors import DataError, UsageError
 from slam.geometry import compose, relative
 from slam.localize.histogram import Mode, PoseHistogram
@@ -128,20 +127,11 @@ class Localizer:
         initial: InitialPose | ArrayLike | None = None,
         seed: int | None = None,
     ) -> None:
-        config = Config() if config is None else config
-        if not isinstance(config, Config):
-            raise UsageError(
-                f"Localizer(config): expected a slam.Config (slam.load_config(...)), found "
-                f"{type(config).__name__}"
-            )
+        config = config_for("Localizer", config, seed)
         if not isinstance(map, LikelihoodMap | OccupancyGrid):
             raise UsageError(
                 f"Localizer(map): expected a map (slam.load_map(RUN_DIR)) or an OccupancyGrid, "
                 f"found {type(map).__name__}"
-            )
-        if seed is not None:
-            config = dataclasses.replace(
-                config, filter=dataclasses.replace(config.filter, seed=int(seed))
             )
         self.config = config
         self.map = map if isinstance(map, LikelihoodMap) else LikelihoodMap.from_grid(map)
