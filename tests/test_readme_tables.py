@@ -214,3 +214,22 @@ def test_localize_and_quality_tables_show_the_json_figures():
     assert f"| **{tables.fixed(clinic['score'], 3)}** |" in row
     assert "| 45 (29 / 26) |" in row  # bad stretches: all, ranked, flagged
     assert "| mit-killian | 17 480 |" in evaluation and "| — | — | — |" in evaluation
+
+
+def test_the_quality_table_lists_logs_scored_without_relations():
+    """mit-killian (metric "quality"): seed 0's score in bold, the range over seeds, wall, memory."""
+    benches = slam_benches()
+    block = {"quality_score": 0.9, "wall_s": 100.04, "peak_rss_mb": 1000.4}
+    block["per_seed"] = [{"seed": 0, "quality_score": 0.9}, {"seed": 1, "quality_score": 0.75}]
+    benches["slam.mit-killian"] = {
+        "metric": "quality",
+        "quality": {"odometry": {"quality_score": 0.3, "wall_s": 30.0}, "rbpf": block},
+    }
+    rows = tables.slam_quality_table(benches).splitlines()
+    assert rows[2] == "| mit-killian | odometry only | 0.300 | | 30.0 | |"
+    assert (
+        rows[3]
+        == "| mit-killian | **slam rbpf** | **0.900** | 0.750–0.900 (seeds 0–1) | 100.0 | 1000 |"
+    )
+    del benches["slam.mit-killian"]
+    assert len(tables.slam_quality_table(benches).splitlines()) == 2  # header only

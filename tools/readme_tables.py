@@ -388,10 +388,47 @@ def _at(*keys: str) -> Callable[[Benches], float]:
     return lambda benches: get(benches, *keys)
 
 
+def map_quality_benches(benches: Benches) -> dict[str, dict]:
+    """Logs scored by the map quality score (no time-matched relations), README order."""
+    found = {
+        name.removeprefix("slam."): bench
+        for name, bench in benches.items()
+        if name.startswith("slam.") and isinstance(bench, dict) and bench.get("metric") == "quality"
+    }
+    return dict(sorted(found.items(), key=lambda kv: (kv[0] not in LOG_ORDER, kv[0])))
+
+
+def slam_quality_table(benches: Benches) -> str:
+    """Logs without relations: map quality score (seed 0, range over seeds), wall, peak memory."""
+    rows = []
+    for log in map_quality_benches(benches):
+        name = f"slam.{log}"
+        odometry = get(benches, name, "quality", "odometry")
+        rbpf = get(benches, name, "quality", "rbpf")
+        rows.append(
+            [log, "odometry only", fixed(odometry["quality_score"], 3), "",
+             fixed(odometry["wall_s"], 1), ""]
+        )  # fmt: skip
+        scores = [s["quality_score"] for s in rbpf.get("per_seed", [])]
+        seeds = [s["seed"] for s in rbpf.get("per_seed", [])]
+        spread = (
+            f"{fixed(min(scores), 3)}–{fixed(max(scores), 3)} (seeds {min(seeds)}–{max(seeds)})"
+            if scores
+            else ""
+        )
+        rows.append(
+            [log, "**slam rbpf**", f"**{fixed(rbpf['quality_score'], 3)}**", spread,
+             fixed(rbpf["wall_s"], 1), f"{rbpf['peak_rss_mb']:.0f}"]
+        )  # fmt: skip
+    header = ["log", "method", "map quality score", "over seeds", "wall (s)", "peak RSS (MB)"]
+    return table(header, rows)
+
+
 # name -> (JSON file stem, generator)
 TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
     "slam": ("slam", slam_table),
     "performance": ("slam", performance_table),
+    "slam.quality": ("slam", slam_quality_table),
     "localize.tracking": ("localize", tracking_table),
     "localize.global": ("localize", global_table),
     "quality": ("quality", quality_table),
