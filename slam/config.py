@@ -231,7 +231,8 @@ class RbpfConfig(Validated):
     more than the matcher's basin); 0 (the default): never. At 3 it repairs mit-csail seeds 0
     and 1 but makes intel seed 1 and mit-csail seed 2 worse (docs/slam.md)."""
     retry_window: int = bounded(25, ge=1, le=100000)
-    """Updates whose best per-beam log-likelihood make the median of ``retry_ratio``."""
+    """How many of the latest updates the median of ``retry_ratio`` is taken over (their best
+    per-beam log-likelihoods)."""
     retry_yaw: tuple[float, ...] = bounded((0.15, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the predicted poses tried, both signs, when an update is retried."""
     proposal_motion_prior: bool = False
