@@ -334,6 +334,8 @@ def test_ray_cluster_survives_a_killed_worker(small, local_hashes, tmp_path):
         for pid in [starter.pid, *left]:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, signal.SIGKILL)
+        starter.wait(timeout=60)  # reaped, so no "subprocess is still running" warning
+        starter.stdout.close()  # type: ignore[union-attr]
         shutil.rmtree(temp, ignore_errors=True)
     ray_rows = results(out)
     assert len(ray_rows) == 4
