@@ -233,6 +233,35 @@ def gauss_newton(
     return x
 
 
+def graph_keyframes(n: int, stride: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The pose graph's keyframes among ``n >= 1`` nodes, every ``stride``-th node and the last,
+    and for every node the index (into the keyframes) of the keyframe at or after it."""
+    keys = np.arange(0, n, stride)
+    if keys[-1] != n - 1:
+        keys = np.append(keys, n - 1)
+    return keys, np.searchsorted(keys, np.arange(n))
+
+
+def keyframe_edges(
+    found: list, x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
+) -> list[tuple[int, int, F64, F64]]:
+    """The loop closures ``found`` (``(j, i, z, info)``: node ``i`` matched at ``z`` relative to
+    node ``j``) as edges between keyframes ``(kj, ki, z', info)`` of :func:`graph_keyframes`.
+
+    Closures are looked for at keyframes, so ``i`` is one; ``j`` moves to its nearest keyframe
+    and the measurement becomes node ``i``'s matched pose relative to that keyframe's pose in
+    ``x``."""
+    edges = []
+    for j, i, z, info in found:
+        kj = int(key_of[j])
+        if kj > 0 and abs(int(keys[kj - 1]) - j) < abs(int(keys[kj]) - j):
+            kj -= 1
+        ki = int(np.searchsorted(keys, i))
+        matched_i = compose(x[j], z)  # node i's pose found by the loop match
+        edges.append((kj, ki, relative(x[keys[kj]], matched_i), info))
+    return edges
+
+
 def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
     """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise.
 
@@ -242,10 +271,7 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
     lc = config.loops
     step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
     path = np.concatenate([[0.0], np.cumsum(step_len)])
-    keys = np.arange(0, poses.shape[0], lc.stride)
-    if keys[-1] != poses.shape[0] - 1:
-        keys = np.append(keys, poses.shape[0] - 1)
-    key_of = np.searchsorted(keys, np.arange(poses.shape[0]))  # the keyframe at or after a node
+    keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
     x = poses.copy()
     examined = 0
     edges: list = []
@@ -254,15 +280,7 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
         examined += count
         if not found:
             break
-        # each loop edge joins two keyframes: i is one; j moves to its nearest keyframe
-        edges = []
-        for j, i, z, info in found:
-            kj = int(key_of[j])
-            if kj > 0 and abs(int(keys[kj - 1]) - j) < abs(int(keys[kj]) - j):
-                kj -= 1
-            ki = int(np.searchsorted(keys, i))
-            matched_i = compose(x[j], z)  # node i's pose found by the loop match
-            edges.append((kj, ki, relative(x[keys[kj]], matched_i), info))
+        edges = keyframe_edges(found, x, keys, key_of)
         new_keys = optimize(poses[keys], edges, lc)
         x = spread_corrections(poses, keys, new_keys, path)
     moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0

@@ -44,6 +44,8 @@ from slam.graph import (
     _detect,
     _edge_information,
     gauss_newton,
+    graph_keyframes,
+    keyframe_edges,
 )
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
@@ -190,18 +192,6 @@ def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
     return keep
 
 
-def _keyframe_edges(found: list, x: F64, keys, key_of) -> list:
-    """Loop edges between keyframes (as :func:`slam.graph.close_loops` builds them)."""
-    out = []
-    for j, i, z, info in found:
-        kj = int(key_of[j])
-        if kj > 0 and abs(int(keys[kj - 1]) - j) < abs(int(keys[kj]) - j):
-            kj -= 1
-        ki = int(np.searchsorted(keys, i))
-        out.append((kj, ki, relative(x[keys[kj]], compose(x[j], z)), info))
-    return out
-
-
 def optimize(poses: F64, edges: list, robust: F64, lc, start: F64 | None = None) -> F64:
     """:func:`slam.graph.optimize` with a robust-kernel scale per loop edge (0: none).
 
@@ -242,10 +232,7 @@ def close_loops_global(
     if path is None:
         step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
         path = np.concatenate([[0.0], np.cumsum(step_len)])
-    keys = np.arange(0, poses.shape[0], lc.stride)
-    if keys[-1] != poses.shape[0] - 1:
-        keys = np.append(keys, poses.shape[0] - 1)
-    key_of = np.searchsorted(keys, np.arange(poses.shape[0]))
+    keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
     x = poses.copy()
     examined = 0
     edges: list = []
@@ -256,8 +243,8 @@ def close_loops_global(
         examined += count + searched
         if not local and not glob:
             break
-        local_edges = _keyframe_edges(local, x, keys, key_of)
-        global_edges = _keyframe_edges(glob, x, keys, key_of)
+        local_edges = keyframe_edges(local, x, keys, key_of)
+        global_edges = keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
         new_keys = None
         start = None
