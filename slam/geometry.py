@@ -1,7 +1,8 @@
 """SE(2) geometry: poses as ``(x, y, theta)`` arrays, composition, inversion, relative motion.
 
-Every function broadcasts over leading dimensions, so a whole trajectory ``(N, 3)`` or a particle
-set is handled in one call. Angles are radians, wrapped to ``[-pi, pi)``.
+Every pose function broadcasts over leading dimensions, so a whole trajectory ``(N, 3)`` or a
+particle set is handled in one call (:func:`path_along` takes one ``(N, 3)`` chain). Angles are
+radians, wrapped to ``[-pi, pi)``.
 """
 
 from __future__ import annotations
@@ -86,6 +87,15 @@ def interpolate_poses(times: ArrayLike, poses: ArrayLike, query: ArrayLike) -> A
         axis=-1,
     )
     return out
+
+
+def path_along(poses: ArrayLike) -> Array:
+    """``(N,)`` path length from the first of the ``(N, 3)`` poses to each (m): the summed
+    straight steps between consecutive positions."""
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.shape[0] < 2:
+        return np.zeros(poses.shape[0])
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
 
 
 def spread_corrections(

@@ -25,13 +25,14 @@ deterministic, the way graph-based SLAM does, without changing what the filter d
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, LoopConfig
-from slam.geometry import compose, relative, spread_corrections, wrap_angle
+from slam.geometry import compose, path_along, relative, spread_corrections, wrap_angle
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
 from slam.mapping import ParticleMaps, likelihood_tables
@@ -262,6 +263,36 @@ def keyframe_edges(
     return edges
 
 
+LoopRound = Callable[[F64, NDArray[np.int64], NDArray[np.int64]], tuple[list, F64 | None, int]]
+"""One round of loop closing, given the current node poses ``x`` and :func:`graph_keyframes`:
+``(keyframe edges, optimised keyframe poses or None when no closure was found, candidates
+examined)``."""
+
+
+def loop_rounds(poses: F64, path: F64, lc: LoopConfig, one_round: LoopRound) -> LoopResult:
+    """Run up to ``lc.rounds`` rounds of ``one_round`` over the nodes ``poses`` (``path``: each
+    node's distance along the trajectory), spreading each round's keyframe corrections to the
+    nodes in between, until a round finds nothing; then the do-no-harm rule (module docstring,
+    step 5). The frame of :func:`close_loops` and
+    :func:`slam.backend.global_loops.close_loops_global`."""
+    keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
+    x = poses.copy()
+    examined = 0
+    edges: list = []
+    for _ in range(lc.rounds):
+        found, new_keys, count = one_round(x, keys, key_of)
+        examined += count
+        if new_keys is None:
+            break
+        edges = found
+        x = spread_corrections(poses, keys, new_keys, path)
+    moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
+    if moved < lc.min_correction:
+        # the filter's trajectory already agrees with its loop closures within their noise
+        return LoopResult(poses.copy(), examined, len(edges), 0.0)
+    return LoopResult(x, examined, len(edges), moved)
+
+
 def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
     """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise.
 
@@ -269,22 +300,15 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
     for, plus the last; the nodes in between follow their keyframes' corrections.
     """
     lc = config.loops
-    step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    path = np.concatenate([[0.0], np.cumsum(step_len)])
-    keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
-    x = poses.copy()
-    examined = 0
-    edges: list = []
-    for _ in range(lc.rounds):
+    path = path_along(poses)
+
+    def one_round(
+        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
+    ) -> tuple[list, F64 | None, int]:
         found, count = _detect(seq, steps, x, path, config)
-        examined += count
         if not found:
-            break
+            return [], None, count
         edges = keyframe_edges(found, x, keys, key_of)
-        new_keys = optimize(poses[keys], edges, lc)
-        x = spread_corrections(poses, keys, new_keys, path)
-    moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
-    if moved < lc.min_correction:
-        # the filter's trajectory already agrees with its loop closures within their noise
-        return LoopResult(poses.copy(), examined, len(edges), 0.0)
-    return LoopResult(x, examined, len(edges), moved)
+        return edges, optimize(poses[keys], edges, lc), count
+
+    return loop_rounds(poses, path, lc, one_round)

@@ -37,15 +37,15 @@ from numpy.typing import NDArray
 
 from slam.backend.submaps import SubmapCache, stretches, world_hits
 from slam.config import Config
-from slam.geometry import compose, inverse, relative, spread_corrections, wrap_angle
+from slam.geometry import compose, inverse, path_along, relative, wrap_angle
 from slam.graph import (
     LoopResult,
     _chain_information,
     _detect,
     _edge_information,
     gauss_newton,
-    graph_keyframes,
     keyframe_edges,
+    loop_rounds,
 )
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
@@ -230,36 +230,29 @@ def close_loops_global(
     """
     lc, bc = config.loops, config.backend
     if path is None:
-        step_len = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-        path = np.concatenate([[0.0], np.cumsum(step_len)])
-    keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
-    x = poses.copy()
-    examined = 0
-    edges: list = []
-    for _ in range(lc.rounds):
+        path = path_along(poses)
+
+    def one_round(
+        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
+    ) -> tuple[list, F64 | None, int]:
         local, count = _detect(seq, steps, x, path, config)
         glob, searched = detect_global(seq, steps, x, path, config, local)
         glob = consistent(glob, x, path, config)
-        examined += count + searched
         if not local and not glob:
-            break
+            return [], None, count + searched
         local_edges = keyframe_edges(local, x, keys, key_of)
         global_edges = keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
-        new_keys = None
         start = None
         if global_edges:  # pull the verified global closures in, then gate them
             robust = np.array([lc.robust] * len(local_edges) + [0.0] * len(global_edges))
             pulled = optimize(poses[keys], edges, robust, lc)
             passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
-            if len(passed) == len(global_edges):
-                new_keys = pulled  # every closure agrees with the solution: nothing to redo
             edges = local_edges + passed
+            if len(passed) == len(global_edges):
+                return edges, pulled, count + searched  # every closure agrees: nothing to redo
             start = pulled if passed else None
-        if new_keys is None:
-            new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
-        x = spread_corrections(poses, keys, new_keys, path)
-    moved = float(np.hypot(*(x[:, :2] - poses[:, :2]).T).max()) if len(x) else 0.0
-    if moved < lc.min_correction:
-        return LoopResult(poses.copy(), examined, len(edges), 0.0)
-    return LoopResult(x, examined, len(edges), moved)
+        new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
+        return edges, new_keys, count + searched
+
+    return loop_rounds(poses, path, lc, one_round)

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from slam.config import MapConfig, QualityConfig
 from slam.errors import DataError
 from slam.eval.relations import DEFAULT_TOLERANCE_S, match_times, relation_errors
+from slam.geometry import path_along
 from slam.io.relations import Relations
 from slam.kernels.quality import (
     AGREE,
@@ -165,13 +166,6 @@ def stretch_bounds(poses: F64, stretch_m: float) -> NDArray[np.int64]:
     if len(starts) > 1 and path[-1] - path[starts[-1]] < 0.5 * stretch_m:
         starts.pop()
     return np.asarray([*starts, n], dtype=np.int64)
-
-
-def path_along(poses: F64) -> F64:
-    """``(N,)`` path length from the first pose to each pose (m)."""
-    if poses.shape[0] < 2:
-        return np.zeros(poses.shape[0])
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
 
 
 @dataclass(frozen=True)
