@@ -11,6 +11,7 @@ import pytest
 from slam.config import MapConfig, QualityConfig
 from slam.eval.quality import (
     Rays,
+    judging_for,
     map_quality,
     rank_correlation,
     scan_rays,
@@ -30,7 +31,6 @@ from slam.kernels.quality import (
     UNCHECKED,
     UNKNOWN,
     CountMap,
-    Judging,
     ScanRays,
     classify_beams,
     count_rays,
@@ -71,10 +71,9 @@ def _at(counts: tuple[np.ndarray, np.ndarray]) -> CountMap:
     return CountMap(*counts, ORIGIN[0], ORIGIN[1], RES)
 
 
-def _judging(tolerance: float) -> Judging:
-    mc = MapConfig()
-    return Judging(tolerance, mc.log_odds_hit, mc.log_odds_miss, mc.occupied_threshold, 2,
-                   math.sin(math.radians(15)), 2.0, 0.1, 0.02)  # fmt: skip
+def _judging(tolerance: float):
+    """The default thresholds of the score, with the agreement ``tolerance`` (m)."""
+    return judging_for(QualityConfig(tolerance_m=tolerance), MapConfig())
 
 
 def classify(counts: tuple[np.ndarray, np.ndarray], x_wall: float, tolerance: float = 0.15):

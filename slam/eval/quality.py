@@ -338,7 +338,7 @@ def _disc(tolerance: float, resolution: float) -> NDArray[np.int64]:
     return np.ascontiguousarray(offsets, dtype=np.int64)
 
 
-def _judging(config: QualityConfig, map_config: MapConfig) -> Judging:
+def judging_for(config: QualityConfig, map_config: MapConfig) -> Judging:
     """The thresholds of :func:`~slam.kernels.quality.classify_beams` from the configuration."""
     return Judging(
         config.tolerance_m, map_config.log_odds_hit, map_config.log_odds_miss,
@@ -390,7 +390,7 @@ def map_quality(
     verdict = np.empty(kind.shape, dtype=np.int8)
     offset = np.empty(kind.shape, dtype=np.float32)
     disc = _disc(config.tolerance_m, res)
-    judging = _judging(config, map_config)
+    judging = judging_for(config, map_config)
     removed = (0, 0)  # rows currently subtracted from the counts
     stretches: list[StretchScore] = []
     for index in range(bounds.shape[0] - 1):
