@@ -1,4 +1,5 @@
-"""``slam`` as a subprocess, for the tests that signal, kill or time a real CLI process.
+"""``slam`` as a subprocess, for the tests that signal, kill or time a real CLI process, and
+:func:`finished_run`, the run folder of an in-process ``slam run`` that other tests read.
 
 Not a test module (no ``test_`` prefix); the tests import it (pytest puts ``tests/`` on the path).
 """
@@ -27,3 +28,12 @@ def cli_env(**extra: str) -> dict[str, str]:
 def slam_cmd(*args: str) -> list[str]:
     """The command line of ``slam ARGS`` run by this interpreter."""
     return [sys.executable, "-m", "slam", *args]
+
+
+def finished_run(log: Path | str, out: Path, *args: str) -> Path:
+    """``out``, the run folder of ``slam run LOG --out OUT ARGS`` run in this process (the run
+    must succeed)."""
+    from slam.cli import main
+
+    assert main(["run", str(log), "--out", str(out), *args]) == 0
+    return out

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import finished_run
 from test_rosbag import assert_same_log
 
 from slam.cli import main
@@ -152,10 +153,8 @@ def test_ros2_conversions_load_to_the_identical_log(converted):
 def bag_run(carmen_dir, tmp_path_factory) -> Path:
     """``slam run intel.orig.bag`` on its first 300 scans."""
     out = tmp_path_factory.mktemp("bagrun") / "intel-bag"
-    code = main(["run", str(_bag(carmen_dir, "intel")), "--out", str(out), "--max-scans", "300",
-                 "--quiet", "--no-record"])  # fmt: skip
-    assert code == 0
-    return out
+    bag = _bag(carmen_dir, "intel")
+    return finished_run(bag, out, "--max-scans", "300", "--quiet", "--no-record")
 
 
 def test_bag_run_writes_map_server_files_and_uses_no_shipped_config(bag_run):

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from cli_process import cli_env, slam_cmd
+from cli_process import cli_env, finished_run, slam_cmd
 
 from slam.cli import main
 from slam.errors import UsageError
@@ -72,10 +72,7 @@ def small(tmp_path_factory) -> Path:
 
 def make_run(small: Path, out: Path, *extra: str) -> Path:
     """A finished run folder of ``slam run`` at ``out`` (20 scans)."""
-    code = main(["run", str(small), "--out", str(out), "--max-scans", SCANS, "--particles", "10",
-                 "--quiet", *extra])  # fmt: skip
-    assert code == 0
-    return out
+    return finished_run(small, out, "--max-scans", SCANS, "--particles", "10", "--quiet", *extra)
 
 
 def wait_for_partial(parent: Path, process: subprocess.Popen, timeout_s: float = 60.0) -> Path:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import finished_run
 from synthetic_logs import carmen_lines, path, ray_cast, write_carmen
 
 from slam.cli import main
@@ -28,8 +29,7 @@ def room(tmp_path_factory) -> tuple[Path, Path]:
     """A synthetic CARMEN log of a box room and the ``slam run`` folder of its map."""
     folder = tmp_path_factory.mktemp("room")
     log = write_carmen(folder, carmen_lines(SCANS))
-    run = folder / "run"
-    assert main(["run", str(log), "--out", str(run), "--no-record", "--no-texture", "--quiet"]) == 0
+    run = finished_run(log, folder / "run", "--no-record", "--no-texture", "--quiet")
     return log, run
 
 

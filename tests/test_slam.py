@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import finished_run
 
 from slam.cli import main
 from slam.config import load_config
@@ -31,10 +32,7 @@ def small(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def rbpf_run(small, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("runs") / "rbpf"
-    code = main(["run", str(small), "--out", str(out), "--max-scans", str(SCANS),
-                 "--particles", "20", "--quiet"])  # fmt: skip
-    assert code == 0
-    return out
+    return finished_run(small, out, "--max-scans", str(SCANS), "--particles", "20", "--quiet")
 
 
 def test_run_folder_has_every_output(rbpf_run):
