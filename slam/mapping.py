@@ -31,6 +31,7 @@ from slam.kernels.field import (
     FieldView,
     TilePool,
     claim_tiles,
+    insert_serial,
     match_particles,
     match_scans,
     recount_tiles,
@@ -346,21 +347,32 @@ class ParticleMaps:
 
         Three kernels: which hits add something (parallel), copy-on-write of the tiles they touch
         (serial, cheap), then the distance updates (parallel: each particle writes only tiles it
-        owns alone).
+        owns alone). One pose (a scan placed into one map) takes one serial kernel instead,
+        :func:`~slam.kernels.field.insert_serial`, which gives the same maps.
         """
         if hx.shape[0] == 0:
             return
         poses = np.ascontiguousarray(poses)
+        hits = np.asarray(np.stack([hx, hy, nx, ny]), dtype=np.float64)
         keep = np.empty((poses.shape[0], hx.shape[0]), dtype=np.bool_)
-        select_new_hits(self._pool(), poses, hx, hy, skip_below, keep)
+        if poses.shape[0] == 1:
+            start = 0
+            while True:
+                start = insert_serial(
+                    self._pool(), poses, hits, skip_below, self.signed, keep, start
+                )
+                if start < 0:
+                    return
+                self._grow_pool()
+        select_new_hits(self._pool(), poses, hits[0], hits[1], skip_below, keep)
         start = 0
         while True:
-            stopped = claim_tiles(self._pool(), poses, hx, hy, keep, start)
+            stopped = claim_tiles(self._pool(), poses, hits[0], hits[1], keep, start)
             if stopped < 0:
                 break
             self._grow_pool()
             start = stopped
-        splat_hits(self._pool(), poses, hx, hy, nx, ny, keep, self.signed)
+        splat_hits(self._pool(), poses, hits, keep, self.signed)
 
     def _pool(self) -> TilePool:
         """The tiles as the insertion kernels write them (built anew: growing replaces arrays)."""

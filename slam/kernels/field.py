@@ -462,26 +462,40 @@ def select_new_hits(
     close (within ``skip_below``) as this one, or when the previous hit of the same scan fell in
     the same cell: re-observed walls then neither copy tiles nor move the field.
     """
-    dist, tables, shift, dmax = pool.dist, pool.tables, pool.shift, pool.dmax
-    ox, oy, res = pool.ox, pool.oy, pool.res
     for p in prange(poses.shape[0]):
-        table = tables[p]
-        c = np.cos(poses[p, 2])
-        s = np.sin(poses[p, 2])
-        last_x = -(1 << 30)
-        last_y = -(1 << 30)
-        for k in range(hx.shape[0]):
-            wx = poses[p, 0] + c * hx[k] - s * hy[k]
-            wy = poses[p, 1] + s * hx[k] + c * hy[k]
-            cx = cell_index(wx, ox, res)
-            cy = cell_index(wy, oy, res)
-            if cx == last_x and cy == last_y:
-                keep[p, k] = False
-                continue
-            last_x = cx
-            last_y = cy
-            own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
-            keep[p, k] = cell_distance(dist, table, shift, cx, cy, dmax) > own + skip_below
+        _select_particle(pool, poses, np.int64(p), hx, hy, skip_below, keep)
+
+
+@njit(cache=True)
+def _select_particle(
+    pool: TilePool,
+    poses: np.ndarray,
+    p: int,
+    hx: np.ndarray,
+    hy: np.ndarray,
+    skip_below: float,
+    keep: np.ndarray,
+) -> None:
+    """:func:`select_new_hits` for particle ``p``."""
+    dist, shift, dmax = pool.dist, pool.shift, pool.dmax
+    ox, oy, res = pool.ox, pool.oy, pool.res
+    table = pool.tables[p]
+    c = np.cos(poses[p, 2])
+    s = np.sin(poses[p, 2])
+    last_x = -(1 << 30)
+    last_y = -(1 << 30)
+    for k in range(hx.shape[0]):
+        wx = poses[p, 0] + c * hx[k] - s * hy[k]
+        wy = poses[p, 1] + s * hx[k] + c * hy[k]
+        cx = cell_index(wx, ox, res)
+        cy = cell_index(wy, oy, res)
+        if cx == last_x and cy == last_y:
+            keep[p, k] = False
+            continue
+        last_x = cx
+        last_y = cy
+        own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
+        keep[p, k] = cell_distance(dist, table, shift, cx, cy, dmax) > own + skip_below
 
 
 @njit(cache=True)
@@ -500,44 +514,60 @@ def claim_tiles(
     processed. Returns -1 when done, or the index of the particle that ran out of free tiles (the
     caller grows the pool and calls again from there).
     """
+    for p in range(start, poses.shape[0]):
+        if not _claim_particle(pool, poses, p, hx, hy, keep):
+            return p
+    return -1
+
+
+@njit(cache=True)
+def _claim_particle(
+    pool: TilePool,
+    poses: np.ndarray,
+    p: int,
+    hx: np.ndarray,
+    hy: np.ndarray,
+    keep: np.ndarray,
+) -> bool:
+    """:func:`claim_tiles` for particle ``p``; ``False`` when the pool ran out of free tiles
+    (the tiles claimed so far stay claimed: claiming again from ``p`` skips them)."""
     dist, surface, refcount = pool.dist, pool.surface, pool.refcount
-    free_stack, free_top, tables, shift = pool.free_stack, pool.free_top, pool.tables, pool.shift
+    free_stack, free_top, shift = pool.free_stack, pool.free_top, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     radius = int(np.ceil(dmax / res))
-    ntile_y = tables.shape[1]
-    ntile_x = tables.shape[2]
-    for p in range(start, poses.shape[0]):
-        table = tables[p]
-        c = np.cos(poses[p, 2])
-        s = np.sin(poses[p, 2])
-        for k in range(hx.shape[0]):
-            if not keep[p, k]:
-                continue
-            wx = poses[p, 0] + c * hx[k] - s * hy[k]
-            wy = poses[p, 1] + s * hx[k] + c * hy[k]
-            cx = cell_index(wx, ox, res)
-            cy = cell_index(wy, oy, res)
-            ty0 = max(cy - radius, 0) >> shift
-            ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
-            tx0 = max(cx - radius, 0) >> shift
-            tx1 = min(cx + radius, (ntile_x << shift) - 1) >> shift
-            for ty in range(ty0, ty1 + 1):
-                for tx in range(tx0, tx1 + 1):
-                    t = table[ty, tx]
-                    if t >= 0 and refcount[t] == 1:
-                        continue
-                    if free_top[0] == 0:
-                        return p
-                    free_top[0] -= 1
-                    new = free_stack[free_top[0]]
-                    if t < 0:
-                        _fill_tile(dist, surface, new, dmax)
-                    else:
-                        _copy_tile(dist, surface, t, new)
-                        refcount[t] -= 1
-                    refcount[new] = 1
-                    table[ty, tx] = new
-    return -1
+    ntile_y = pool.tables.shape[1]
+    ntile_x = pool.tables.shape[2]
+    table = pool.tables[p]
+    c = np.cos(poses[p, 2])
+    s = np.sin(poses[p, 2])
+    for k in range(hx.shape[0]):
+        if not keep[p, k]:
+            continue
+        wx = poses[p, 0] + c * hx[k] - s * hy[k]
+        wy = poses[p, 1] + s * hx[k] + c * hy[k]
+        cx = cell_index(wx, ox, res)
+        cy = cell_index(wy, oy, res)
+        ty0 = max(cy - radius, 0) >> shift
+        ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
+        tx0 = max(cx - radius, 0) >> shift
+        tx1 = min(cx + radius, (ntile_x << shift) - 1) >> shift
+        for ty in range(ty0, ty1 + 1):
+            for tx in range(tx0, tx1 + 1):
+                t = table[ty, tx]
+                if t >= 0 and refcount[t] == 1:
+                    continue
+                if free_top[0] == 0:
+                    return False
+                free_top[0] -= 1
+                new = free_stack[free_top[0]]
+                if t < 0:
+                    _fill_tile(dist, surface, new, dmax)
+                else:
+                    _copy_tile(dist, surface, t, new)
+                    refcount[t] -= 1
+                refcount[new] = 1
+                table[ty, tx] = new
+    return True
 
 
 @njit(cache=True)
@@ -566,59 +596,90 @@ def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int) -> Non
 def splat_hits(
     pool: TilePool,
     poses: np.ndarray,
-    hx: np.ndarray,
-    hy: np.ndarray,
-    nx: np.ndarray,
-    ny: np.ndarray,
+    hits: np.ndarray,
     keep: np.ndarray,
     signed: bool,
 ) -> None:
     """Write the kept hits into the particles' (exclusively owned) tiles, in parallel.
 
+    ``hits`` is ``(4, K)``: the robot-frame hits ``(hx, hy)`` and their unit normals ``(nx, ny)``.
     Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
     Euclidean distance (``dist``) and, in ``surface``, its signed plane distance when ``signed``
     (else the Euclidean distance again: the unsigned field). Must follow :func:`claim_tiles`.
     """
-    dist, surface, tables, shift = pool.dist, pool.surface, pool.tables, pool.shift
+    for p in prange(poses.shape[0]):
+        _splat_particle(pool, poses, np.int64(p), hits, keep, signed)
+
+
+@njit(cache=True)
+def _splat_particle(
+    pool: TilePool, poses: np.ndarray, p: int, hits: np.ndarray, keep: np.ndarray, signed: bool
+) -> None:
+    """:func:`splat_hits` for particle ``p``."""
+    dist, surface, shift = pool.dist, pool.surface, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     radius = int(np.ceil(dmax / res))
     mask = (1 << shift) - 1
-    ny_cells = tables.shape[1] << shift
-    nx_cells = tables.shape[2] << shift
-    for p in prange(poses.shape[0]):
-        table = tables[p]
-        c = np.cos(poses[p, 2])
-        s = np.sin(poses[p, 2])
-        for k in range(hx.shape[0]):
-            if not keep[p, k]:
-                continue
-            wx = poses[p, 0] + c * hx[k] - s * hy[k]
-            wy = poses[p, 1] + s * hx[k] + c * hy[k]
-            wnx = c * nx[k] - s * ny[k]
-            wny = s * nx[k] + c * ny[k]
-            cx = cell_index(wx, ox, res)
-            cy = cell_index(wy, oy, res)
-            for iy in range(max(cy - radius, 0), min(cy + radius + 1, ny_cells)):
-                ccy = oy + (iy + 0.5) * res - wy
-                ty = iy >> shift
-                ly = iy & mask
-                for ix in range(max(cx - radius, 0), min(cx + radius + 1, nx_cells)):
-                    ccx = ox + (ix + 0.5) * res - wx
-                    d = np.sqrt(ccx * ccx + ccy * ccy)
-                    if d >= dmax:
+    ny_cells = pool.tables.shape[1] << shift
+    nx_cells = pool.tables.shape[2] << shift
+    table = pool.tables[p]
+    c = np.cos(poses[p, 2])
+    s = np.sin(poses[p, 2])
+    for k in range(hits.shape[1]):
+        if not keep[p, k]:
+            continue
+        hx, hy, nx, ny = hits[0, k], hits[1, k], hits[2, k], hits[3, k]
+        wx = poses[p, 0] + c * hx - s * hy
+        wy = poses[p, 1] + s * hx + c * hy
+        wnx = c * nx - s * ny
+        wny = s * nx + c * ny
+        cx = cell_index(wx, ox, res)
+        cy = cell_index(wy, oy, res)
+        for iy in range(max(cy - radius, 0), min(cy + radius + 1, ny_cells)):
+            ccy = oy + (iy + 0.5) * res - wy
+            ty = iy >> shift
+            ly = iy & mask
+            for ix in range(max(cx - radius, 0), min(cx + radius + 1, nx_cells)):
+                ccx = ox + (ix + 0.5) * res - wx
+                d = np.sqrt(ccx * ccx + ccy * ccy)
+                if d >= dmax:
+                    continue
+                t = table[ty, ix >> shift]
+                lx = ix & mask
+                if d < dist[t, ly, lx]:
+                    dist[t, ly, lx] = d
+                    if not signed:
+                        surface[t, ly, lx] = d
                         continue
-                    t = table[ty, ix >> shift]
-                    lx = ix & mask
-                    if d < dist[t, ly, lx]:
-                        dist[t, ly, lx] = d
-                        if not signed:
-                            surface[t, ly, lx] = d
-                            continue
-                        normal = ccx * wnx + ccy * wny
-                        beyond = abs(ccy * wnx - ccx * wny) - res
-                        if beyond > 0.0:
-                            normal = np.copysign(np.sqrt(normal * normal + beyond * beyond), normal)
-                        surface[t, ly, lx] = normal
+                    normal = ccx * wnx + ccy * wny
+                    beyond = abs(ccy * wnx - ccx * wny) - res
+                    if beyond > 0.0:
+                        normal = np.copysign(np.sqrt(normal * normal + beyond * beyond), normal)
+                    surface[t, ly, lx] = normal
+
+
+@njit(cache=True)
+def insert_serial(
+    pool: TilePool,
+    poses: np.ndarray,
+    hits: np.ndarray,
+    skip_below: float,
+    signed: bool,
+    keep: np.ndarray,
+    start: int,
+) -> int:
+    """:func:`select_new_hits`, :func:`claim_tiles` and :func:`splat_hits` particle by particle
+    in one serial call, for few poses (one scan placed into one map): a parallel region's start
+    costs more than the work of one pose. ``hits`` as for :func:`splat_hits`. The same result as
+    the three kernels (each particle writes only tiles it owns alone, and claims in the same
+    order). Returns -1 when done, or the particle that ran out of free tiles (grow the pool and
+    call again from there)."""
+    for p in range(start, poses.shape[0]):
+        _select_particle(pool, poses, p, hits[0], hits[1], skip_below, keep)
+        if not _claim_particle(pool, poses, p, hits[0], hits[1], keep):
+            return p
+        _splat_particle(pool, poses, p, hits, keep, signed)
+    return -1
 
 
 @njit(cache=True)
