@@ -216,46 +216,77 @@ def normal_equations(
     (``cost_row``, ``weight_row``; see :func:`slam.mapping.likelihood_tables`), which avoids an
     ``exp`` and a ``log`` per beam. Only every ``stride``-th beam is used. Returns the cost and
     the number of beams on known cells.
+
+    The hot loop of the matcher: :func:`surface_at` and :func:`table_lookup` are written out in
+    it (the same operations in the same order, so the same bits) with the view's fields and the
+    tables' ends read once, and the two table lookups share their index.
     """
-    return _normal_equations(
-        view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, np.int64(stride)
-    )  # one compiled body whether ``stride`` is given or not (an omitted argument is a type)
-
-
-@njit(cache=True)
-def _normal_equations(
-    view: FieldView,
-    x: float,
-    y: float,
-    th: float,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    cost_row: np.ndarray,
-    weight_row: np.ndarray,
-    step_inv: float,
-    h: np.ndarray,
-    g: np.ndarray,
-    stride: int,
-) -> tuple[float, int]:
-    """:func:`normal_equations` with every argument given."""
+    surface, table, shift = view.surface, view.table, view.shift
+    ox, oy, inv_res = view.ox, view.oy, view.inv_res
+    mask = (1 << shift) - 1
+    nty = table.shape[0]
+    ntx = table.shape[1]
+    last_c = cost_row.shape[0] - 1
+    last_w = weight_row.shape[0] - 1
+    unknown = cost_row[last_c]
     c = np.cos(th)
     s = np.sin(th)
     cost = 0.0
     inliers = 0
-    unknown = cost_row[cost_row.shape[0] - 1]
     # accumulate in scalars (kept in registers), write the arrays once at the end
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     g0 = g1 = g2 = 0.0
     for b in range(0, ex.shape[0], stride):
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
-        d, gx, gy = surface_at(view, x + rx, y + ry)
+        fgx = (x + rx - ox) * inv_res - 0.5
+        fgy = (y + ry - oy) * inv_res - 0.5
+        if fgx < 0.0 or fgy < 0.0:
+            cost += unknown
+            continue
+        ix = int(fgx)  # truncation is the floor for non-negative values, and much cheaper
+        iy = int(fgy)
+        fx = fgx - ix
+        fy = fgy - iy
+        lx = ix & mask
+        ly = iy & mask
+        if lx < mask and ly < mask:
+            tx = ix >> shift
+            ty = iy >> shift
+            if ty >= nty or tx >= ntx:
+                cost += unknown
+                continue
+            t = table[ty, tx]
+            if t < 0:
+                cost += unknown
+                continue
+            d00 = surface[t, ly, lx]
+            d10 = surface[t, ly, lx + 1]
+            d01 = surface[t, ly + 1, lx]
+            d11 = surface[t, ly + 1, lx + 1]
+        else:
+            d00 = _cell(surface, table, shift, ix, iy)
+            d10 = _cell(surface, table, shift, ix + 1, iy)
+            d01 = _cell(surface, table, shift, ix, iy + 1)
+            d11 = _cell(surface, table, shift, ix + 1, iy + 1)
+        d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
         if np.isnan(d):
             cost += unknown
             continue
-        cost += table_lookup(cost_row, step_inv, abs(d))
+        gx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) * inv_res
+        gy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) * inv_res
+        u = abs(d) * step_inv
+        i = int(u)
+        f = u - i
+        if u >= last_c:
+            cost += cost_row[last_c]
+        else:
+            cost += cost_row[i] + f * (cost_row[i + 1] - cost_row[i])
         inliers += 1
-        wgt = table_lookup(weight_row, step_inv, abs(d))
+        if u >= last_w:
+            wgt = weight_row[last_w]
+        else:
+            wgt = weight_row[i] + f * (weight_row[i + 1] - weight_row[i])
         j2 = -gx * ry + gy * rx
         wgx = wgt * gx
         wgy = wgt * gy
@@ -319,7 +350,7 @@ def match_one(
         cost_row = luts[level, 0]
         weight_row = luts[level, 1]
         stride = 1 if level == last else coarse_stride
-        cost, inliers = _normal_equations(
+        cost, inliers = normal_equations(
             view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, stride
         )
         lam = 1e-3
@@ -335,7 +366,7 @@ def match_one(
             nx = x - s0
             ny = y - s1
             nth = th - s2
-            new_cost, new_inliers = _normal_equations(
+            new_cost, new_inliers = normal_equations(
                 view, nx, ny, nth, ex, ey, cost_row, weight_row, step_inv, hc, gc, stride
             )
             if new_cost < cost:
@@ -423,7 +454,7 @@ def _match_particle(
     h = np.zeros((3, 3))
     g = np.zeros(3)
     fine = luts[last]
-    cost, inliers = _normal_equations(
+    cost, inliers = normal_equations(
         own,
         refined[0],
         refined[1],
