@@ -29,6 +29,8 @@ from slam.grid_geometry import GridGeometry
 from slam.io.atomic import atomic_path
 from slam.kernels.field import (
     FieldView,
+    MatchOutput,
+    MatchSettings,
     TilePool,
     claim_tiles,
     insert_serial,
@@ -430,18 +432,9 @@ class ParticleMaps:
         match_particles(
             self.field(),
             np.ascontiguousarray(poses),
-            ex,
-            ey,
-            luts[0],
-            luts[1],
-            max_iter,
-            tolerance,
-            coarse_stride,
-            min_inliers,
-            out.poses,
-            out.loglik,
-            out.inliers,
-            out.hessian,
+            np.stack([ex, ey]).astype(np.float64, copy=False),
+            _settings(luts, max_iter, tolerance, coarse_stride, min_inliers),
+            MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
         )
         return out
 
@@ -469,12 +462,17 @@ class ParticleMaps:
             ex,
             ey,
             counts,
-            luts[0],
-            luts[1],
-            max_iter,
-            tolerance,
-            coarse_stride,
-            min_inliers,
+            _settings(luts, max_iter, tolerance, coarse_stride, min_inliers),
             out,
         )
         return out
+
+
+def _settings(
+    luts: tuple[F64, float], max_iter: int, tolerance: float, coarse_stride: int, min_inliers: float
+) -> MatchSettings:
+    """The matcher's settings as its kernels take them (one type whatever the caller passed)."""
+    return MatchSettings(
+        luts[0], float(luts[1]), int(max_iter), float(tolerance), int(coarse_stride),
+        float(min_inliers),
+    )  # fmt: skip

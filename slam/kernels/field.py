@@ -95,6 +95,37 @@ class TilePool(NamedTuple):
     """Distance cap (m): cells farther from every hit are unknown."""
 
 
+class MatchSettings(NamedTuple):
+    """How the scan matcher runs (numba takes it as one argument)."""
+
+    luts: np.ndarray
+    """``(levels, 2, size)`` likelihood tables, wide sigma to narrow
+    (:func:`slam.mapping.likelihood_tables`)."""
+    step_inv: float
+    """``1 / step`` of the tables."""
+    max_iter: int
+    """Levenberg-Marquardt iterations per level at most."""
+    tolerance: float
+    """A level ends when a step moves less than this (m or rad)."""
+    coarse_stride: int
+    """The levels before the last use every ``coarse_stride``-th beam."""
+    min_inliers: float
+    """Least fraction of beams on known cells for a match to be trusted."""
+
+
+class MatchOutput(NamedTuple):
+    """Where :func:`match_particles` writes, one row per particle."""
+
+    poses: np.ndarray
+    """``(P, 3)`` refined poses (the predicted pose where the match was not trusted)."""
+    loglik: np.ndarray
+    """``(P,)`` log-likelihood of the scan at each refined pose (narrowest table)."""
+    inliers: np.ndarray
+    """``(P,)`` fraction of beams on known cells."""
+    hessian: np.ndarray
+    """``(P, 3, 3)`` Gauss-Newton Hessian of the negative log-likelihood at each refined pose."""
+
+
 @njit(cache=True, inline="always")
 def cell_distance(
     pool: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int, dmax: float
@@ -128,22 +159,29 @@ def surface_at(view: FieldView, x: float, y: float) -> tuple[float, float, float
     gy = (y - view.oy) * inv_res - 0.5
     if gx < 0.0 or gy < 0.0:
         return np.nan, 0.0, 0.0
+    d, ddx, ddy = _interpolate(view.surface, view.table, view.shift, gx, gy, inv_res)
+    if np.isnan(d):
+        return np.nan, 0.0, 0.0
+    return d, ddx, ddy
+
+
+@njit(cache=True, inline="always")
+def _interpolate(
+    surface: np.ndarray, table: np.ndarray, shift: int, gx: float, gy: float, inv_res: float
+) -> tuple[float, float, float]:
+    """The bilinear value and gradient of :func:`surface_at` at grid coordinates ``(gx, gy)``
+    (``≥ 0``, in cells from the centre of cell (0, 0)); a NaN value where a corner is unknown."""
     ix = int(gx)  # truncation is the floor for non-negative values, and much cheaper
     iy = int(gy)
     fx = gx - ix
     fy = gy - iy
-    shift = view.shift
-    table = view.table
-    surface = view.surface
     mask = (1 << shift) - 1
-    tx = ix >> shift
-    ty = iy >> shift
     lx = ix & mask
     ly = iy & mask
-    nty = table.shape[0]
-    ntx = table.shape[1]
     if lx < mask and ly < mask:
-        if ty >= nty or tx >= ntx:
+        tx = ix >> shift
+        ty = iy >> shift
+        if ty >= table.shape[0] or tx >= table.shape[1]:
             return np.nan, 0.0, 0.0
         t = table[ty, tx]
         if t < 0:
@@ -158,8 +196,6 @@ def surface_at(view: FieldView, x: float, y: float) -> tuple[float, float, float
         d01 = _cell(surface, table, shift, ix, iy + 1)
         d11 = _cell(surface, table, shift, ix + 1, iy + 1)
     d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
-    if np.isnan(d):
-        return np.nan, 0.0, 0.0
     ddx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) * inv_res
     ddy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) * inv_res
     return d, ddx, ddy
@@ -217,15 +253,13 @@ def normal_equations(
     ``exp`` and a ``log`` per beam. Only every ``stride``-th beam is used. Returns the cost and
     the number of beams on known cells.
 
-    The hot loop of the matcher: :func:`surface_at` and :func:`table_lookup` are written out in
-    it (the same operations in the same order, so the same bits) with the view's fields and the
-    tables' ends read once, and the two table lookups share their index.
+    The hot loop of the matcher: the view's fields and the tables' ends are read once, the field
+    is interpolated by :func:`surface_at`'s own :func:`_interpolate`, and :func:`table_lookup` is
+    written out so that the two table lookups share their index (the same operations in the same
+    order, so the same bits).
     """
     surface, table, shift = view.surface, view.table, view.shift
     ox, oy, inv_res = view.ox, view.oy, view.inv_res
-    mask = (1 << shift) - 1
-    nty = table.shape[0]
-    ntx = table.shape[1]
     last_c = cost_row.shape[0] - 1
     last_w = weight_row.shape[0] - 1
     unknown = cost_row[last_c]
@@ -244,37 +278,10 @@ def normal_equations(
         if fgx < 0.0 or fgy < 0.0:
             cost += unknown
             continue
-        ix = int(fgx)  # truncation is the floor for non-negative values, and much cheaper
-        iy = int(fgy)
-        fx = fgx - ix
-        fy = fgy - iy
-        lx = ix & mask
-        ly = iy & mask
-        if lx < mask and ly < mask:
-            tx = ix >> shift
-            ty = iy >> shift
-            if ty >= nty or tx >= ntx:
-                cost += unknown
-                continue
-            t = table[ty, tx]
-            if t < 0:
-                cost += unknown
-                continue
-            d00 = surface[t, ly, lx]
-            d10 = surface[t, ly, lx + 1]
-            d01 = surface[t, ly + 1, lx]
-            d11 = surface[t, ly + 1, lx + 1]
-        else:
-            d00 = _cell(surface, table, shift, ix, iy)
-            d10 = _cell(surface, table, shift, ix + 1, iy)
-            d01 = _cell(surface, table, shift, ix, iy + 1)
-            d11 = _cell(surface, table, shift, ix + 1, iy + 1)
-        d = (1.0 - fy) * ((1.0 - fx) * d00 + fx * d10) + fy * ((1.0 - fx) * d01 + fx * d11)
+        d, gx, gy = _interpolate(surface, table, shift, fgx, fgy, inv_res)
         if np.isnan(d):
             cost += unknown
             continue
-        gx = ((1.0 - fy) * (d10 - d00) + fy * (d11 - d01)) * inv_res
-        gy = ((1.0 - fx) * (d01 - d00) + fx * (d11 - d10)) * inv_res
         u = abs(d) * step_inv
         i = int(u)
         f = u - i
@@ -332,13 +339,37 @@ def match_one(
     Levenberg-Marquardt on the negative log-likelihood (see :func:`normal_equations`), level by
     level through the likelihood tables ``luts[level]`` (wide sigma to narrow) so the first levels
     pull in from further away; the wide levels, which only need to bring the pose into the narrow
-    basin, use every ``coarse_stride``-th beam. Each iteration costs one pass over the beams: a
-    step that does not
-    lower the cost is undone and the damping raised; a level ends when a step moves less than
-    ``tolerance`` (m or rad). Returns the refined pose, its cost at the last level and its inliers.
+    basin, use every ``coarse_stride``-th beam (:func:`refine`). Returns the refined pose (heading
+    wrapped to ``[-π, π)``), its cost at the last level and its inliers.
     """
+    settings = MatchSettings(luts, step_inv, max_iter, tolerance, coarse_stride, 0.0)
+    x, y, th, cost, inliers = refine(view, pose, ex, ey, settings, np.zeros((3, 3)))
+    out = np.empty(3)
+    out[0] = x
+    out[1] = y
+    out[2] = (th + np.pi) % (2.0 * np.pi) - np.pi
+    return out, cost, inliers
+
+
+@njit(cache=True)
+def refine(
+    view: FieldView,
+    pose: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    settings: MatchSettings,
+    h: np.ndarray,
+) -> tuple[float, float, float, float, int]:
+    """The levels of :func:`match_one`: the refined pose ``(x, y, θ)`` (heading not wrapped), its
+    cost under the last table and its inliers; ``h`` receives the Gauss-Newton Hessian there
+    (the last level uses every beam, so it is :func:`normal_equations`' at that pose).
+
+    Each iteration costs one pass over the beams: a step that does not lower the cost is undone
+    and the damping raised; a level ends when a step moves less than ``settings.tolerance``.
+    """
+    luts, step_inv, max_iter = settings.luts, settings.step_inv, settings.max_iter
+    tolerance, coarse_stride = settings.tolerance, settings.coarse_stride
     x, y, th = pose[0], pose[1], pose[2]
-    h = np.zeros((3, 3))
     g = np.zeros(3)
     hc = np.zeros((3, 3))
     gc = np.zeros(3)
@@ -382,44 +413,30 @@ def match_one(
                 lam *= 10.0
                 if lam > 1e3:
                     break
-    out = np.empty(3)
-    out[0] = x
-    out[1] = y
-    out[2] = (th + np.pi) % (2.0 * np.pi) - np.pi
-    return out, cost, inliers
+    return x, y, th, cost, inliers
 
 
 @njit(cache=True, parallel=True)
 def match_particles(
     view: FieldView,
     poses: np.ndarray,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    luts: np.ndarray,
-    step_inv: float,
-    max_iter: int,
-    tolerance: float,
-    coarse_stride: int,
-    min_inliers: float,
-    out_poses: np.ndarray,
-    out_loglik: np.ndarray,
-    out_inliers: np.ndarray,
-    out_hessian: np.ndarray,
+    ends: np.ndarray,
+    settings: MatchSettings,
+    out: MatchOutput,
 ) -> None:
     """Scan-match every particle against its own map (the proposal), then score it.
 
-    ``view.table`` holds every particle's tile table. For each particle: refine its predicted
-    pose with :func:`match_one`; if fewer than ``min_inliers`` of the beams then fall on known
-    cells the match is not trusted and the predicted pose is kept. ``out_loglik`` is the log-likelihood of the scan at the final pose
-    under the last (narrowest) table; ``out_inliers`` the fraction of beams on known cells;
-    ``out_hessian`` the Gauss-Newton Hessian of the negative log-likelihood there (its inverse is
-    the covariance of the match, the spread of the proposal).
+    ``ends`` is ``(2, B)``: the scan's endpoints ``(ex, ey)`` in the robot frame; ``view.table``
+    holds every particle's tile table. For each particle: refine its predicted pose with
+    :func:`refine`; if fewer than ``settings.min_inliers`` of the beams then fall on known cells
+    the match is not trusted and the predicted pose is kept. ``out.loglik`` is the
+    log-likelihood of the scan at the final pose under the last (narrowest) table;
+    ``out.inliers`` the fraction of beams on known cells; ``out.hessian`` the Gauss-Newton
+    Hessian of the negative log-likelihood there (its inverse is the covariance of the match,
+    the spread of the proposal).
     """
     for p in prange(poses.shape[0]):
-        _match_particle(
-            view, np.int64(p), poses, ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride,
-            min_inliers, out_poses, out_loglik, out_inliers, out_hessian,
-        )  # fmt: skip
+        _match_particle(view, np.int64(p), poses, ends, settings, out)
 
 
 @njit(cache=True)
@@ -427,55 +444,41 @@ def _match_particle(
     view: FieldView,
     p: int,
     poses: np.ndarray,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    luts: np.ndarray,
-    step_inv: float,
-    max_iter: int,
-    tolerance: float,
-    coarse_stride: int,
-    min_inliers: float,
-    out_poses: np.ndarray,
-    out_loglik: np.ndarray,
-    out_inliers: np.ndarray,
-    out_hessian: np.ndarray,
+    ends: np.ndarray,
+    settings: MatchSettings,
+    out: MatchOutput,
 ) -> None:
     """:func:`match_particles` for particle ``p`` (a serial function: the parallel loop only
-    calls it, which keeps numba's parallel region, slow to compile, tiny)."""
-    last = luts.shape[0] - 1
+    calls it, which keeps numba's parallel region, slow to compile, tiny).
+
+    The score and Hessian at the refined pose are those of the matcher's last evaluation when
+    that was at the very pose reported (the wrapped heading has the same bits); else (a heading
+    wrapping changed, an untrusted match) one more pass computes them.
+    """
+    luts = settings.luts
+    ex, ey = ends[0], ends[1]
     nbeams = max(ex.shape[0], 1)
     own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
-    refined, cost, inliers = match_one(
-        own, poses[p], ex, ey, luts, step_inv, max_iter, tolerance, coarse_stride
-    )
-    frac = inliers / nbeams
-    if frac < min_inliers:
-        refined = poses[p].copy()
     h = np.zeros((3, 3))
-    g = np.zeros(3)
-    fine = luts[last]
-    cost, inliers = normal_equations(
-        own,
-        refined[0],
-        refined[1],
-        refined[2],
-        ex,
-        ey,
-        fine[0],
-        fine[1],
-        step_inv,
-        h,
-        g,
-        np.int64(1),
-    )
+    x, y, th, cost, inliers = refine(own, poses[p], ex, ey, settings, h)
+    frac = inliers / nbeams
+    wrapped = (th + np.pi) % (2.0 * np.pi) - np.pi
+    if frac < settings.min_inliers:
+        x, y, wrapped = poses[p, 0], poses[p, 1], poses[p, 2]
+    if frac < settings.min_inliers or wrapped != th or th == 0.0:  # (-0.0 wraps to 0.0)
+        fine = luts[luts.shape[0] - 1]
+        cost, _ = normal_equations(
+            own, x, y, wrapped, ex, ey, fine[0], fine[1], settings.step_inv, h, np.zeros(3),
+            np.int64(1),
+        )  # fmt: skip
     for a in range(3):
         for b in range(3):
-            out_hessian[p, a, b] = h[a, b]
-    out_poses[p, 0] = refined[0]
-    out_poses[p, 1] = refined[1]
-    out_poses[p, 2] = refined[2]
-    out_inliers[p] = frac
-    out_loglik[p] = -cost
+            out.hessian[p, a, b] = h[a, b]
+    out.poses[p, 0] = x
+    out.poses[p, 1] = y
+    out.poses[p, 2] = wrapped
+    out.inliers[p] = frac
+    out.loglik[p] = -cost
 
 
 @njit(cache=True, parallel=True)
@@ -572,32 +575,31 @@ def _claim_particle(
     c = np.cos(poses[p, 2])
     s = np.sin(poses[p, 2])
     for k in range(hx.shape[0]):
-        if not keep[p, k]:
-            continue
-        wx = poses[p, 0] + c * hx[k] - s * hy[k]
-        wy = poses[p, 1] + s * hx[k] + c * hy[k]
-        cx = cell_index(wx, ox, res)
-        cy = cell_index(wy, oy, res)
-        ty0 = max(cy - radius, 0) >> shift
-        ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
-        tx0 = max(cx - radius, 0) >> shift
-        tx1 = min(cx + radius, (ntile_x << shift) - 1) >> shift
-        for ty in range(ty0, ty1 + 1):
-            for tx in range(tx0, tx1 + 1):
-                t = table[ty, tx]
-                if t >= 0 and refcount[t] == 1:
-                    continue
-                if free_top[0] == 0:
-                    return False
-                free_top[0] -= 1
-                new = free_stack[free_top[0]]
-                if t < 0:
-                    _fill_tile(dist, surface, new, dmax)
-                else:
-                    _copy_tile(dist, surface, t, new)
-                    refcount[t] -= 1
-                refcount[new] = 1
-                table[ty, tx] = new
+        if keep[p, k]:  # a hit that adds something: its footprint
+            wx = poses[p, 0] + c * hx[k] - s * hy[k]
+            wy = poses[p, 1] + s * hx[k] + c * hy[k]
+            cx = cell_index(wx, ox, res)
+            cy = cell_index(wy, oy, res)
+            ty0 = max(cy - radius, 0) >> shift
+            ty1 = min(cy + radius, (ntile_y << shift) - 1) >> shift
+            tx0 = max(cx - radius, 0) >> shift
+            tx1 = min(cx + radius, (ntile_x << shift) - 1) >> shift
+            for ty in range(ty0, ty1 + 1):
+                for tx in range(tx0, tx1 + 1):
+                    t = table[ty, tx]
+                    if t >= 0 and refcount[t] == 1:
+                        continue
+                    if free_top[0] == 0:
+                        return False
+                    free_top[0] -= 1
+                    new = free_stack[free_top[0]]
+                    if t < 0:
+                        _fill_tile(dist, surface, new, dmax)
+                    else:
+                        _copy_tile(dist, surface, t, new)
+                        refcount[t] -= 1
+                    refcount[new] = 1
+                    table[ty, tx] = new
     return True
 
 
@@ -740,28 +742,23 @@ def match_scans(
     ex: np.ndarray,
     ey: np.ndarray,
     counts: np.ndarray,
-    luts: np.ndarray,
-    step_inv: float,
-    max_iter: int,
-    tolerance: float,
-    coarse_stride: int,
-    min_inliers: float,
+    settings: MatchSettings,
     out_poses: np.ndarray,
 ) -> None:
     """Register many scans against one map: scan ``k`` has ``counts[k]`` endpoints in row ``k``.
 
     Each pose is refined with :func:`match_one`; it is kept unchanged when fewer than
-    ``min_inliers`` of its beams then fall on known cells.
+    ``settings.min_inliers`` of its beams then fall on known cells.
     """
     for k in prange(poses.shape[0]):
         n = counts[k]
         kept = poses[k]
         if n > 0:
             refined, _, inliers = match_one(
-                view, poses[k], ex[k, :n], ey[k, :n], luts, step_inv, max_iter, tolerance,
-                coarse_stride,
+                view, poses[k], ex[k, :n], ey[k, :n], settings.luts, settings.step_inv,
+                settings.max_iter, settings.tolerance, settings.coarse_stride,
             )  # fmt: skip
-            if inliers >= min_inliers * n:
+            if inliers >= settings.min_inliers * n:
                 kept = refined
         for a in range(3):
             out_poses[k, a] = kept[a]
