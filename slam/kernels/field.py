@@ -253,35 +253,81 @@ def normal_equations(
     ``exp`` and a ``log`` per beam. Only every ``stride``-th beam is used. Returns the cost and
     the number of beams on known cells.
 
-    The hot loop of the matcher: the view's fields and the tables' ends are read once, the field
-    is interpolated by :func:`surface_at`'s own :func:`_interpolate`, and :func:`table_lookup` is
-    written out so that the two table lookups share their index (the same operations in the same
-    order, so the same bits).
+    Two passes: the field at the endpoints (:func:`beam_geometry`, the view's fields read once,
+    interpolated by :func:`surface_at`'s own :func:`_interpolate`), then the tables
+    (:func:`accumulate`).
+    """
+    geo = np.empty(((ex.shape[0] + stride - 1) // stride, 4))
+    beam_geometry(geo, view, x, y, th, stride, ex, ey)
+    return accumulate(geo, cost_row, weight_row, step_inv, h, g)
+
+
+@njit(cache=True)
+def beam_geometry(
+    geo: np.ndarray,
+    view: FieldView,
+    x: float,
+    y: float,
+    th: float,
+    stride: int,
+    ex: np.ndarray,
+    ey: np.ndarray,
+) -> None:
+    """The field at every ``stride``-th endpoint at pose ``(x, y, th)``, for :func:`accumulate`:
+    ``geo[j]`` is the value ``d`` (NaN: unknown), its gradient ``(∂d/∂x, ∂d/∂y)`` and its
+    derivative by the heading, of beam ``j·stride``.
+
+    Apart from the tables, so that a level of :func:`refine` that starts where the previous one
+    ended (with the same stride) reuses it: only the tables change from level to level.
     """
     surface, table, shift = view.surface, view.table, view.shift
     ox, oy, inv_res = view.ox, view.oy, view.inv_res
-    last_c = cost_row.shape[0] - 1
-    last_w = weight_row.shape[0] - 1
-    unknown = cost_row[last_c]
     c = np.cos(th)
     s = np.sin(th)
-    cost = 0.0
-    inliers = 0
-    # accumulate in scalars (kept in registers), write the arrays once at the end
-    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
-    g0 = g1 = g2 = 0.0
-    for b in range(0, ex.shape[0], stride):
+    for j in range(geo.shape[0]):
+        b = j * stride
         rx = c * ex[b] - s * ey[b]
         ry = s * ex[b] + c * ey[b]
         fgx = (x + rx - ox) * inv_res - 0.5
         fgy = (y + ry - oy) * inv_res - 0.5
         if fgx < 0.0 or fgy < 0.0:
-            cost += unknown
-            continue
-        d, gx, gy = _interpolate(surface, table, shift, fgx, fgy, inv_res)
+            geo[j, 0] = np.nan
+        else:
+            d, gx, gy = _interpolate(surface, table, shift, fgx, fgy, inv_res)
+            geo[j, 0] = d
+            geo[j, 1] = gx
+            geo[j, 2] = gy
+            geo[j, 3] = -gx * ry + gy * rx
+
+
+@njit(cache=True)
+def accumulate(
+    geo: np.ndarray,
+    cost_row: np.ndarray,
+    weight_row: np.ndarray,
+    step_inv: float,
+    h: np.ndarray,
+    g: np.ndarray,
+) -> tuple[float, int]:
+    """Cost, Gauss-Newton system and inliers of :func:`normal_equations` from the beams'
+    :func:`beam_geometry` ``geo``: :func:`table_lookup` is written out so that the two table
+    lookups share their index (the same operations in the same order, so the same bits)."""
+    last_c = cost_row.shape[0] - 1
+    last_w = weight_row.shape[0] - 1
+    unknown = cost_row[last_c]
+    cost = 0.0
+    inliers = 0
+    # accumulate in scalars (kept in registers), write the arrays once at the end
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    g0 = g1 = g2 = 0.0
+    for j in range(geo.shape[0]):
+        d = geo[j, 0]
         if np.isnan(d):
             cost += unknown
             continue
+        gx = geo[j, 1]
+        gy = geo[j, 2]
+        j2 = geo[j, 3]
         u = abs(d) * step_inv
         i = int(u)
         f = u - i
@@ -294,7 +340,6 @@ def normal_equations(
             wgt = weight_row[last_w]
         else:
             wgt = weight_row[i] + f * (weight_row[i + 1] - weight_row[i])
-        j2 = -gx * ry + gy * rx
         wgx = wgt * gx
         wgy = wgt * gy
         wj2 = wgt * j2
@@ -365,7 +410,9 @@ def refine(
     (the last level uses every beam, so it is :func:`normal_equations`' at that pose).
 
     Each iteration costs one pass over the beams: a step that does not lower the cost is undone
-    and the damping raised; a level ends when a step moves less than ``settings.tolerance``.
+    and the damping raised; a level ends when a step moves less than ``settings.tolerance``. A
+    level that uses the beams of the previous one starts from that level's field values at the
+    pose it ended at (:func:`beam_geometry`), so only its tables are read again.
     """
     luts, step_inv, max_iter = settings.luts, settings.step_inv, settings.max_iter
     tolerance, coarse_stride = settings.tolerance, settings.coarse_stride
@@ -377,13 +424,18 @@ def refine(
     cost = 0.0
     inliers = 0
     last = luts.shape[0] - 1
+    geo = np.empty((ex.shape[0], 4))  # the field at the beams at the current pose
+    trial = np.empty((ex.shape[0], 4))  # ... at the pose tried
+    known = 0  # stride of the beams in ``geo`` (0: none yet)
     for level in range(luts.shape[0]):
         cost_row = luts[level, 0]
         weight_row = luts[level, 1]
         stride = 1 if level == last else coarse_stride
-        cost, inliers = normal_equations(
-            view, x, y, th, ex, ey, cost_row, weight_row, step_inv, h, g, stride
-        )
+        n = (ex.shape[0] + stride - 1) // stride
+        if known != stride:  # else the previous level ended at this pose with these beams
+            beam_geometry(geo[:n], view, x, y, th, stride, ex, ey)
+            known = stride
+        cost, inliers = accumulate(geo[:n], cost_row, weight_row, step_inv, h, g)
         lam = 1e-3
         for _ in range(max_iter):
             for a in range(3):
@@ -397,11 +449,11 @@ def refine(
             nx = x - s0
             ny = y - s1
             nth = th - s2
-            new_cost, new_inliers = normal_equations(
-                view, nx, ny, nth, ex, ey, cost_row, weight_row, step_inv, hc, gc, stride
-            )
+            beam_geometry(trial[:n], view, nx, ny, nth, stride, ex, ey)
+            new_cost, new_inliers = accumulate(trial[:n], cost_row, weight_row, step_inv, hc, gc)
             if new_cost < cost:
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
+                geo, trial = trial, geo
                 for a in range(3):
                     g[a] = gc[a]
                     for b in range(3):
