@@ -257,8 +257,9 @@ def normal_equations(
     interpolated by :func:`surface_at`'s own :func:`_interpolate`), then the tables
     (:func:`accumulate`).
     """
-    geo = np.empty(((ex.shape[0] + stride - 1) // stride, 4))
-    beam_geometry(geo, view, x, y, th, stride, ex, ey)
+    every = np.int64(stride)  # one type for the callee whether ``stride`` is given or not
+    geo = np.empty(((ex.shape[0] + every - 1) // every, 4))
+    beam_geometry(geo, view, x, y, th, every, ex, ey)
     return accumulate(geo, cost_row, weight_row, step_inv, h, g)
 
 
@@ -562,10 +563,14 @@ def _select_particle(
     skip_below: float,
     keep: np.ndarray,
 ) -> None:
-    """:func:`select_new_hits` for particle ``p``."""
+    """:func:`select_new_hits` for particle ``p``. The hit's distance to its cell's centre (a
+    ``hypot``) is computed only where the cell's stored distance does not decide alone: at most
+    ``skip_below`` (no hit adds anything), beyond ``res + skip_below`` (any hit in the cell is
+    closer) — the same decisions, bit for bit."""
     dist, shift, dmax = pool.dist, pool.shift, pool.dmax
     ox, oy, res = pool.ox, pool.oy, pool.res
     table = pool.tables[p]
+    sure = res + skip_below  # a cell farther than this from its hits gains by any hit in it
     c = np.cos(poses[p, 2])
     s = np.sin(poses[p, 2])
     last_x = -(1 << 30)
@@ -580,8 +585,14 @@ def _select_particle(
             continue
         last_x = cx
         last_y = cy
-        own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
-        keep[p, k] = cell_distance(dist, table, shift, cx, cy, dmax) > own + skip_below
+        known = cell_distance(dist, table, shift, cx, cy, dmax)
+        if known <= skip_below:  # the hit's own distance is ≥ 0: nothing closer to add
+            keep[p, k] = False
+        elif known > sure and np.isfinite(wx + wy):  # its own distance is < res: closer
+            keep[p, k] = True
+        else:
+            own = np.hypot(ox + (cx + 0.5) * res - wx, oy + (cy + 0.5) * res - wy)
+            keep[p, k] = known > own + skip_below
 
 
 @njit(cache=True)
