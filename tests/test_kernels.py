@@ -239,3 +239,48 @@ def test_scan_matching_recovers_a_known_offset(signed, tolerance):
     if signed:  # a well-posed match: the Hessian (inverse covariance) is positive definite
         assert np.all(np.linalg.eigvalsh(out.hessian) > 0)
     assert np.all(out.inliers > 0.99)
+
+
+@pytest.mark.parametrize("signed", [True, False])
+def test_one_pose_insert_equals_the_parallel_kernels(signed):
+    """One pose goes through the serial kernel (insert_serial), several through the three
+    parallel ones: the same maps, bit for bit, with a pool that has to grow on the way."""
+    hy = np.linspace(-1.5, 1.5, 301)
+    hx = np.full_like(hy, 2.0) + 0.3 * np.sin(3.0 * hy)  # a wavy wall 2 m ahead
+    nx, ny = np.full_like(hx, -1.0), np.zeros_like(hy)
+    pose = np.array([[0.11, -0.07, 0.2]])
+    one = ParticleMaps(1, 0.05, 0.3, tile=8, size_m=8.0, capacity=4, signed=signed)
+    many = ParticleMaps(2, 0.05, 0.3, tile=8, size_m=8.0, capacity=4, signed=signed)
+    for maps, poses in ((one, pose), (many, np.repeat(pose, 2, axis=0))):
+        maps.insert(poses, hx, hy, nx, ny, 0.01)
+        maps.insert(poses + [0.02, 0.01, 0.0], hx, hy, nx, ny, 0.01)  # partly seen already
+    assert one.capacity > 4 and one.tiles_in_use == many.tiles_in_use // 2
+    for p in (0, 1):
+        known = many.tables[p] >= 0
+        assert np.array_equal(known, one.tables[0] >= 0)
+        for layer in ("dist", "surface"):
+            a = getattr(one, layer)[one.tables[0][known]]
+            b = getattr(many, layer)[many.tables[p][known]]
+            assert np.array_equal(a, b, equal_nan=True)
+
+
+def test_particle_score_and_hessian_are_those_at_the_reported_pose():
+    """match_particles reuses the matcher's last evaluation when it was at the reported pose;
+    its score and Hessian equal a fresh normal_equations there either way."""
+    from slam.kernels.field import normal_equations
+
+    maps, hx, hy = _wall_maps(particles=4)
+    luts, step_inv = likelihood_tables(np.array([0.2, 0.075, 0.04]), 0.9, 0.1, 0.3)
+    ex, ey = hx[::3] - 0.03, hy[::3] + 0.02
+    # matches near the wall (headings whose wrapping keeps or changes their bits), one facing
+    # away from it and one far off (both untrusted: the predicted pose is kept)
+    poses = np.array([[0.0, 0.0, -2.9], [0.01, 0.0, 0.1], [0.0, 0.01, -0.03], [5.0, 5.0, 0.0]])
+    out = maps.match(poses, ex, ey, (luts, step_inv), 5, 1e-3, 0.5)
+    assert np.all(out.inliers[1:3] > 0.9) and np.all(out.inliers[[0, 3]] == 0.0)
+    assert np.array_equal(out.poses[[0, 3]], poses[[0, 3]])
+    for p in range(4):
+        h, g = np.zeros((3, 3)), np.zeros(3)
+        cost, _ = normal_equations(
+            maps.field(p), *out.poses[p], ex, ey, luts[-1, 0], luts[-1, 1], step_inv, h, g, 1
+        )
+        assert out.loglik[p] == -cost and np.array_equal(out.hessian[p], h)
