@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import pytest
 
@@ -22,8 +23,10 @@ from slam.eval.quality import (
 )
 from slam.geometry import relative
 from slam.io.relations import Relations
+from slam.kernels.grid import bresenham
 from slam.kernels.quality import (
     AGREE,
+    BLOCK_SCANS,
     CONFLICT_FREE,
     CONFLICT_THROUGH,
     HIT,
@@ -119,6 +122,66 @@ def test_tiles_are_allocated_where_rays_pass_and_count_the_same():
     count_rays(_at(sparse), rays, 0, n, 1)
     for a, b in zip(to_rows(*full), to_rows(*sparse), strict=True):
         assert np.array_equal(a, b) and a.sum() > 0
+
+
+def _reference_counts(rays: ScanRays, height: int, width: int) -> tuple[np.ndarray, ...]:
+    """Hits and misses of ``rays`` counted ray by ray in Python (:func:`bresenham`)."""
+    hits = np.zeros((height, width), np.int64)
+    misses = np.zeros((height, width), np.int64)
+    cell = [lambda v, o=o: int(math.floor((v - o) / RES)) for o in ORIGIN]
+    for k, (x, y, th) in enumerate(rays.poses):
+        c, s = math.cos(th), math.sin(th)
+        x0, y0 = cell[0](x + c * rays.lx - s * rays.ly), cell[1](y + s * rays.lx + c * rays.ly)
+        for j in np.flatnonzero(rays.kind[k]):
+            ex, ey = float(rays.ex[k, j]), float(rays.ey[k, j])
+            x1, y1 = cell[0](x + c * ex - s * ey), cell[1](y + s * ex + c * ey)
+            line = bresenham(x0, y0, x1, y1)
+            for n, (cx, cy) in enumerate(line):
+                if 0 <= cx < width and 0 <= cy < height:
+                    end_hit = n == len(line) - 1 and rays.kind[k, j] == HIT
+                    (hits if end_hit else misses)[cy, cx] += 1
+    return hits, misses
+
+
+def test_parallel_counts_and_verdicts_equal_a_reference_whatever_the_threads():
+    """:func:`count_rays` over several blocks of scans (rays leaving the grid too) counts what a
+    ray-by-ray walk counts, and counts and verdicts are the same on one thread and on all."""
+    rng = np.random.default_rng(7)
+    n, beams = 2 * BLOCK_SCANS + 37, 24
+    poses = np.column_stack([rng.uniform(-0.5, 2.5, n), rng.uniform(-2.5, 2.5, n),
+                             rng.uniform(-3, 3, n)])  # fmt: skip
+    reach = rng.uniform(0.2, 3.0, (n, beams))
+    angle = np.linspace(-2.0, 2.0, beams)[None, :]
+    ex = (reach * np.cos(angle)).astype(np.float32)
+    ey = (reach * np.sin(angle)).astype(np.float32)
+    kind = rng.choice(np.array([0, HIT, HIT, 2], np.int8), (n, beams))
+    rays = ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+    expected = _reference_counts(rays, 120, 80)
+    assert expected[0].sum() > 0 and expected[1].sum() > 0
+    disc = np.array([[dx, dy] for dx in range(-3, 4) for dy in range(-3, 4)
+                     if (dx * dx + dy * dy) * RES**2 <= 0.15**2 + 1e-12])  # fmt: skip
+    results = []
+    for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
+        numba.set_num_threads(threads)
+        try:
+            counts = counts_for(touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, rays))
+            count_rays(_at(counts), rays, 0, n, 1)
+            count_rays(_at(counts), rays, 40, 200, -1)  # the window of a stretch taken out
+            verdict = np.empty(kind.shape, np.int8)
+            offset = np.empty(kind.shape, np.float32)
+            classify_beams(_at(counts), rays, 40, 200, disc, _judging(0.15), verdict, offset)
+            count_rays(_at(counts), rays, 40, 200, 1)
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        rows = to_rows(*counts)
+        for got, want in zip(rows, expected, strict=True):
+            assert np.array_equal(got[:120, :80], want)
+        results.append((rows, verdict[40:200].copy(), offset[40:200].copy()))
+    for rows, verdict, offset in results[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(rows, results[0][0], strict=True))
+        assert np.array_equal(verdict, results[0][1])
+        assert np.array_equal(offset, results[0][2], equal_nan=True)
+    assert (results[0][1] == AGREE).sum() > 0
 
 
 def test_the_four_verdicts_on_a_wall():

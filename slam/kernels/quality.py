@@ -27,8 +27,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from slam.kernels.cells import cell_index
 from slam.kernels.grid import line_start, line_step
@@ -165,68 +166,146 @@ def _laser(poses, k, lx, ly):
     return c, s, sx, sy
 
 
+BLOCK_SCANS = 128
+"""Scans per block of :func:`count_rays` (a block's rays are counted in a dense patch of cells
+covering them, by one thread; see :func:`count_rays`)."""
+
+
 @njit(cache=True)
+def _block_box(rays, k0, k1, ox, oy, res, w, h):
+    """``(x0, y0, x1, y1)``: the cells (half-open, clipped to the ``w × h`` grid) holding every
+    laser position and ray end of scans ``k0 .. k1 − 1``, hence every cell their rays cross."""
+    poses, lx, ly, ex, ey, kind = rays
+    bx0, by0, bx1, by1 = w, h, 0, 0
+    for k in range(k0, k1):
+        c, s, sx, sy = _laser(poses, k, lx, ly)
+        for j in range(-1, kind.shape[1]):
+            if j >= 0 and kind[k, j] == NO_RAY:
+                continue
+            if j < 0:
+                x = cell_index(sx, ox, res)
+                y = cell_index(sy, oy, res)
+            else:
+                wx, wy = _world(poses, k, c, s, ex[k, j], ey[k, j])
+                x = cell_index(wx, ox, res)
+                y = cell_index(wy, oy, res)
+            bx0 = min(bx0, max(x, 0))
+            by0 = min(by0, max(y, 0))
+            bx1 = max(bx1, min(x + 1, w))
+            by1 = max(by1, min(y + 1, h))
+    return bx0, by0, max(bx1, bx0), max(by1, by0)
+
+
+@njit(cache=True)
+def _walk_scan(rays, k, ox, oy, res, w, h, patch, px0, py0, mask):
+    """Walk the rays of scan ``k`` cell by cell (Bresenham) over the ``w × h`` grid: every cell a
+    ray passes through gets a miss (end cell excluded), the end cell a hit for a :data:`HIT` ray
+    and a miss for a :data:`FREE` ray, as the occupancy map does; cells outside the grid are
+    skipped. With an empty ``mask`` the counts go to ``patch[layer, y − py0, x − px0]``
+    (layer 0 hits, 1 misses), else the tile of every cell is marked in ``mask``."""
+    poses, lx, ly, ex, ey, kind = rays
+    marking = mask.size > 0
+    c, s, sx, sy = _laser(poses, k, lx, ly)
+    x0 = cell_index(sx, ox, res)
+    y0 = cell_index(sy, oy, res)
+    for j in range(kind.shape[1]):
+        what = kind[k, j]
+        if what == NO_RAY:
+            continue
+        wx, wy = _world(poses, k, c, s, ex[k, j], ey[k, j])
+        x1 = cell_index(wx, ox, res)
+        y1 = cell_index(wy, oy, res)
+        dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
+        x, y = x0, y0
+        for _ in range(max(dx, dy)):
+            if 0 <= x < w and 0 <= y < h:
+                if marking:
+                    mask[y >> SHIFT, x >> SHIFT] = True
+                else:
+                    patch[1, y - py0, x - px0] += 1
+            x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
+        if 0 <= x1 < w and 0 <= y1 < h:
+            if marking:
+                mask[y1 >> SHIFT, x1 >> SHIFT] = True
+            else:
+                patch[0 if what == HIT else 1, y1 - py0, x1 - px0] += 1
+
+
 def touched_tiles(
     tiles_y: int, tiles_x: int, ox: float, oy: float, res: float, rays: ScanRays
 ) -> np.ndarray:
     """``(TY, TX)`` mask of the tiles holding a cell some ray passes through or ends in (the
-    cells :func:`count_rays` updates: the same walk, :func:`_walk_rays`)."""
-    mask = np.zeros((tiles_y, tiles_x), dtype=np.bool_)
-    no_counts = CountMap(
-        np.empty((0, 0), dtype=np.int32), np.empty((0, TILE, TILE, 2), dtype=np.int32), ox, oy, res
-    )
-    _walk_rays(no_counts, rays, 0, rays.poses.shape[0], 0, mask)
+    cells :func:`count_rays` updates: the same walk, :func:`_walk_scan`). Parallel over chunks
+    of scans, each marking its own mask; the masks are or-ed (the result does not depend on the
+    number of threads)."""
+    chunks = max(1, min(numba.get_num_threads(), rays.poses.shape[0]))
+    return _touched_tiles(tiles_y, tiles_x, ox, oy, res, rays, chunks)
+
+
+@njit(cache=True, parallel=True)
+def _touched_tiles(tiles_y, tiles_x, ox, oy, res, rays, chunks):
+    n = rays.poses.shape[0]
+    masks = np.zeros((chunks, tiles_y, tiles_x), dtype=np.bool_)
+    no_patch = np.zeros((2, 0, 0), dtype=np.int32)
+    w = tiles_x * TILE
+    h = tiles_y * TILE
+    for c in prange(chunks):
+        for k in range(n * c // chunks, n * (c + 1) // chunks):
+            _walk_scan(rays, k, ox, oy, res, w, h, no_patch, 0, 0, masks[c])
+    mask = masks[0].copy()
+    for c in range(1, chunks):
+        mask |= masks[c]
     return mask
 
 
-@njit(cache=True)
 def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) -> None:
     """Add ``sign`` (+1 or −1) to the counts of the rays of scans ``k0 .. k1 − 1``.
 
     Every cell a ray passes through gets a miss (Bresenham, end cell excluded); the end cell gets
     a hit for a :data:`HIT` ray and a miss for a :data:`FREE` ray, as the occupancy map does.
-    Cells outside the grid are skipped (the caller sizes the grid to hold every ray).
+    Cells outside the grid are skipped (the caller sizes the grid to hold every ray; the cells
+    inside must lie in allocated tiles, :func:`touched_tiles`).
+
+    Parallel without races: the scans are cut into blocks of :data:`BLOCK_SCANS`; a round gives
+    one block to each thread, which counts its rays in a dense patch of its own covering them
+    (:func:`_block_box`: the robot's path over the block and the sensor's reach, not the map);
+    the patches are then added to the tiles one after the other, in block order, each over its
+    rows in parallel (rows are distinct cells). Counts are integers, so the result is exact and
+    the same whatever the number of threads.
     """
-    _walk_rays(counts, rays, k0, k1, sign, np.zeros((0, 0), dtype=np.bool_))
+    _count_rays(counts, rays, k0, k1, sign, numba.get_num_threads())
 
 
-@njit(cache=True)
-def _walk_rays(counts, rays, k0, k1, sign, mask):
-    """Walk the rays of scans ``k0 .. k1 − 1`` cell by cell (Bresenham) over the grid of
-    ``counts`` and, when ``mask`` is empty, add ``sign`` to their counts (:func:`count_rays`);
-    else mark the tile of every cell in ``mask``, whose tiles are then the grid (the counts'
-    ``table`` and ``pool`` are not read: :func:`touched_tiles`)."""
+@njit(cache=True, parallel=True)
+def _count_rays(counts, rays, k0, k1, sign, threads):
     table, pool, ox, oy, res = counts
-    poses, lx, ly, ex, ey, kind = rays
-    marking = mask.size > 0
-    ty, tx = mask.shape if marking else table.shape
-    h = ty * TILE
-    w = tx * TILE
-    for k in range(k0, k1):
-        c, s, sx, sy = _laser(poses, k, lx, ly)
-        x0 = cell_index(sx, ox, res)
-        y0 = cell_index(sy, oy, res)
-        for j in range(kind.shape[1]):
-            what = kind[k, j]
-            if what == NO_RAY:
-                continue
-            wx, wy = _world(poses, k, c, s, ex[k, j], ey[k, j])
-            x1 = cell_index(wx, ox, res)
-            y1 = cell_index(wy, oy, res)
-            dx, dy, stepx, stepy, err = line_start(x0, y0, x1, y1)
-            x, y = x0, y0
-            for _ in range(max(dx, dy)):
-                if 0 <= x < w and 0 <= y < h:
-                    if marking:
-                        mask[y >> SHIFT, x >> SHIFT] = True
-                    else:
-                        _add(table, pool, x, y, 1, sign)
-                x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
-            if 0 <= x1 < w and 0 <= y1 < h:
-                if marking:
-                    mask[y1 >> SHIFT, x1 >> SHIFT] = True
-                else:
-                    _add(table, pool, x1, y1, 0 if what == HIT else 1, sign)
+    h = table.shape[0] * TILE
+    w = table.shape[1] * TILE
+    blocks = -(-(k1 - k0) // BLOCK_SCANS) if k1 > k0 else 0
+    for r0 in range(0, blocks, threads):
+        r1 = min(r0 + threads, blocks)
+        boxes = np.zeros((r1 - r0, 4), dtype=np.int64)
+        patches = []
+        for b in range(r0, r1):
+            a = k0 + b * BLOCK_SCANS
+            x0, y0, x1, y1 = _block_box(rays, a, min(a + BLOCK_SCANS, k1), ox, oy, res, w, h)
+            boxes[b - r0] = (x0, y0, x1, y1)
+            patches.append(np.zeros((2, y1 - y0, x1 - x0), dtype=np.int32))
+        no_mask = np.zeros((0, 0), dtype=np.bool_)
+        for i in prange(r1 - r0):
+            a = k0 + (r0 + i) * BLOCK_SCANS
+            for k in range(a, min(a + BLOCK_SCANS, k1)):
+                _walk_scan(rays, k, ox, oy, res, w, h, patches[i], boxes[i, 0], boxes[i, 1],
+                           no_mask)  # fmt: skip
+        for i in range(r1 - r0):
+            patch = patches[i]
+            x0, y0 = boxes[i, 0], boxes[i, 1]
+            for yy in prange(patch.shape[1]):
+                for xx in range(patch.shape[2]):
+                    for layer in range(2):
+                        v = patch[layer, yy, xx]
+                        if v != 0:
+                            _add(table, pool, x0 + xx, y0 + yy, layer, sign * v)
 
 
 @njit(cache=True)
@@ -320,7 +399,7 @@ def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
     return -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def classify_beams(
     counts: CountMap,
     rays: ScanRays,
@@ -356,8 +435,9 @@ def classify_beams(
     A cell is occupied when it has hits and ``hits·l_hit + misses·l_miss > occupied_above``,
     solid when it has hits and ``hits ≥ misses``, free when it has at least ``min_free_rays``
     misses and that sum is negative. Beams that are not
-    returns get :data:`UNCHECKED`. The thresholds are the fields of ``judging``. Long because the
-    four tests share the beam's geometry.
+    returns get :data:`UNCHECKED`. The thresholds are the fields of ``judging``. Parallel over the
+    scans (each writes only its own rows; the counts are only read), so the verdicts do not depend
+    on the number of threads. Long because the four tests share the beam's geometry.
     """
     table, pool, ox, oy, res = counts
     poses, lx, ly, ex, ey, kind = rays
@@ -366,7 +446,7 @@ def classify_beams(
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
     nb = kind.shape[1]
-    for k in range(k0, k1):
+    for k in prange(k0, k1):
         c, s, sx, sy = _laser(poses, k, lx, ly)
         x0 = cell_index(sx, ox, res)
         y0 = cell_index(sy, oy, res)
