@@ -117,7 +117,9 @@ def render_map(
     """``map.png``: occupancy in grey, the estimated trajectory in red, ground truth in green."""
     import cv2
 
-    img = cv2.cvtColor(grid.to_image(), cv2.COLOR_GRAY2BGR)
+    from slam.rowwise import grid_image
+
+    img = cv2.cvtColor(grid_image(grid), cv2.COLOR_GRAY2BGR)  # grid.to_image(), by blocks
     scale = max(1, int(round(800 / max(img.shape[:2]))))
     if scale > 1:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)

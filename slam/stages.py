@@ -25,9 +25,9 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.config import Config
-from slam.geometry import relative, spread_corrections
-from slam.mapping import OccupancyGrid, likelihood_tables
+from slam.config import Config, MapConfig
+from slam.geometry import compose, relative, spread_corrections, transform_points
+from slam.mapping import OccupancyGrid, _check_growth, _grow_extent, likelihood_tables
 from slam.particle_filter import (
     FilterOutput,
     hits_for_insert,
@@ -126,13 +126,117 @@ def run_stages(output: FilterOutput, stages: list[Stage], config: Config) -> Fil
 def build_map(
     seq: ScanSequence, poses: F64, steps: NDArray[np.int64], config: Config
 ) -> OccupancyGrid:
-    """Occupancy grid of the scans ``steps`` of ``seq`` taken at ``poses[steps]``."""
-    grid = OccupancyGrid(config.map, center=(float(poses[0, 0]), float(poses[0, 1])))
+    """Occupancy grid of the scans ``steps`` of ``seq`` taken at ``poses[steps]``.
+
+    The same grid, to the bit, as integrating the scans one by one into a growing
+    :class:`~slam.mapping.OccupancyGrid` and cropping it (``crop_margin_m``), with one
+    allocation instead of a copy per growth: :func:`_growth_plan` replays how that grid would
+    grow (no cells), the grid is allocated once at its final size, and each scan is integrated
+    into the part of it the growing grid covered then, with the origin it had then, so every ray
+    falls on the very cells it did; the crop then moves the kept rows to the front of the same
+    buffer (:func:`_crop_in_place`). The peak is one grid instead of two (old and new copy).
+    """
+    mc = config.map
+    start = OccupancyGrid(mc, center=(float(poses[0, 0]), float(poses[0, 1])))
     span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
-    grid.ensure_contains(*span)
+    plan, final = _growth_plan(seq, poses, steps, mc, start, span)
+    origin, rows, cols, bottom, left = final
+    res = start.resolution
+    _check_growth(4.0 * rows * cols, "an occupancy grid", cols * res, rows * res)
+    buffer = np.zeros(rows * cols, dtype=np.float32)
+    full = buffer.reshape(rows, cols)
+    part = OccupancyGrid.from_arrays(full[:0], res, origin, mc)
+    for k, state in zip(steps, plan, strict=True):
+        if state is None:  # a scan without rays: the growing grid skipped it too
+            continue
+        at, h, w, below, beside = state
+        r0, c0 = bottom - below, left - beside
+        view = full[r0 : r0 + h, c0 : c0 + w]
+        part.log_odds, part.origin = view, at
+        integrate_scan(part, seq, int(k), poses[k])
+        if part.log_odds is not view:  # the plan missed a growth: never silently lose rays
+            raise RuntimeError(f"build_map: scan {int(k)} left the planned grid")
+    del full, view, part
+    return _crop_in_place(buffer, rows, cols, origin, config)
+
+
+GridState = tuple[F64, int, int, int, int]
+"""A growing grid's ``(origin, rows, cols, bottom, left)``: origin, shape, and how many rows
+and columns were added below and to the left since it started."""
+
+
+def _grown(state: GridState, box: tuple[float, float, float, float], mc: MapConfig) -> GridState:
+    """``state`` after :meth:`slam.mapping.OccupancyGrid.ensure_contains` of ``box`` (the same
+    arithmetic, so the same origin to the bit)."""
+    origin, rows, cols, bottom, left = state
+    res = float(mc.resolution)
+    xmin, ymin, xmax, ymax = box
+    x0, y0 = float(origin[0]), float(origin[1])
+    x1, y1 = x0 + cols * res, y0 + rows * res
+    if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+        return state
+    margin = mc.grow_margin_m
+    nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, margin)
+    ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, margin)
+    dl = int(np.ceil((x0 - nx0) / res))
+    db = int(np.ceil((y0 - ny0) / res))
+    dr = int(np.ceil((nx1 - x1) / res))
+    dt = int(np.ceil((ny1 - y1) / res))
+    origin = origin - np.array([dl * res, db * res])
+    return origin, rows + db + dt, cols + dl + dr, bottom + db, left + dl
+
+
+def _growth_plan(
+    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], mc: MapConfig,
+    start: OccupancyGrid, span: F64,
+) -> tuple[list[GridState | None], GridState]:  # fmt: skip
+    """The state of the growing grid of :func:`build_map` at each scan (``None`` for a scan
+    without rays), and its final state."""
+    state: GridState = (start.origin.copy(), *start.shape, 0, 0)
+    state = _grown(state, tuple(float(v) for v in span), mc)
+    plan: list[GridState | None] = []
     for k in steps:
-        integrate_scan(grid, seq, int(k), poses[k])
-    return grid.cropped(config.map.crop_margin_m)
+        ends, _ = seq.rays(int(k), mc.free_range_no_return, mc.free_beam_stride)
+        if ends.shape[0] == 0:
+            plan.append(None)
+            continue
+        pose = poses[k]
+        sensor = compose(pose, seq.laser_offset)[:2]
+        world = transform_points(pose, ends)
+        lo = np.minimum(world.min(axis=0), sensor)
+        hi = np.maximum(world.max(axis=0), sensor)
+        state = _grown(state, (lo[0], lo[1], hi[0], hi[1]), mc)
+        plan.append(state)
+    return plan, state
+
+
+def _crop_in_place(
+    buffer: NDArray[np.float32], rows: int, cols: int, origin: F64, config: Config
+) -> OccupancyGrid:
+    """The grid ``buffer`` (``rows × cols``, lower-left corner ``origin``) reduced as
+    :meth:`slam.mapping.OccupancyGrid.cropped` reduces it (observed cells plus
+    ``map.crop_margin_m``), the kept rows moved to the front of ``buffer`` and the rest freed."""
+    mc = config.map
+    res = float(mc.resolution)
+    full = buffer.reshape(rows, cols)
+    known = full != 0
+    if not known.any():
+        return OccupancyGrid.from_arrays(full, res, origin, mc)
+    used_rows = np.flatnonzero(known.any(axis=1))
+    used_cols = np.flatnonzero(known.any(axis=0))
+    del known
+    pad = int(np.ceil(mc.crop_margin_m / res))
+    r0 = max(int(used_rows[0]) - pad, 0)
+    r1 = min(int(used_rows[-1]) + pad + 1, rows)
+    c0 = max(int(used_cols[0]) - pad, 0)
+    c1 = min(int(used_cols[-1]) + pad + 1, cols)
+    h, w = r1 - r0, c1 - c0
+    for i in range(h):  # row i lands before where it is read from: earlier rows stay intact
+        buffer[i * w : (i + 1) * w] = full[r0 + i, c0:c1]
+    del full
+    buffer.resize(h * w, refcheck=False)  # no view of it is left
+    origin = origin + np.array([c0, r0]) * res
+    return OccupancyGrid.from_arrays(buffer.reshape(h, w), res, origin, mc)
 
 
 def interpolate_between_updates(

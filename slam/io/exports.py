@@ -86,8 +86,13 @@ def write_map_files(folder: Path, log_odds: Any, resolution: float, origin: Any)
 def clean_image(log_odds: Any) -> NDArray[np.uint8]:
     """The occupancy picture (occupied black, free white, unknown grey, +y up), no trajectory:
     the same grey levels as ``map.png`` (:meth:`slam.mapping.OccupancyGrid.to_image`)."""
-    p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(log_odds, dtype=np.float64)))
-    return np.ascontiguousarray((255.0 * (1.0 - p)).astype(np.uint8)[::-1])
+    from slam.rowwise import by_rows
+
+    def block(lo: NDArray[np.floating]) -> NDArray[np.uint8]:
+        p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(lo, dtype=np.float64)))
+        return (255.0 * (1.0 - p)).astype(np.uint8)
+
+    return np.ascontiguousarray(by_rows(block, np.asarray(log_odds), np.uint8)[::-1])
 
 
 def write_png(path: Path, image: NDArray[np.uint8]) -> None:

@@ -59,11 +59,16 @@ def trinary(
     """Cells ``(H, W)`` as 100 / 0 / −1 (occupied / free / unknown) from their log-odds: the
     occupancy probability ``1 − 1/(1 + e^l)`` above ``occupied_thresh`` or below
     ``free_thresh``. Rows keep the grid's order (row 0 is the smallest y)."""
-    p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(log_odds, dtype=np.float64)))
-    out = np.full(p.shape, UNKNOWN, dtype=np.int8)
-    out[p > occupied_thresh] = OCCUPIED
-    out[p < free_thresh] = FREE
-    return out
+    from slam.rowwise import by_rows
+
+    def block(lo: NDArray[np.floating]) -> NDArray[np.int8]:
+        p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(lo, dtype=np.float64)))
+        out = np.full(p.shape, UNKNOWN, dtype=np.int8)
+        out[p > occupied_thresh] = OCCUPIED
+        out[p < free_thresh] = FREE
+        return out
+
+    return by_rows(block, np.asarray(log_odds), np.int8)  # temporaries of a block of rows
 
 
 def pgm_image(occupancy: NDArray[np.int8]) -> NDArray[np.uint8]:

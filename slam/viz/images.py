@@ -20,6 +20,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from slam.mapping import OccupancyGrid
+from slam.rowwise import by_rows
 
 
 @dataclass
@@ -69,11 +70,16 @@ def observed_box(known: NDArray[np.bool_], margin: int = 1) -> tuple[int, int, i
 
 
 def occupancy_pixels(log_odds: NDArray[np.floating], levels: int) -> NDArray[np.uint8]:
-    """Grey values ``255·(1 − p)`` (occupied black, unknown mid grey, free white) on ``levels``."""
-    p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(log_odds, dtype=np.float32)))
-    grey = 1.0 - p
+    """Grey values ``255·(1 − p)`` (occupied black, unknown mid grey, free white) on ``levels``
+    (computed a block of rows at a time: :func:`slam.rowwise.by_rows`)."""
     step = 255.0 / (levels - 1)
-    return (np.round(grey * (levels - 1)) * step).astype(np.uint8)
+
+    def block(lo: NDArray[np.floating]) -> NDArray[np.uint8]:
+        p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(lo, dtype=np.float32)))
+        grey = 1.0 - p
+        return (np.round(grey * (levels - 1)) * step).astype(np.uint8)
+
+    return by_rows(block, np.asarray(log_odds), np.uint8)  # temporaries of a block of rows
 
 
 def occupancy_image(grid: OccupancyGrid, levels: int = 256) -> PlacedImage | None:
