@@ -1,0 +1,97 @@
+"""The stages after the filter (slam.stages): the final map, built once at its final size, equals
+the grid that grows scan by scan, to the bit; the row-block pictures equal the whole-grid ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from synthetic_logs import carmen_lines, write_carmen
+
+import slam.rowwise as rowwise
+from slam.config import MapConfig, load_config
+from slam.io import sources
+from slam.io.exports import clean_image
+from slam.io.mapserver import trinary
+from slam.mapping import OccupancyGrid
+from slam.particle_filter import integrate_scan
+from slam.scans import ScanSequence
+from slam.stages import build_map
+from slam.viz.images import occupancy_pixels
+
+
+def growing_map(seq, poses, steps, config) -> OccupancyGrid:
+    """The final map as a grid that grows with every scan and is cropped at the end."""
+    grid = OccupancyGrid(config.map, center=(float(poses[0, 0]), float(poses[0, 1])))
+    span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
+    grid.ensure_contains(*span)
+    for k in steps:
+        integrate_scan(grid, seq, int(k), poses[k])
+    return grid.cropped(config.map.crop_margin_m)
+
+
+def turning(seq: ScanSequence) -> np.ndarray:
+    """The odometry moved off its lattice and turned a little more at every scan, so that the
+    rays keep reaching past the grid grown so far (the map is a mess; the test is the bits)."""
+    rng = np.random.default_rng(3)
+    poses = seq.odometry.copy()
+    poses[:, :2] += rng.normal(0.0, 0.05, (len(seq), 2))
+    poses[:, 2] += 0.11 * np.arange(len(seq))
+    return poses
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> tuple[ScanSequence, object]:
+    """The synthetic box room as a scan sequence, with a map that starts small and grows by
+    little, so that building it takes many growths in every direction."""
+    path = write_carmen(tmp_path_factory.mktemp("room"), carmen_lines(60))
+    config = load_config(
+        "", None, ["map.initial_size_m=1.0", "map.grow_margin_m=0.0", "map.resolution=0.03"]
+    )
+    ref = sources.resolve(str(path), path.parent, where="test")
+    log = sources.load(ref, config, ("scans",)).log
+    return ScanSequence.from_log(log, config), config
+
+
+def test_final_map_equals_the_growing_grid_to_the_bit(room):
+    seq, config = room
+    poses = turning(seq)
+    steps = np.arange(0, len(seq), 2)
+    got = build_map(seq, poses, steps, config)
+    want = growing_map(seq, poses, steps, config)
+    assert got.shape == want.shape and got.shape[0] * got.shape[1] > 10_000
+    assert got.origin.tobytes() == want.origin.tobytes()
+    assert got.log_odds.tobytes() == want.log_odds.tobytes()
+    assert (got.log_odds > 0).sum() > 100 and (got.log_odds < 0).sum() > 1000
+
+
+def test_pictures_by_blocks_of_rows_equal_the_whole(monkeypatch):
+    rng = np.random.default_rng(5)
+    log_odds = (rng.standard_normal((301, 257)) * 4).astype(np.float32)
+    log_odds[rng.random(log_odds.shape) < 0.3] = 0.0
+    grid = OccupancyGrid.from_arrays(log_odds, 0.05, np.array([1.0, -2.0]), MapConfig())
+
+    def pictures():
+        return [trinary(log_odds), clean_image(log_odds), occupancy_pixels(log_odds, 256),
+                occupancy_pixels(log_odds[5:-3, 2:-9], 16), rowwise.grid_image(grid)]  # fmt: skip
+
+    monkeypatch.setattr(rowwise, "BLOCK_CELLS", 1000)  # blocks of 3 rows, the last one shorter
+    blocks = pictures()
+    monkeypatch.setattr(rowwise, "BLOCK_CELLS", 1 << 40)  # one block: the whole grid
+    whole = pictures()
+    assert np.array_equal(whole[4], grid.to_image())
+    for a, b in zip(blocks, whole, strict=True):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_the_room_map_grows_many_times(room):
+    """The test above is only worth something if the growing grid grows often."""
+    from slam.stages import _growth_plan
+
+    seq, config = room
+    poses = turning(seq)
+    steps = np.arange(0, len(seq), 2)
+    start = OccupancyGrid(config.map, center=(float(poses[0, 0]), float(poses[0, 1])))
+    span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
+    plan, _ = _growth_plan(seq, poses, steps, config.map, start, span)
+    shapes = {(s[1], s[2]) for s in plan if s is not None}
+    assert len(shapes) >= 3
