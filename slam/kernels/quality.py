@@ -249,7 +249,8 @@ def _touched_tiles(tiles_y, tiles_x, ox, oy, res, rays, chunks):
     no_patch = np.zeros((2, 0, 0), dtype=np.int32)
     w = tiles_x * TILE
     h = tiles_y * TILE
-    for c in prange(chunks):
+    for p in prange(chunks):
+        c = np.int64(p)  # the prange index is another integer type: one callee signature
         for k in range(n * c // chunks, n * (c + 1) // chunks):
             _walk_scan(rays, k, ox, oy, res, w, h, no_patch, 0, 0, masks[c])
     mask = masks[0].copy()
@@ -269,9 +270,8 @@ def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) ->
     Parallel without races: the scans are cut into blocks of :data:`BLOCK_SCANS`; a round gives
     one block to each thread, which counts its rays in a dense patch of its own covering them
     (:func:`_block_box`: the robot's path over the block and the sensor's reach, not the map);
-    the patches are then added to the tiles one after the other, in block order, each over its
-    rows in parallel (rows are distinct cells). Counts are integers, so the result is exact and
-    the same whatever the number of threads.
+    the patches are then added to the tiles one after the other, in block order. Counts are
+    integers, so the result is exact and the same whatever the number of threads.
     """
     _count_rays(counts, rays, k0, k1, sign, numba.get_num_threads())
 
@@ -292,15 +292,16 @@ def _count_rays(counts, rays, k0, k1, sign, threads):
             boxes[b - r0] = (x0, y0, x1, y1)
             patches.append(np.zeros((2, y1 - y0, x1 - x0), dtype=np.int32))
         no_mask = np.zeros((0, 0), dtype=np.bool_)
-        for i in prange(r1 - r0):
+        for p in prange(r1 - r0):
+            i = np.int64(p)  # the prange index is another integer type: one callee signature
             a = k0 + (r0 + i) * BLOCK_SCANS
             for k in range(a, min(a + BLOCK_SCANS, k1)):
                 _walk_scan(rays, k, ox, oy, res, w, h, patches[i], boxes[i, 0], boxes[i, 1],
                            no_mask)  # fmt: skip
-        for i in range(r1 - r0):
+        for i in range(r1 - r0):  # serial: a patch is small next to the walk that filled it
             patch = patches[i]
             x0, y0 = boxes[i, 0], boxes[i, 1]
-            for yy in prange(patch.shape[1]):
+            for yy in range(patch.shape[1]):
                 for xx in range(patch.shape[2]):
                     for layer in range(2):
                         v = patch[layer, yy, xx]
@@ -446,7 +447,8 @@ def classify_beams(
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
     nb = kind.shape[1]
-    for k in prange(k0, k1):
+    for p in prange(k1 - k0):
+        k = k0 + np.int64(p)  # the prange index is another integer type: one callee signature
         c, s, sx, sy = _laser(poses, k, lx, ly)
         x0 = cell_index(sx, ox, res)
         y0 = cell_index(sy, oy, res)
