@@ -235,6 +235,13 @@ class RbpfConfig(Validated):
     per-beam log-likelihoods)."""
     retry_yaw: tuple[float, ...] = bounded((0.15, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the predicted poses tried, both signs, when an update is retried."""
+    probe_gain: float = bounded(0.3, ge=0.0, le=100.0)
+    """Every update, the best particle is matched again from starts rotated by ±``probe_yaw``;
+    when one scores a per-beam log-likelihood this much above its match, every particle is
+    matched again from its predicted pose rotated by that start's angle, each keeping the better
+    match (an odometry rotation wrong by more than the matcher's basin); 0: never."""
+    probe_yaw: tuple[float, ...] = bounded((0.1, 0.2, 0.3), min_length=1, gt=0.0, le=math.pi)
+    """Rotations (rad) of the best particle's predicted pose the probe tries, both signs."""
     proposal_motion_prior: bool = False
     """Include the odometry model in the proposal's covariance (else the scan likelihood alone,
     with a unit ridge)."""

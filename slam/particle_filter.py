@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, RbpfConfig
 from slam.geometry import compose, relative, transform_points, wrap_angle
+from slam.kernels.field import match_particles
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
@@ -294,6 +295,7 @@ class RbpfFilter:
         self.resamples = 0
         self.fallbacks = 0
         self.retries = 0
+        self.probes = 0
         self.recent_loglik: list[float] = []
         """Best per-beam log-likelihood of the last ``rbpf.retry_window`` updates."""
         self.peak_tiles = self.maps.tiles_in_use
@@ -358,6 +360,7 @@ class RbpfFilter:
             rc.min_inliers, rc.coarse_stride,
         )  # fmt: skip
         match = self._retry(predicted, hits, match)
+        match = self._probe(predicted, hits, match)
         self.particles = match.poses
         if rc.proposal_spread > 0:
             motion_cov = None
@@ -398,6 +401,46 @@ class RbpfFilter:
         recent.append(best)
         if len(recent) > rc.retry_window:
             del recent[0]
+        return match
+
+    def _probe(self, predicted: F64, hits: tuple[F64, F64], match: MatchResult) -> MatchResult:
+        """``match``, or, when the best particle's match is in the wrong basin of rotation, the
+        best per particle of it and of the matches from the predicted poses rotated the way that
+        found the better basin.
+
+        The test is direct, not a threshold on how bad the match looks (a scan entering new
+        space looks as bad as a rotated one): the best particle's predicted pose is matched
+        again against its own map from starts rotated by ±``rbpf.probe_yaw``; if one of them
+        scores a per-beam log-likelihood ``rbpf.probe_gain`` above the first match, the odometry
+        got the rotation wrong by more than the matcher's basin, and every particle is matched
+        again from its predicted pose rotated by that start's angle. No random draw: a run whose
+        probes never find a better basin is the run without them.
+        """
+        rc = self.config.rbpf
+        if rc.probe_gain <= 0:
+            return match
+        beams = max(hits[0].size, 1)
+        b = int(np.argmax(match.loglik))
+        yaws = np.concatenate([np.asarray(rc.probe_yaw), -np.asarray(rc.probe_yaw)])
+        starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
+        starts[:, 2] = wrap_angle(starts[:, 2] + yaws)
+        probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+        score = np.where(probe.inliers >= rc.min_inliers, probe.loglik, -np.inf)
+        j = int(np.argmax(score))
+        if (score[j] - match.loglik[b]) / beams < rc.probe_gain:
+            return match
+        self.probes += 1
+        start = predicted.copy()
+        start[:, 2] = wrap_angle(start[:, 2] + yaws[j])
+        alt = self.maps.match(
+            start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
+            rc.coarse_stride,
+        )  # fmt: skip
+        better = (alt.loglik > match.loglik) & (alt.inliers >= rc.min_inliers)
+        match.poses[better] = alt.poses[better]
+        match.loglik[better] = alt.loglik[better]
+        match.inliers[better] = alt.inliers[better]
+        match.hessian[better] = alt.hessian[better]
         return match
 
     def weight(self, match: MatchResult, moved: F64) -> tuple[float, float]:
@@ -453,6 +496,7 @@ class RbpfFilter:
                 "resamples": self.resamples,
                 "match_fallbacks": self.fallbacks,
                 "match_retries": self.retries,
+                "basin_probes": self.probes,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
             },
@@ -568,6 +612,28 @@ def make_filter(
     if config.filter.method == "classic":
         return ClassicFilter(scans, config, rng)
     raise ValueError(f"no particle filter for method {config.filter.method!r}")
+
+
+def match_from_starts(
+    maps: ParticleMaps,
+    particle: int,
+    starts: F64,
+    hits: tuple[F64, F64],
+    luts: tuple[F64, float],
+    rc: RbpfConfig,
+) -> MatchResult:
+    """Match one scan (robot-frame ``hits``) from several ``starts`` ``(S, 3)`` against the map
+    of one ``particle``, with the proposal's matcher and settings (``rc``)."""
+    n = starts.shape[0]
+    tables = np.ascontiguousarray(np.repeat(maps.tables[particle : particle + 1], n, axis=0))
+    view = maps.field()._replace(table=tables)
+    out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
+    match_particles(
+        view, np.ascontiguousarray(starts), hits[0], hits[1], luts[0], luts[1], rc.max_iterations,
+        rc.tolerance, rc.coarse_stride, rc.min_inliers, out.poses, out.loglik, out.inliers,
+        out.hessian,
+    )  # fmt: skip
+    return out
 
 
 def motion_covariance(poses: F64, increment: F64, alphas: F64, floor: F64) -> F64:
