@@ -231,15 +231,17 @@ class RbpfConfig(Validated):
     more than the matcher's basin); 0 (the default): never. At 3 it repairs mit-csail seeds 0
     and 1 but makes intel seed 1 and mit-csail seed 2 worse (docs/slam.md)."""
     retry_window: int = bounded(25, ge=1, le=100000)
-    """How many of the latest updates the median of ``retry_ratio`` is taken over (their best
-    per-beam log-likelihoods)."""
+    """How many of the latest updates the median of ``retry_ratio`` and of ``probe_gain`` is
+    taken over (their best per-beam log-likelihoods)."""
     retry_yaw: tuple[float, ...] = bounded((0.15, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the predicted poses tried, both signs, when an update is retried."""
     probe_gain: float = bounded(0.3, ge=0.0, le=100.0)
     """Every update, the best particle is matched again from starts rotated by ±``probe_yaw``;
-    when one scores a per-beam log-likelihood this much above its match, every particle is
-    matched again from its predicted pose rotated by that start's angle, each keeping the better
-    match (an odometry rotation wrong by more than the matcher's basin); 0: never."""
+    when one scores a per-beam log-likelihood this much above its match and closes at least half
+    of the match's shortfall from the median of the last ``retry_window`` updates, every
+    particle is matched again from its predicted pose rotated by that start's angle, each
+    keeping the better match (an odometry rotation wrong by more than the matcher's basin);
+    0: never."""
     probe_yaw: tuple[float, ...] = bounded((0.1, 0.2, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the best particle's predicted pose the probe tries, both signs."""
     proposal_motion_prior: bool = False

@@ -296,6 +296,9 @@ class RbpfFilter:
         self.fallbacks = 0
         self.retries = 0
         self.probes = 0
+        self.recent_best: list[float] = []
+        """Best per-beam log-likelihood of the first match of the last ``rbpf.retry_window``
+        updates (the basin probe's reference)."""
         self.recent_loglik: list[float] = []
         """Best per-beam log-likelihood of the last ``rbpf.retry_window`` updates."""
         self.peak_tiles = self.maps.tiles_in_use
@@ -410,11 +413,15 @@ class RbpfFilter:
 
         The test is direct, not a threshold on how bad the match looks (a scan entering new
         space looks as bad as a rotated one): the best particle's predicted pose is matched
-        again against its own map from starts rotated by ±``rbpf.probe_yaw``; if one of them
-        scores a per-beam log-likelihood ``rbpf.probe_gain`` above the first match, the odometry
-        got the rotation wrong by more than the matcher's basin, and every particle is matched
-        again from its predicted pose rotated by that start's angle. No random draw: a run whose
-        probes never find a better basin is the run without them.
+        again against its own map from starts rotated by ±``rbpf.probe_yaw``. The odometry got
+        the rotation wrong by more than the matcher's basin when one of them scores a per-beam
+        log-likelihood ``rbpf.probe_gain`` above the first match *and* closes at least half of
+        the first match's shortfall from the median of the last ``rbpf.retry_window`` updates
+        (the rotated start explains the scan about as well as the recent updates did; a scan
+        that no start explains — new space, a wide hall's far beams — is left alone). Then every
+        particle is matched again from its predicted pose rotated by that start's angle, each
+        keeping the better match. No random draw: a run whose probes never fire is the run
+        without them.
         """
         rc = self.config.rbpf
         if rc.probe_gain <= 0:
@@ -427,7 +434,14 @@ class RbpfFilter:
         probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
         score = np.where(probe.inliers >= rc.min_inliers, probe.loglik, -np.inf)
         j = int(np.argmax(score))
-        if (score[j] - match.loglik[b]) / beams < rc.probe_gain:
+        first = float(match.loglik[b]) / beams
+        gain = float(score[j]) / beams - first
+        recent = self.recent_best
+        typical = float(np.median(recent)) if len(recent) >= 5 else first
+        recent.append(first)
+        if len(recent) > rc.retry_window:
+            del recent[0]
+        if gain < rc.probe_gain or gain < 0.5 * (typical - first):
             return match
         self.probes += 1
         start = predicted.copy()

@@ -76,3 +76,47 @@ def test_intel_run_matches_its_reference(carmen_dir, tmp_path):
     intel = tool.INTEL
     case = tool.run_case("intel", "rbpf", carmen_dir.parent, intel["scans"], intel["particles"])
     _compare("intel-rbpf", case, tmp_path)
+
+
+def _glitch_rotation_error(case: dict, carmen_dir: Path, tmp_path: Path) -> float:
+    """Largest rotation error (degrees) of the mit-csail relations that span the odometry glitch
+    at 56.8 s (scans 266→268) within the run's piece of the log."""
+    from slam.eval.relations import relation_errors
+    from slam.io.relations import read_relations
+
+    out = tmp_path / "run.tum"
+    out.write_text(case["tum"])
+    trajectory = read_tum(out)
+    relations = read_relations(carmen_dir / "relations" / "mit-csail.relations")
+    errors = relation_errors(trajectory, relations)
+    t1 = relations.t1[errors.matched_index] - trajectory.times.min()
+    t2 = relations.t2[errors.matched_index] - trajectory.times.min()
+    span = (np.minimum(t1, t2) < GLITCH_S) & (np.maximum(t1, t2) > GLITCH_S)
+    assert span.sum() >= 3, f"only {span.sum()} relations span the glitch"
+    return float(np.degrees(errors.rot[span].max()))
+
+
+GLITCH_S = 56.8
+"""Time (s from the first scan) of mit-csail's odometry glitch: +2° where the robot turned −15°."""
+MAX_GLITCH_ROT_DEG = 3.0
+"""With the basin probe the relations across the glitch stay within this rotation error (a few
+degrees of ordinary error); without it the stretch after the glitch is ≈14° rotated."""
+
+
+def test_mit_csail_glitch_stretch_matches_its_reference(carmen_dir, tmp_path):
+    tool = load_tool("make_slam_reference")
+    piece = tool.CSAIL
+    case = tool.run_case("mit-csail", "rbpf", carmen_dir.parent, piece["scans"], piece["particles"])
+    _compare("mit-csail-rbpf", case, tmp_path)
+    assert _glitch_rotation_error(case, carmen_dir, tmp_path) <= MAX_GLITCH_ROT_DEG
+
+
+def test_mit_csail_glitch_breaks_without_the_probe(carmen_dir, tmp_path):
+    """The stretch the probe repairs is the one that broke: without it, rotated by ≈14°."""
+    tool = load_tool("make_slam_reference")
+    piece = tool.CSAIL
+    case = tool.run_case(
+        "mit-csail", "rbpf", carmen_dir.parent, piece["scans"], piece["particles"],
+        ("rbpf.probe_gain=0",),
+    )  # fmt: skip
+    assert _glitch_rotation_error(case, carmen_dir, tmp_path) > 10.0

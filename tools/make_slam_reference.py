@@ -5,7 +5,9 @@ The references are short runs whose outputs ``tests/test_slam_regression.py`` co
 
 * ``small-<method>``: the simulator's ``small`` scenario (seed 7, 30 s, no RGB-D), first 600 scans,
   for ``rbpf`` and ``classic`` — generated from the project's own simulator, so it needs no data;
-* ``intel-rbpf``: the first 500 scans of the intel log (needs ``$SLAM_DATA_DIR``).
+* ``intel-rbpf``: the first 500 scans of the intel log (needs ``$SLAM_DATA_DIR``);
+* ``mit-csail-rbpf``: the first 400 scans of the mit-csail log, through the odometry glitch at
+  scans 266→268 (56.8 s) that the filter's basin probe repairs (needs ``$SLAM_DATA_DIR``).
 
 Each reference is a ``.tum`` trajectory plus a ``.json`` with map statistics. Run after a change
 that is meant to alter SLAM results, check the new figures, and commit them::
@@ -26,6 +28,7 @@ REFERENCE_DIR = Path(__file__).resolve().parent.parent / "data" / "reference" / 
 
 SMALL = {"scenario": "small", "seed": 7, "duration": 30.0, "scans": 600, "particles": 20}
 INTEL = {"scans": 500, "particles": 30}
+CSAIL = {"scans": 400, "particles": 30}
 
 
 def small_dataset(folder: Path) -> Path:
@@ -39,8 +42,16 @@ def small_dataset(folder: Path) -> Path:
     return folder
 
 
-def run_case(name: str, method: str, data_dir: Path, scans: int, particles: int) -> dict:
-    """Run ``slam run`` on ``name`` and return its trajectory and map statistics."""
+def run_case(
+    name: str,
+    method: str,
+    data_dir: Path,
+    scans: int,
+    particles: int,
+    settings: tuple[str, ...] = (),
+) -> dict:
+    """Run ``slam run`` on ``name`` (with the extra ``section.key=value`` ``settings``) and
+    return its trajectory and map statistics."""
     from slam.config import load_config
     from slam.io.tum import read_tum
     from slam.pipeline import RunRequest, run
@@ -56,6 +67,7 @@ def run_case(name: str, method: str, data_dir: Path, scans: int, particles: int)
             "filter.seed=0",
             "viz.record=false",
             "texture.enabled=false",
+            *settings,
         ],
     )
     with tempfile.TemporaryDirectory() as tmp:
@@ -90,15 +102,16 @@ def main() -> int:
             )
             print(f"small-{method}: {case['stats']}")
     data_dir = resolve_data_dir(None)
-    if (data_dir / "carmen" / "intel.clf.gz").is_file():
-        case = run_case("intel", "rbpf", data_dir, INTEL["scans"], INTEL["particles"])
-        (REFERENCE_DIR / "intel-rbpf.tum").write_text(case["tum"])
-        (REFERENCE_DIR / "intel-rbpf.json").write_text(
-            json.dumps({**INTEL, **case["stats"]}, indent=2) + "\n"
+    for log, piece in (("intel", INTEL), ("mit-csail", CSAIL)):
+        if not (data_dir / "carmen" / f"{log}.clf.gz").is_file():
+            print(f"{log}-rbpf: skipped, {data_dir}/carmen/{log}.clf.gz is absent", file=sys.stderr)
+            continue
+        case = run_case(log, "rbpf", data_dir, piece["scans"], piece["particles"])
+        (REFERENCE_DIR / f"{log}-rbpf.tum").write_text(case["tum"])
+        (REFERENCE_DIR / f"{log}-rbpf.json").write_text(
+            json.dumps({**piece, **case["stats"]}, indent=2) + "\n"
         )
-        print(f"intel-rbpf: {case['stats']}")
-    else:
-        print(f"intel-rbpf: skipped, {data_dir}/carmen/intel.clf.gz is absent", file=sys.stderr)
+        print(f"{log}-rbpf: {case['stats']}")
     return 0
 
 
