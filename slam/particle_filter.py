@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, RbpfConfig
 from slam.geometry import compose, relative, transform_points, wrap_angle
-from slam.kernels.field import match_particles
+from slam.kernels.field import MatchOutput, MatchSettings, match_particles
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
@@ -642,11 +642,17 @@ def match_from_starts(
     tables = np.ascontiguousarray(np.repeat(maps.tables[particle : particle + 1], n, axis=0))
     view = maps.field()._replace(table=tables)
     out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
-    match_particles(
-        view, np.ascontiguousarray(starts), hits[0], hits[1], luts[0], luts[1], rc.max_iterations,
-        rc.tolerance, rc.coarse_stride, rc.min_inliers, out.poses, out.loglik, out.inliers,
-        out.hessian,
+    settings = MatchSettings(
+        luts[0], float(luts[1]), int(rc.max_iterations), float(rc.tolerance),
+        int(rc.coarse_stride), float(rc.min_inliers),
     )  # fmt: skip
+    match_particles(
+        view,
+        np.ascontiguousarray(starts),
+        np.stack([hits[0], hits[1]]).astype(np.float64, copy=False),
+        settings,
+        MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
+    )
     return out
 
 
