@@ -39,7 +39,10 @@ _state: dict[str, Any] = {
     "kernels": [],
     "depth": {},
     "table": [],
+    "signatures": [],
     "installed": False,
+    "phase": "start",
+    "wait_s": 0.0,
 }
 _callbacks: list[Callable[[bool], None]] = []
 
@@ -68,6 +71,8 @@ def install() -> None:
                 depth = _state["depth"].get(ident, (0, 0.0, 0.0))
                 if depth[0] == 0:
                     start, cpu = time.perf_counter(), time.thread_time()
+                    args = tuple(ev.data.get("args") or ())
+                    _state["signatures"].append((_kernel_name(ev.data), _state["phase"], args))
                 else:
                     start, cpu = depth[1], depth[2]
                 _state["depth"][ident] = (depth[0] + 1, start, cpu)
@@ -100,9 +105,31 @@ def install() -> None:
 
 
 def compile_seconds() -> float:
-    """Seconds this process has spent compiling kernels (outermost compilations only)."""
+    """Seconds this process has spent compiling kernels (outermost compilations only), and
+    waiting for the background compiler to compile kernels it needs (:func:`reach_stage`)."""
     with _lock:
-        return float(_state["seconds"])
+        return float(_state["seconds"] + _state["wait_s"])
+
+
+def add_wait(seconds: float) -> None:
+    """Count ``seconds`` spent waiting for the background compiler as compilation time
+    (:mod:`slam.jit_background`)."""
+    with _lock:
+        _state["wait_s"] += float(seconds)
+
+
+def set_phase(name: str) -> None:
+    """Name the pipeline stage this process is in (each outermost compilation is recorded with
+    it: :func:`compiled_signatures`, what ``tools/make_jit_manifest.py`` reads)."""
+    with _lock:
+        _state["phase"] = name
+
+
+def compiled_signatures() -> list[tuple[str, str, tuple]]:
+    """Every outermost compilation so far: kernel (``module.name``), the stage it happened in
+    (:func:`set_phase`) and its argument types (numba types)."""
+    with _lock:
+        return list(_state["signatures"])
 
 
 def compile_cpu_seconds() -> float:
@@ -136,6 +163,13 @@ def compiled_kernels() -> list[str]:
     """Every kernel (``module.name``) compiled so far in this process, in order, callees included."""
     with _lock:
         return list(_state["kernels"])
+
+
+def notify(active: bool) -> None:
+    """Tell the :func:`on_compile` callbacks that compiling (or waiting for the background
+    compiler) starts (``True``) or ends."""
+    for callback in list(_callbacks):
+        callback(active)
 
 
 @contextmanager

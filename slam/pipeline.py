@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam import jit_background
 from slam.config import Config, dumps, load_config
 from slam.errors import UsageError
 from slam.io import sources
@@ -50,6 +51,7 @@ from slam.io.plausibility import check_plausibility
 from slam.io.rosbag import BagOptions
 from slam.io.sources import Source
 from slam.jit import compile_seconds, on_compile
+from slam.jit_background import reach_stage
 from slam.mapping import OccupancyGrid
 from slam.observers import Observer
 
@@ -162,9 +164,11 @@ def execute(request: RunRequest) -> Result:
     inputs = (*request.inputs, request.data_dir, ref.path)
     check_output_dir(out, "run", request.force, inputs)  # before loading anything
     wall_start, compiled = time.perf_counter(), compile_seconds()
+    jit_background.start()  # the later stages' kernels compile while the log loads
     with atomic_dir(out, overwrite=request.force, kind="run", inputs=inputs) as tmp:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
+            reach_stage("load")
             source = sources.load(ref, config, _needs(config), request.progress, request.bag)
             doubts = check_plausibility(source.log, config)  # time base, odometry jumps
             from slam.viz.recorder import start_recording
@@ -174,10 +178,13 @@ def execute(request: RunRequest) -> Result:
             result = _estimate(source, config, request.progress, observers)
             from slam.texture import run_stage
 
+            reach_stage("texture")
             result.metrics.update(run_stage(source.log, result, config, tmp, request.progress))
             from slam.eval.quality_run import quality_stage
 
+            reach_stage("quality")
             result.metrics.update(quality_stage(source.log, result.trajectory, config, tmp))
+        reach_stage("outputs")
         messages = doubts + sorted({str(w.message) for w in caught})
         clock = clock_warning(result.trajectory.times)
         messages += [clock] if clock else []
@@ -195,6 +202,8 @@ def execute(request: RunRequest) -> Result:
         if recorder is not None:  # last: the recording logs the texture when there is one
             metrics["recording"] = recorder.finish(result.trajectory, result.grid, tmp)
         metrics["compile_s"] = round(compile_seconds() - compiled, 3)
+        metrics["compile_background"] = jit_background.report()
+        jit_background.stop()
         metrics["wall_s"] = round(time.perf_counter() - wall_start, 3)
         metrics["peak_rss_mb"] = _peak_rss_mb()
         write_text(tmp / "metrics.json", json.dumps(metrics, indent=2) + "\n")
@@ -296,9 +305,11 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     start, compiled = time.perf_counter(), compile_seconds()
     try:
         with on_compile(bar.compiling):
+            reach_stage("filter")
             slam = Slam(config, observers=[bar, *observers], scan_period=scans.scan_period())
             for scan, odometry in scans:
                 slam.update(scan, odometry=odometry)
+            reach_stage("finish")  # loop closing, re-registration, final map
             result = slam.finish()
     finally:
         bar.close()

@@ -6,11 +6,14 @@ and runs the commands as a user would, each in its own process (``uv``'s environ
 interpreter running this bench):
 
 * ``demo_cold_then_warm`` — ``slam run demo`` (default: 30 particles, texture, recording) on the
-  fresh cache, then the same command again: wall and CPU seconds (user + system of the child, all
+  fresh cache (the background compiler on: :mod:`slam.jit_background`, its report as
+  ``compile_background``), then the same command again: wall and CPU seconds (user + system of the child, all
   its threads) of each, and ``compile_s`` / ``estimate_wall_s`` from their ``metrics.json``;
   the cold run also reports the CPU seconds of compilation (``compile_cpu_s``, the compiling
   thread's, from ``$SLAM_COMPILE_REPORT``: :mod:`slam.jit`) and the kernels that cost most
   (``compile_top``: outermost compilations, each with the functions compiled on the way);
+* ``demo_cold_without_background`` — the cold run with ``SLAM_BACKGROUND_COMPILE=0``: every
+  kernel compiled by the run's process itself (the figure without :mod:`slam.jit_background`);
 * ``warmup_then_run`` — ``slam warmup`` on a fresh cache, then ``slam run demo``: what the warm-up
   costs and that the run after it compiles nothing (``compile_s`` 0).
 
@@ -43,11 +46,13 @@ TOP_KERNELS = 15
 """How many of the costliest compilations a cold run lists."""
 
 
-def _slam(args: list[str], cache: Path) -> dict:
-    """Run ``slam ARGS`` in a child process with ``NUMBA_CACHE_DIR=cache``; wall, CPU, output,
-    and what it compiled (:mod:`slam.jit`'s report)."""
+def _slam(args: list[str], cache: Path, background: bool = True) -> dict:
+    """Run ``slam ARGS`` in a child process with ``NUMBA_CACHE_DIR=cache`` (and
+    ``SLAM_BACKGROUND_COMPILE=0`` unless ``background``); wall, CPU, output, and what the main
+    process compiled (:mod:`slam.jit`'s report)."""
     report = cache.parent / f"compile-{time.monotonic_ns()}.json"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), SLAM_COMPILE_REPORT=str(report))
+    env["SLAM_BACKGROUND_COMPILE"] = "1" if background else "0"
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load = os.getloadavg()[0]
     start = time.perf_counter()
@@ -73,8 +78,8 @@ def _slam(args: list[str], cache: Path) -> dict:
     }
 
 
-def _run_demo(cache: Path, out: Path) -> dict:
-    figures = _slam(["run", "demo", "--quiet", "--force", "--out", str(out)], cache)
+def _run_demo(cache: Path, out: Path, background: bool = True) -> dict:
+    figures = _slam(["run", "demo", "--quiet", "--force", "--out", str(out)], cache, background)
     metrics = json.loads((out / "metrics.json").read_text())
     texture = metrics.get("texture", {})
     figures.update(
@@ -86,6 +91,7 @@ def _run_demo(cache: Path, out: Path) -> dict:
         quality_wall_s=metrics.get("quality", {}).get("wall_s"),
         run_wall_s=metrics.get("wall_s"),
         ate_rmse=metrics.get("ate_rmse"),
+        compile_background=metrics.get("compile_background"),
     )
     return figures
 
@@ -100,6 +106,15 @@ def demo_cold_then_warm() -> dict:
     return {"cold": cold, "warm": warm}
 
 
+def demo_cold_without_background() -> dict:
+    """``slam run demo`` on a fresh numba cache with ``SLAM_BACKGROUND_COMPILE=0`` (everything
+    compiled by the run's own process, one kernel after another: the figure before
+    :mod:`slam.jit_background`)."""
+    _ensure_demo()
+    with tempfile.TemporaryDirectory(prefix="slam-cold-") as tmp:
+        return {"cold": _run_demo(Path(tmp) / "numba", Path(tmp) / "cold", background=False)}
+
+
 def warmup_then_run() -> dict:
     """``slam warmup`` on a fresh numba cache, then ``slam run demo`` on it."""
     _ensure_demo()
@@ -112,4 +127,8 @@ def warmup_then_run() -> dict:
 
 def benches() -> dict:
     """The cold-start benches."""
-    return {"demo_cold_then_warm": demo_cold_then_warm, "warmup_then_run": warmup_then_run}
+    return {
+        "demo_cold_then_warm": demo_cold_then_warm,
+        "demo_cold_without_background": demo_cold_without_background,
+        "warmup_then_run": warmup_then_run,
+    }

@@ -1,0 +1,155 @@
+"""slam.jit_background: the committed manifest is current, the main process waits for the
+background compiler instead of compiling the same kernel, and the compiler is off when asked."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numba.core import types
+
+from slam import jit, jit_background
+
+ROOT = Path(__file__).resolve().parent.parent
+TOOL = "uv run python tools/make_jit_manifest.py"
+
+
+def test_the_manifest_is_current() -> None:
+    """Fails when a cached kernel was added, removed, renamed or edited (its parameters
+    included) since tools/make_jit_manifest.py last wrote slam/jit_manifest.json."""
+    manifest = jit_background.load_manifest()
+    recorded, live = manifest["fingerprints"], jit_background.kernel_fingerprints()
+    added = sorted(set(live) - set(recorded))
+    removed = sorted(set(recorded) - set(live))
+    changed = sorted(k for k in set(live) & set(recorded) if live[k] != recorded[k])
+    stale = [f"{what}: {', '.join(names)}" for what, names in
+             (("added", added), ("removed", removed), ("changed", changed)) if names]  # fmt: skip
+    assert not stale, f"slam/jit_manifest.json is stale ({'; '.join(stale)}): run `{TOOL}`"
+    for entry in manifest["kernels"]:
+        assert entry["kernel"] in live, f"{entry['kernel']} is not a kernel: run `{TOOL}`"
+        assert len(jit_background._signature(entry)) == len(entry["signature"])
+    stages = {entry["stage"] for entry in manifest["kernels"]}
+    assert {"filter", "finish", "texture", "quality"} <= stages
+
+
+def test_numba_types_round_trip_through_json() -> None:
+    cases = [
+        types.float64,
+        types.int64,
+        types.boolean,
+        types.uint8,
+        types.Array(types.float64, 2, "C"),
+        types.Array(types.int32, 1, "A", readonly=True),
+        types.UniTuple(types.int64, 3),
+        types.Tuple([types.float64, types.Array(types.uint8, 3, "C")]),
+        types.none,
+    ]
+    for case in cases:
+        text = json.dumps(jit_background.type_to_json(case))
+        assert jit_background.type_from_json(json.loads(text)) == case
+    with pytest.raises(ValueError, match="cannot record the argument type"):
+        jit_background.type_to_json(types.unicode_type)
+
+
+KERNELS = """
+from numba import njit
+
+
+@njit(cache=True)
+def blend(a, b, w):
+    out = a.copy()
+    for i in range(a.size):
+        out[i] = (1.0 - w) * a[i] + w * b[i]
+    return out
+"""
+
+
+def _manifest(tmp_path: Path) -> Path:
+    """A manifest of one kernel of a module written in ``tmp_path``, in the texture stage."""
+    (tmp_path / "bg_kernels_for_test.py").write_text(textwrap.dedent(KERNELS))
+    array = {"array": "float64", "ndim": 1, "layout": "C", "readonly": False, "aligned": True}
+    entry = {"kernel": "bg_kernels_for_test.blend", "stage": "texture",
+             "signature": [array, array, "float64"], "cpu_s": None}  # fmt: skip
+    path = tmp_path / "manifest.json"
+    path.write_text(json.dumps({"kernels": [entry], "fingerprints": {}}))
+    return path
+
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch):
+    """A fresh numba cache and the test module importable, here and in the child process."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), str(ROOT)]))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delenv(jit_background.ENV, raising=False)
+    from numba.core.config import reload_config
+
+    reload_config()
+    yield tmp_path
+    monkeypatch.undo()
+    reload_config()
+    jit_background.stop()
+
+
+def test_the_main_process_waits_for_the_background_compiler(fresh_cache) -> None:
+    manifest = _manifest(fresh_cache)
+    started = jit_background.start(manifest)
+    assert started["enabled"] and started["stages"] == ["texture"] and started["kernels"] == 1
+    jit_background.reach_stage("load")  # a foreground stage: no wait
+    before_s, before = jit.compile_seconds(), len(jit.compiled_kernels())
+    events: list[bool] = []
+    with jit.on_compile(events.append):
+        jit_background.reach_stage("texture")  # the child starts Python and compiles: we wait
+    report = jit_background.report()
+    assert report["waited_s"]["texture"] > 0.0
+    assert report["compiled"] == {"texture": 1} and report["errors"] == []
+    assert events == [True, False]  # the bar says "compiling kernels" while we wait
+    assert jit.compile_seconds() - before_s >= report["waited_s"]["texture"] - 1e-6
+
+    import bg_kernels_for_test
+
+    out = bg_kernels_for_test.blend(np.zeros(3), np.ones(3), 0.25)
+    assert out.tolist() == [0.25, 0.25, 0.25]
+    assert len(jit.compiled_kernels()) == before  # loaded from the cache, not compiled here
+    assert bg_kernels_for_test.blend.stats.cache_hits
+    assert jit_background.report()["compiled_here"] == []
+    jit_background.reach_stage("texture")  # a stage is waited for once
+    assert jit_background.report()["waited_s"] == report["waited_s"]
+
+    again = jit_background.start(manifest)  # now in the cache: off
+    assert again == {"enabled": False, "reason": "warm cache"}
+
+
+def test_off_with_the_environment_variable_on_one_core_or_without_manifest(
+    fresh_cache, monkeypatch
+) -> None:
+    manifest = _manifest(fresh_cache)
+    monkeypatch.setenv(jit_background.ENV, "0")
+    assert jit_background.start(manifest) == {
+        "enabled": False,
+        "reason": "SLAM_BACKGROUND_COMPILE=0",
+    }
+    monkeypatch.delenv(jit_background.ENV)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    assert jit_background.start(manifest)["reason"] == "one core"
+    monkeypatch.undo()
+    assert jit_background.start(fresh_cache / "none.json")["reason"] == "no manifest none.json"
+
+
+def test_the_child_reports_each_stage_as_json_lines(fresh_cache) -> None:
+    manifest = _manifest(fresh_cache)
+    code = "import sys; from slam.jit_background import _child; _child(sys.argv[1], sys.argv[2:])"
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(manifest), "texture", "quality"],
+        capture_output=True, text=True, check=True, env=dict(os.environ),
+    )  # fmt: skip
+    lines = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert [line.get("stage") for line in lines[:2]] == ["texture", "quality"]
+    assert lines[0]["kernels"] == 1 and lines[1]["kernels"] == 0 and lines[0]["cpu_s"] > 0.0
+    assert lines[2]["end"] is True
