@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from slam import jit
+import slam.jit as jit
 
 MANIFEST = Path(__file__).resolve().parent / "jit_manifest.json"
 """The committed manifest: kernels, argument types and first stage of a cold ``slam run demo``."""
@@ -51,8 +51,8 @@ ENV = "SLAM_BACKGROUND_COMPILE"
 
 
 def type_to_json(numba_type: Any) -> Any:
-    """A numba argument type as JSON (arrays, numbers, booleans, tuples, None); ``ValueError``
-    for any other type."""
+    """A numba argument type as JSON (arrays, numbers, booleans, tuples, None, an omitted
+    default argument of a number); ``ValueError`` for any other type."""
     from numba.core import types
 
     if isinstance(numba_type, types.Array):
@@ -69,6 +69,8 @@ def type_to_json(numba_type: Any) -> Any:
         return {"tuple": [type_to_json(t) for t in numba_type.types]}
     if isinstance(numba_type, types.NoneType):
         return "none"
+    if isinstance(numba_type, types.Omitted) and isinstance(numba_type.value, (bool, int, float)):
+        return {"omitted": numba_type.value}  # a default argument left out by the caller
     raise ValueError(f"slam.jit_background: cannot record the argument type {numba_type!r}")
 
 
@@ -82,6 +84,8 @@ def type_from_json(value: Any) -> Any:
         return types.none
     if isinstance(value, str):
         return from_dtype(np.dtype(value))
+    if "omitted" in value:
+        return types.Omitted(value["omitted"])
     if "tuple" in value:
         return types.Tuple.from_types([type_from_json(v) for v in value["tuple"]])
     return types.Array(

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from slam import jit_background
+import slam.jit_background as jit_background
 from slam.config import Config, dumps, load_config
 from slam.errors import UsageError
 from slam.io import sources

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from numba.core import types
 
-from slam import jit, jit_background
+import slam.jit as jit
+import slam.jit_background as jit_background
 
 ROOT = Path(__file__).resolve().parent.parent
 TOOL = "uv run python tools/make_jit_manifest.py"
@@ -49,6 +50,7 @@ def test_numba_types_round_trip_through_json() -> None:
         types.UniTuple(types.int64, 3),
         types.Tuple([types.float64, types.Array(types.uint8, 3, "C")]),
         types.none,
+        types.Omitted(1),
     ]
     for case in cases:
         text = json.dumps(jit_background.type_to_json(case))

@@ -265,6 +265,8 @@ TEXTURE = "texture.demo_ground_truth_path"
 
 COLD = "coldstart.demo_cold_then_warm"
 """The cold-start bench: ``slam run demo`` on a fresh numba cache, then again (tools/benches/coldstart.py)."""
+NOBG = "coldstart.demo_cold_without_background"
+"""The cold run with ``SLAM_BACKGROUND_COMPILE=0`` (every kernel compiled by the run itself)."""
 WARMUP = "coldstart.warmup_then_run"
 """``slam warmup`` on a fresh numba cache, then ``slam run demo``."""
 
@@ -479,6 +481,13 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "coldstart.cold_cpu_s": _figure(COLD, "cold", "cpu_s", digits=0),
     "coldstart.cold_compile_s": _figure(COLD, "cold", "compile_s", digits=0),
     "coldstart.cold_compile_cpu_s": _figure(COLD, "cold", "compile_cpu_s", digits=0),
+    "coldstart.cold_background_cpu_s": _figure(
+        COLD, "cold", "compile_background", "compile_cpu_s", digits=0
+    ),
+    "coldstart.cold_estimate_compile_s": _figure(COLD, "cold", "estimate_compile_s", digits=1),
+    "coldstart.nobg_wall_s": _figure(NOBG, "cold", "wall_s", digits=0),
+    "coldstart.nobg_compile_s": _figure(NOBG, "cold", "compile_s", digits=0),
+    "coldstart.nobg_load": _figure(NOBG, "cold", "load_average_at_start", digits=0),
     "coldstart.warm_wall_s": _figure(COLD, "warm", "wall_s", digits=0),
     "coldstart.warm_cpu_s": _figure(COLD, "warm", "cpu_s", digits=0),
     "coldstart.load": _figure(COLD, "cold", "load_average_at_start", digits=0),
