@@ -51,8 +51,9 @@ ENV = "SLAM_BACKGROUND_COMPILE"
 
 
 def type_to_json(numba_type: Any) -> Any:
-    """A numba argument type as JSON (arrays, numbers, booleans, tuples, None, an omitted
-    default argument of a number); ``ValueError`` for any other type."""
+    """A numba argument type as JSON (arrays, numbers, booleans, tuples, named tuples of a
+    module-level class, None, an omitted default argument of a number); ``ValueError`` for any
+    other type."""
     from numba.core import types
 
     if isinstance(numba_type, types.Array):
@@ -65,6 +66,10 @@ def type_to_json(numba_type: Any) -> Any:
         }
     if isinstance(numba_type, (types.Integer, types.Float, types.Boolean, types.Complex)):
         return str(numba_type)
+    if isinstance(numba_type, types.BaseNamedTuple):  # e.g. kernels.field.FieldView
+        cls = numba_type.instance_class
+        items = [type_to_json(t) for t in numba_type.types]
+        return {"namedtuple": f"{cls.__module__}.{cls.__qualname__}", "items": items}
     if isinstance(numba_type, types.BaseTuple):
         return {"tuple": [type_to_json(t) for t in numba_type.types]}
     if isinstance(numba_type, types.NoneType):
@@ -86,8 +91,11 @@ def type_from_json(value: Any) -> Any:
         return from_dtype(np.dtype(value))
     if "omitted" in value:
         return types.Omitted(value["omitted"])
+    if "namedtuple" in value:
+        items = [type_from_json(v) for v in value["items"]]
+        return types.BaseTuple.from_types(items, kernel(value["namedtuple"]))
     if "tuple" in value:
-        return types.Tuple.from_types([type_from_json(v) for v in value["tuple"]])
+        return types.BaseTuple.from_types([type_from_json(v) for v in value["tuple"]])
     return types.Array(
         from_dtype(np.dtype(value["array"])),
         int(value["ndim"]),
@@ -98,7 +106,7 @@ def type_from_json(value: Any) -> Any:
 
 
 def kernel(name: str) -> Any:
-    """The numba dispatcher ``module.qualname`` (imports its module)."""
+    """The object ``module.name`` (a numba dispatcher, a named tuple class; imports its module)."""
     module, _, attr = name.rpartition(".")
     return getattr(importlib.import_module(module), attr)
 

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -39,7 +40,19 @@ def test_the_manifest_is_current() -> None:
     assert {"filter", "finish", "texture", "quality"} <= stages
 
 
+class Point(NamedTuple):
+    """A homogeneous named tuple (numba: NamedUniTuple)."""
+
+    x: float
+    y: float
+
+
 def test_numba_types_round_trip_through_json() -> None:
+    from slam.kernels.field import FieldView
+
+    field_view = [types.Array(types.float32, 3, "C"), types.Array(types.int32, 2, "C")]
+    field_view += [types.int64, types.float64, types.float64, types.float64]
+
     cases = [
         types.float64,
         types.int64,
@@ -51,6 +64,8 @@ def test_numba_types_round_trip_through_json() -> None:
         types.Tuple([types.float64, types.Array(types.uint8, 3, "C")]),
         types.none,
         types.Omitted(1),
+        types.BaseTuple.from_types(field_view, FieldView),
+        types.BaseTuple.from_types([types.float64, types.float64], Point),
     ]
     for case in cases:
         text = json.dumps(jit_background.type_to_json(case))
