@@ -194,6 +194,8 @@ class Warmup:
     """Seconds of the whole warm-up (compilation plus the run that triggers it)."""
     kernels: list[str] = field(default_factory=list)
     """Kernels compiled (outermost and callees), in order."""
+    background: int = 0
+    """Kernel signatures the background compiler compiled meanwhile (:mod:`slam.jit_background`)."""
 
 
 def warmup(data_dir: Path, progress: bool = False) -> Warmup:
@@ -219,11 +221,13 @@ def warmup(data_dir: Path, progress: bool = False) -> Warmup:
         request = RunRequest(
             name="demo", config=config, data_dir=data_dir, out=Path(tmp) / "run", progress=progress
         )
-        execute(request)
+        result = execute(request)
+    background = result.metrics.get("compile_background", {})
     return Warmup(
         compile_s=compile_seconds() - compiled,
         wall_s=time.perf_counter() - start,
         kernels=compiled_kernels()[before:],
+        background=sum(background.get("compiled", {}).values()),
     )
 
 

@@ -57,6 +57,13 @@ def test_slam_warmup_prints_what_it_compiled(monkeypatch, capsys, tmp_path) -> N
     assert "2 kernels compiled in 12.3 s (20.0 s in all)" in out
     assert seen == {"data_dir": tmp_path, "progress": False}
 
+    monkeypatch.setattr(
+        jit, "warmup", lambda data_dir, progress=False: jit.Warmup(3.0, 9.0, ["a.f"], background=17)
+    )
+    assert main(["warmup", "--quiet", "--data-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 kernels compiled in 3.0 s, 17 more in a background process (9.0 s in all)" in out
+
 
 def test_compile_cpu_seconds_and_the_table_of_outermost_compilations() -> None:
     @njit  # no cache: compiled here

@@ -36,8 +36,9 @@ def run_warmup(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore")  # the demo's warnings are the run's business, not ours
         done = warmup(data_dir_from(args), progress=show_progress(args))
     names = sorted(set(done.kernels))
+    more = f", {done.background} more in a background process" if done.background else ""
     print(
-        f"slam warmup: {len(names)} kernels compiled in {done.compile_s:.1f} s "
+        f"slam warmup: {len(names)} kernels compiled in {done.compile_s:.1f} s{more} "
         f"({done.wall_s:.1f} s in all); later runs load them from numba's cache"
     )
     return 0
