@@ -127,7 +127,8 @@ def test_the_main_process_waits_for_the_background_compiler(fresh_cache) -> None
     assert report["waited_s"]["texture"] > 0.0
     assert report["compiled"] == {"texture": 1} and report["errors"] == []
     assert events == [True, False]  # the bar says "compiling kernels" while we wait
-    assert jit.compile_seconds() - before_s >= report["waited_s"]["texture"] - 1e-6
+    # waited_s is rounded to the millisecond in the report
+    assert jit.compile_seconds() - before_s >= report["waited_s"]["texture"] - 5e-4
 
     import bg_kernels_for_test
 
