@@ -389,17 +389,7 @@ class RbpfFilter:
             self.retries += 1
             for yaw in rc.retry_yaw:
                 for sign in (1.0, -1.0):
-                    start = predicted.copy()
-                    start[:, 2] = wrap_angle(start[:, 2] + sign * yaw)
-                    alt = self.maps.match(
-                        start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
-                        rc.min_inliers, rc.coarse_stride,
-                    )  # fmt: skip
-                    better = (alt.loglik > match.loglik) & (alt.inliers >= rc.min_inliers)
-                    match.poses[better] = alt.poses[better]
-                    match.loglik[better] = alt.loglik[better]
-                    match.inliers[better] = alt.inliers[better]
-                    match.hessian[better] = alt.hessian[better]
+                    self._keep_better(match, predicted, sign * yaw, hits)
             best = float(match.loglik.max()) / beams
         recent.append(best)
         if len(recent) > rc.retry_window:
@@ -444,8 +434,17 @@ class RbpfFilter:
         if gain < rc.probe_gain or gain < 0.5 * (typical - first):
             return match
         self.probes += 1
+        self._keep_better(match, predicted, float(yaws[j]), hits)
+        return match
+
+    def _keep_better(
+        self, match: MatchResult, predicted: F64, yaw: float, hits: tuple[F64, F64]
+    ) -> None:
+        """Match every particle again from its predicted pose turned by ``yaw`` and keep, in
+        ``match``, the new match where it scores higher on enough known cells."""
+        rc = self.config.rbpf
         start = predicted.copy()
-        start[:, 2] = wrap_angle(start[:, 2] + yaws[j])
+        start[:, 2] = wrap_angle(start[:, 2] + yaw)
         alt = self.maps.match(
             start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
             rc.coarse_stride,
@@ -455,7 +454,6 @@ class RbpfFilter:
         match.loglik[better] = alt.loglik[better]
         match.inliers[better] = alt.inliers[better]
         match.hessian[better] = alt.hessian[better]
-        return match
 
     def weight(self, match: MatchResult, moved: F64) -> tuple[float, float]:
         """Weight by the scan's (tempered, evidence-shared) log-likelihood; ``N_eff`` and the
