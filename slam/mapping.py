@@ -63,6 +63,30 @@ def _grow_extent(lo: float, hi: float, cur_lo: float, cur_hi: float, margin: flo
     return new_lo, new_hi
 
 
+def growth_steps(
+    box: tuple[float, float, float, float],
+    extent: tuple[float, float, float, float],
+    step: float,
+    margin: float,
+) -> tuple[int, int, int, int] | None:
+    """How many ``step``-sized rows and columns to add ``(left, bottom, right, top)`` so the box
+    ``(xmin, ymin, xmax, ymax)`` lies inside ``extent`` (grown by at least ``margin`` on each side
+    that must grow), or ``None`` when it already does. The one growth rule of the dense grid, the
+    particle maps' tile tables and :func:`slam.stages.build_map`'s plan."""
+    xmin, ymin, xmax, ymax = box
+    x0, y0, x1, y1 = extent
+    if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+        return None
+    nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, margin)
+    ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, margin)
+    return (
+        int(np.ceil((x0 - nx0) / step)),
+        int(np.ceil((y0 - ny0) / step)),
+        int(np.ceil((nx1 - x1) / step)),
+        int(np.ceil((ny1 - y1) / step)),
+    )
+
+
 class OccupancyGrid:
     """A dense log-odds occupancy grid that grows to contain what is integrated into it."""
 
@@ -106,17 +130,11 @@ class OccupancyGrid:
 
     def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
         """Grow the grid (by at least ``grow_margin_m``) so the box lies inside it."""
-        x0, y0, x1, y1 = self.extent
-        if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
-            return
-        margin = self.config.grow_margin_m
-        nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, margin)
-        ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, margin)
         res = self.resolution
-        left = int(np.ceil((x0 - nx0) / res))
-        bottom = int(np.ceil((y0 - ny0) / res))
-        right = int(np.ceil((nx1 - x1) / res))
-        top = int(np.ceil((ny1 - y1) / res))
+        grow = growth_steps((xmin, ymin, xmax, ymax), self.extent, res, self.config.grow_margin_m)
+        if grow is None:
+            return
+        left, bottom, right, top = grow
         rows, cols = self.shape[0] + bottom + top, self.shape[1] + left + right
         _check_growth(4.0 * rows * cols, "an occupancy grid", cols * res, rows * res)
         self.log_odds = np.pad(self.log_odds, ((bottom, top), (left, right)))
@@ -321,16 +339,11 @@ class ParticleMaps:
         tile_m = self.tile * self.resolution
         _, nty, ntx = self.tables.shape
         x0, y0 = self.origin
-        x1, y1 = x0 + ntx * tile_m, y0 + nty * tile_m
-        if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+        extent = (x0, y0, x0 + ntx * tile_m, y0 + nty * tile_m)
+        grow = growth_steps((xmin, ymin, xmax, ymax), extent, tile_m, self.grow_margin_m)
+        if grow is None:
             return
-        m = self.grow_margin_m
-        nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, m)
-        ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, m)
-        left = int(np.ceil((x0 - nx0) / tile_m))
-        bottom = int(np.ceil((y0 - ny0) / tile_m))
-        right = int(np.ceil((nx1 - x1) / tile_m))
-        top = int(np.ceil((ny1 - y1) / tile_m))
+        left, bottom, right, top = grow
         rows, cols = nty + bottom + top, ntx + left + right
         particles = self.tables.shape[0]
         _check_growth(

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, MapConfig
 from slam.geometry import compose, relative, spread_corrections, transform_points
-from slam.mapping import OccupancyGrid, _check_growth, _grow_extent, likelihood_tables
+from slam.mapping import OccupancyGrid, _check_growth, growth_steps, likelihood_tables
 from slam.particle_filter import (
     FilterOutput,
     hits_for_insert,
@@ -170,18 +170,11 @@ def _grown(state: GridState, box: tuple[float, float, float, float], mc: MapConf
     arithmetic, so the same origin to the bit)."""
     origin, rows, cols, bottom, left = state
     res = float(mc.resolution)
-    xmin, ymin, xmax, ymax = box
     x0, y0 = float(origin[0]), float(origin[1])
-    x1, y1 = x0 + cols * res, y0 + rows * res
-    if xmin >= x0 and ymin >= y0 and xmax < x1 and ymax < y1:
+    grow = growth_steps(box, (x0, y0, x0 + cols * res, y0 + rows * res), res, mc.grow_margin_m)
+    if grow is None:
         return state
-    margin = mc.grow_margin_m
-    nx0, nx1 = _grow_extent(xmin, xmax, x0, x1, margin)
-    ny0, ny1 = _grow_extent(ymin, ymax, y0, y1, margin)
-    dl = int(np.ceil((x0 - nx0) / res))
-    db = int(np.ceil((y0 - ny0) / res))
-    dr = int(np.ceil((nx1 - x1) / res))
-    dt = int(np.ceil((ny1 - y1) / res))
+    dl, db, dr, dt = grow
     origin = origin - np.array([dl * res, db * res])
     return origin, rows + db + dt, cols + dl + dr, bottom + db, left + dl
 
