@@ -1,6 +1,8 @@
 """The ``slam`` command line: one sub-command per module in :mod:`slam.commands`.
 
-Each command module exposes ``register(subparsers)``, which adds its parser and sets ``func``.
+Each command module exposes ``register(subparsers)``, which adds its parser with
+:func:`~slam.commands._common.add_command` (the description is the module docstring after its
+first paragraph; sub-commands go in :func:`~slam.commands._common.add_actions`) and sets ``func``.
 Heavy imports (numba kernels, rerun) happen inside the handlers so ``slam --help`` stays instant.
 Errors meant for people (:class:`~slam.errors.SlamError`) print one line and exit with code 2.
 
@@ -34,6 +36,7 @@ import threading
 from collections.abc import Iterator, Sequence
 
 from slam import __version__
+from slam.commands._common import add_actions
 from slam.errors import SlamError, Terminated
 
 COMMAND_ORDER: tuple[str, ...] = (
@@ -75,8 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Particle-filter SLAM, texture mapping, grid localization and maze robots.",
     )
     parser.add_argument("--version", action="version", version=f"slam {__version__}")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    subparsers.required = True
+    subparsers = add_actions(parser, "command", "COMMAND")
     for name in command_modules():
         importlib.import_module(f"slam.commands.{name}").register(subparsers)
     return parser

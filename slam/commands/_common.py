@@ -1,4 +1,9 @@
-"""Arguments and helpers shared by several sub-commands."""
+"""Arguments and helpers shared by several sub-commands.
+
+Every command module makes its parser with :func:`add_command`, which takes the command's
+description from the module docstring (the paragraphs after the first, one-line one), and a
+command with sub-commands adds them to the group :func:`add_actions` returns.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +16,43 @@ from slam.io.datadir import resolve_data_dir
 
 if TYPE_CHECKING:
     from slam.io.rosbag import BagOptions
+
+
+def doc_description(doc: str | None) -> str | None:
+    """The paragraphs of the docstring ``doc`` after its first, with RST double backquotes shown
+    as plain quotes (``None`` when there is nothing after the first, or no docstring, as under
+    ``python -OO``)."""
+    if doc is None or "\n\n" not in doc:
+        return None
+    return doc.split("\n\n", 1)[1].replace("``", "'")
+
+
+def add_command(
+    subparsers: argparse._SubParsersAction,
+    name: str,
+    doc: str | None,
+    help: str,
+    layout: bool = False,
+) -> argparse.ArgumentParser:
+    """Add the parser of command ``name`` to ``subparsers``: ``help`` is its line in the
+    commands' list, its description :func:`doc_description` of ``doc`` (the command module's
+    ``__doc__``), rewrapped to the terminal, or with ``layout`` printed with the docstring's own
+    line breaks (lists, examples)."""
+    formatter = argparse.RawDescriptionHelpFormatter if layout else argparse.HelpFormatter
+    return subparsers.add_parser(
+        name, help=help, description=doc_description(doc), formatter_class=formatter
+    )
+
+
+def add_actions(
+    parser: argparse.ArgumentParser, dest: str, metavar: str = "SUBCOMMAND"
+) -> argparse._SubParsersAction:
+    """Add to ``parser`` a group of sub-commands one of which must be given (its name goes to
+    ``args.<dest>``; ``metavar`` names it in the usage line); add each with
+    :func:`add_command` or ``add_parser``."""
+    actions = parser.add_subparsers(dest=dest, metavar=metavar)
+    actions.required = True
+    return actions
 
 
 def add_data_dir_argument(parser: argparse.ArgumentParser) -> None:

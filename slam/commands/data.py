@@ -1,5 +1,8 @@
 """``slam data``: which datasets are under the data directory, and are they sound.
 
+List and verify the datasets of the registry (data/datasets.toml) under the data directory:
+--data-dir, else $SLAM_DATA_DIR, else ./data.
+
 * ``slam data list [--data-dir D] [--json]``: every registry dataset as present, partial (with
   the missing files) or absent.
 * ``slam data verify NAME [--data-dir D] [--json]``: sizes and hashes of the files present, then
@@ -22,7 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from slam.commands._common import (
+    add_actions,
     add_bag_arguments,
+    add_command,
     add_data_dir_argument,
     bag_options_from,
     data_dir_from,
@@ -32,17 +37,17 @@ from slam.io.datadir import DATA_DIR_ENV
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``slam data`` and its sub-commands."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "data",
-        help="list and verify the datasets under the data directory",
-        description="List and verify the datasets of the registry (data/datasets.toml) under "
-        "the data directory: --data-dir, else $SLAM_DATA_DIR, else ./data.",
+        __doc__,
+        "list and verify the datasets under the data directory",
+        layout=True,
     )
-    actions = parser.add_subparsers(dest="data_command", metavar="ACTION")
-    actions.required = True
+    actions = add_actions(parser, "data_command", "ACTION")
 
-    listing = actions.add_parser(
-        "list", help="show each dataset as present, partial or absent", description=__doc__
+    listing = add_command(
+        actions, "list", __doc__, "show each dataset as present, partial or absent", layout=True
     )
     add_data_dir_argument(listing)
     listing.add_argument("--json", action="store_true", help="print JSON instead of a table")

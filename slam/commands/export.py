@@ -16,16 +16,19 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from slam.commands._common import add_command
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``export`` sub-command."""
     from slam.io.exports import EXPORT_FORMATS
 
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "export",
-        help="write a finished run's map or trajectory for other tools (map_server, evo, KITTI)",
-        description=__doc__.split("\n\n", 1)[1].replace("``", "'"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        __doc__,
+        "write a finished run's map or trajectory for other tools (map_server, evo, KITTI)",
+        layout=True,
     )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder (slam run)")
     parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="what to write")

@@ -1,5 +1,7 @@
 """``slam grid``: grid-world localization with the exact histogram filter.
 
+Grid-world localization: the Bayes filter on cells, computed exactly.
+
 * ``slam grid list`` — the shipped scenarios (and the Udacity cases when the data is present);
 * ``slam grid run SCENARIO [--json]`` — the posterior after every sense and every move;
 * ``slam grid study [...]`` — random colour maps: observations until one cell holds ≥ 0.999 and
@@ -13,19 +15,22 @@ import json
 import sys
 from pathlib import Path
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_actions,
+    add_command,
+    add_data_dir_argument,
+    data_dir_from,
+    show_progress,
+)
 from slam.errors import UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``slam grid`` and its sub-commands."""
-    parser = subparsers.add_parser(
-        "grid",
-        help="grid-world localization (exact histogram filter)",
-        description="Grid-world localization: the Bayes filter on cells, computed exactly.",
+    parser = add_command(
+        subparsers, "grid", __doc__, "grid-world localization (exact histogram filter)", layout=True
     )
-    sub = parser.add_subparsers(dest="grid_command", metavar="SUBCOMMAND")
-    sub.required = True
+    sub = add_actions(parser, "grid_command")
 
     p_list = sub.add_parser("list", help="list the shipped scenarios")
     add_data_dir_argument(p_list)

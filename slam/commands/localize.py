@@ -1,4 +1,11 @@
-"""``slam localize LOG --map RUN_DIR|map.yaml``: localize a log on a saved map and write a run folder."""
+"""``slam localize LOG --map RUN_DIR|map.yaml``: localize a log on a saved map and write a run folder.
+
+Localize LOG (a dataset name, 'demo', or a path) on the map of a slam run folder (or a map.npz, or
+a ROS map_server map.yaml). With --initial the particles start around that pose; without it (or
+with --global) an exact histogram filter over the map's free cells and headings finds the pose
+first. Writes trajectory.tum, localization.npz, metrics.json, map.png, config.toml and
+recording.rrd to the run folder.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +13,7 @@ import argparse
 from pathlib import Path
 
 from slam.commands._common import (
+    add_command,
     add_config_arguments,
     add_data_dir_argument,
     add_output_arguments,
@@ -17,16 +25,11 @@ from slam.commands._common import (
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``localize`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "localize",
-        help="localize a log on a saved map (Monte Carlo localization, global localization)",
-        description=(
-            "Localize LOG (a dataset name, 'demo', or a path) on the map of a slam run folder "
-            "(or a map.npz, or a ROS map_server map.yaml). With --initial the particles start around that pose; without it "
-            "(or with --global) an exact histogram filter over the map's free cells and "
-            "headings finds the pose first. Writes trajectory.tum, localization.npz, "
-            "metrics.json, map.png, config.toml and recording.rrd to the run folder."
-        ),
+        __doc__,
+        "localize a log on a saved map (Monte Carlo localization, global localization)",
     )
     parser.add_argument("name", metavar="LOG", help="dataset name, 'demo', or a path")
     parser.add_argument(

@@ -22,7 +22,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_actions,
+    add_command,
+    add_data_dir_argument,
+    data_dir_from,
+    show_progress,
+)
 from slam.errors import ConfigError, UsageError
 
 
@@ -30,14 +36,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``maze`` sub-command and its ``run``, ``bench``, ``show``, ``convert``."""
     from slam.maze.robots import DEFAULT_ROBOT, ROBOTS
 
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "maze",
-        help="micromouse mazes: run, bench, show and convert (Udacity tester rules)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        __doc__,
+        "micromouse mazes: run, bench, show and convert (Udacity tester rules)",
+        layout=True,
     )
-    sub = parser.add_subparsers(dest="maze_command", metavar="ACTION")
-    sub.required = True
+    sub = add_actions(parser, "maze_command", "ACTION")
 
     def robot_args(p: argparse.ArgumentParser) -> None:
         p.add_argument(

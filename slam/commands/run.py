@@ -1,4 +1,11 @@
-"""``slam run NAME``: estimate a trajectory and a map from a log and write a run folder."""
+"""``slam run NAME``: estimate a trajectory and a map from a log and write a run folder.
+
+Run SLAM on NAME: a dataset of the registry (slam data list), 'demo' (a simulated dataset20-scale
+log generated on first use, with ground truth), or a path to a CARMEN log, an ECE276A dataset
+folder, a ROS 1 bag, a ROS 2 bag folder or an MCAP file (format detected by content). Writes
+config.toml, trajectory.tum, map.pgm/map.yaml, map.npz, map.png, map_clean.png, metrics.json and,
+with RGB-D frames, texture.png/npz to the run folder.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +15,7 @@ from pathlib import Path
 
 from slam.commands._common import (
     add_bag_arguments,
+    add_command,
     add_config_arguments,
     add_data_dir_argument,
     add_output_arguments,
@@ -21,17 +29,11 @@ from slam.config import METHODS
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``run`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "run",
-        help="run SLAM (or dead reckoning) on a dataset and write a run folder",
-        description=(
-            "Run SLAM on NAME: a dataset of the registry (slam data list), 'demo' (a simulated "
-            "dataset20-scale log generated on first use, with ground truth), or a path to a "
-            "CARMEN log, an ECE276A dataset folder, a ROS 1 bag, a ROS 2 bag folder or an MCAP file "
-            "(format detected by content). Writes config.toml, trajectory.tum, map.pgm/map.yaml, "
-            "map.npz, map.png, map_clean.png, metrics.json and, with RGB-D frames, texture.png/npz to the run "
-            "folder."
-        ),
+        __doc__,
+        "run SLAM (or dead reckoning) on a dataset and write a run folder",
     )
     parser.add_argument("name", metavar="NAME", help="dataset name, 'demo', or a path")
     parser.add_argument("--method", choices=METHODS, help="estimation method (default: rbpf)")

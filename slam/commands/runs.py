@@ -1,4 +1,5 @@
-"""``slam runs clean [DIR ...]``: remove the partial folders that killed runs left behind.
+"""``slam runs``: manage the folders slam writes; ``slam runs clean [DIR ...]`` removes the
+partial folders that killed runs left behind.
 
 A command writing an output folder assembles it in a partial sibling folder
 ``.<name>.<random>.partial`` holding an owner record (pid, host, start time). Ctrl-C, SIGTERM and
@@ -13,22 +14,24 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from slam.commands._common import add_actions, add_command
 from slam.errors import UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``slam runs`` and its sub-command ``clean``."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "runs",
-        help="manage run folders: remove partial folders left by killed runs (runs clean)",
-        description="Manage the folders slam writes.",
+        __doc__,
+        "manage run folders: remove partial folders left by killed runs (runs clean)",
     )
-    sub = parser.add_subparsers(dest="runs_command", metavar="SUBCOMMAND")
-    sub.required = True
-    clean = sub.add_parser(
+    sub = add_actions(parser, "runs_command")
+    clean = add_command(
+        sub,
         "clean",
-        help="remove stale partial folders (.NAME.XXXX.partial) whose process is gone",
-        description=__doc__.split("\n\n", 1)[1].replace("``", "'"),
+        __doc__,
+        "remove stale partial folders (.NAME.XXXX.partial) whose process is gone",
     )
     clean.add_argument(
         "dirs",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.commands._common import add_output_arguments, show_progress
+from slam.commands._common import add_command, add_output_arguments, show_progress
 from slam.io.atomic import check_output_dir
 
 
@@ -20,11 +20,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``sim`` sub-command."""
     from slam.sim.scenarios import SCENARIOS
 
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "sim",
-        help="simulate a robot log with ground truth (ECE276A format)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        __doc__,
+        "simulate a robot log with ground truth (ECE276A format)",
+        layout=True,
     )
     parser.add_argument(
         "name",

@@ -13,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from slam.commands._common import add_data_dir_argument, data_dir_from
+from slam.commands._common import add_command, add_data_dir_argument, data_dir_from
 from slam.config import METHODS
 from slam.sweep.spec import EXECUTORS
 
@@ -40,10 +40,11 @@ def add_sweep_arguments(parser: argparse.ArgumentParser) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``sweep`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "sweep",
-        help="run many cells (logs × seeds × settings), evaluate, tabulate; resumable",
-        description=__doc__.split("\n\n")[1].replace("``", "'"),
+        __doc__,
+        "run many cells (logs × seeds × settings), evaluate, tabulate; resumable",
     )
     add_sweep_arguments(parser)
     parser.add_argument(

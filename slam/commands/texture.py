@@ -13,16 +13,14 @@ import sys
 import warnings
 from pathlib import Path
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import add_command, add_data_dir_argument, data_dir_from, show_progress
 from slam.config import TEXTURE_MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``texture`` sub-command."""
-    parser = subparsers.add_parser(
-        "texture",
-        help="recompute the floor texture (RGB-D) of a finished run",
-        description=__doc__.split("\n\n")[1].replace("``", "'"),
+    parser = add_command(
+        subparsers, "texture", __doc__, "recompute the floor texture (RGB-D) of a finished run"
     )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder of `slam run`")
     parser.add_argument(

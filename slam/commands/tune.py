@@ -12,17 +12,18 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from slam.commands._common import data_dir_from
+from slam.commands._common import add_command, data_dir_from
 from slam.commands.sweep import add_sweep_arguments
 from slam.sweep.tune import SEARCHES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``tune`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "tune",
-        help="random/grid search over declared ranges for the least mean error",
-        description=__doc__.split("\n\n")[1].replace("``", "'"),
+        __doc__,
+        "random/grid search over declared ranges for the least mean error",
     )
     add_sweep_arguments(parser)
     parser.add_argument("--trials", type=int, help="trials, the default included (budget)")

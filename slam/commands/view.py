@@ -1,11 +1,9 @@
 """``slam view RUN_DIR``: open a run's recording in the rerun viewer.
 
-* ``slam view RUN_DIR`` — the native viewer on ``RUN_DIR/recording.rrd`` (or on a ``.rrd`` file);
-* ``slam view RUN_DIR --web`` — serve the web viewer on 127.0.0.1 and print its URL; it runs
-  until interrupted (Ctrl-C).
-
-Every server it starts listens on 127.0.0.1 only (rerun's own default is every interface). A
-port already taken is one line and exit 2 before anything starts. The viewer process dies with
+Open RUN_DIR/recording.rrd (or a .rrd file) in the rerun viewer: the native viewer, or with --web
+the web viewer served on 127.0.0.1 (its URL is printed; Ctrl-C stops it). Every server started
+listens on 127.0.0.1 only (rerun's own default is every interface). A port already taken is one
+line and exit 2 before anything starts. The viewer process dies with
 ``slam view`` (Linux: ``PR_SET_PDEATHSIG``), even when ``slam view`` is killed with SIGKILL.
 """
 
@@ -17,19 +15,17 @@ import subprocess
 import sys
 from pathlib import Path
 
+from slam.commands._common import add_command
 from slam.errors import DataError, UsageError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``view`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "view",
-        help="open a run's recording.rrd in the rerun viewer (native, or web with --web)",
-        description=(
-            "Open RUN_DIR/recording.rrd (or a .rrd file) in the rerun viewer: the native "
-            "viewer, or with --web the web viewer served on 127.0.0.1 (its URL is printed; "
-            "Ctrl-C stops it). Every server started listens on 127.0.0.1 only."
-        ),
+        __doc__,
+        "open a run's recording.rrd in the rerun viewer (native, or web with --web)",
     )
     parser.add_argument(
         "run_dir", metavar="RUN_DIR", type=Path, help="run folder (or a .rrd recording)"

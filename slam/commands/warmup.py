@@ -11,15 +11,16 @@ from __future__ import annotations
 
 import argparse
 
-from slam.commands._common import add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import add_command, add_data_dir_argument, data_dir_from, show_progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``warmup`` sub-command."""
-    parser = subparsers.add_parser(
+    parser = add_command(
+        subparsers,
         "warmup",
-        help="compile the kernels of `slam run` into numba's cache (first run at full speed)",
-        description=__doc__.split("\n\n")[1].replace("``", "'"),
+        __doc__,
+        "compile the kernels of `slam run` into numba's cache (first run at full speed)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_data_dir_argument(parser)

@@ -1,0 +1,53 @@
+"""The command parsers: descriptions from the module docstrings, required sub-command groups."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+import pytest
+
+from slam.cli import build_parser, command_modules
+from slam.commands._common import add_actions, add_command, doc_description
+
+
+def _commands() -> dict[str, argparse.ArgumentParser]:
+    action = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
+def test_doc_description_takes_the_paragraphs_after_the_first() -> None:
+    doc = "``slam x``: one line.\n\nSecond ``a``.\n\n* third\n"
+    assert doc_description(doc) == "Second 'a'.\n\n* third\n"
+    assert doc_description("only one line") is None
+    assert doc_description(None) is None
+
+
+def test_every_command_describes_itself_with_its_module_docstring() -> None:
+    commands = _commands()
+    assert sorted(commands) == sorted(command_modules())
+    for name, parser in commands.items():
+        doc = importlib.import_module(f"slam.commands.{name}").__doc__
+        assert parser.description == doc_description(doc), name
+        assert parser.description, name
+        assert "``" not in parser.description, name
+
+
+def test_layout_keeps_line_breaks_and_default_rewraps() -> None:
+    top = argparse.ArgumentParser(prog="t")
+    sub = add_actions(top, "cmd", "COMMAND")
+    doc = "One line.\n\n* a\n* b\n"
+    kept = add_command(sub, "kept", doc, "kept help", layout=True).format_help()
+    wrapped = add_command(sub, "wrapped", doc, "wrapped help").format_help()
+    assert "* a\n* b\n" in kept
+    assert "* a * b\n" in wrapped
+
+
+@pytest.mark.parametrize("argv", [["grid"], ["data"], ["maze"], ["runs"], []])
+def test_a_missing_sub_command_is_a_usage_error(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(argv)
+    assert exc.value.code == 2
+    assert "required" in capsys.readouterr().err
