@@ -49,7 +49,7 @@ from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import LidarConfig
 from slam.errors import ConfigError, DataError
 from slam.geometry import relative, wrap_angle
-from slam.io.log import Log, OdometryStream, ScanStream, valid_ranges
+from slam.io.log import Log, OdometryStream, ScanStream, laser_offset_meta, valid_ranges
 from slam.io.text import decode_utf8, read_input
 
 F64 = NDArray[np.float64]
@@ -200,10 +200,7 @@ def load_carmen(
         "skipped_lines": sum(skipped.values()),
         "skipped_types": ", ".join(f"{k}={v}" for k, v in sorted(skipped.items())) or "none",
         "scan_time": "ipc_timestamp",
-        "laser_offset_source": offset_source,
-        "laser_offset_x": float(scans.laser_offset[0]),
-        "laser_offset_y": float(scans.laser_offset[1]),
-        "laser_offset_yaw": float(scans.laser_offset[2]),
+        **laser_offset_meta(offset_source, scans.laser_offset),
     }
     return Log(
         name=name or _stem(path),

@@ -238,6 +238,19 @@ def valid_ranges(ranges: NDArray[Any], range_min: float) -> tuple[F32, int]:
     return out, int(np.count_nonzero(invalid))
 
 
+def laser_offset_meta(source: str, offset: F64) -> dict[str, str | float]:
+    """The ``meta`` entries of a log's laser mounting: where the offset came from
+    (``laser_offset_source``) and the ``(3,)`` offset itself (``laser_offset_x``, ``_y``,
+    ``_yaw``), as CARMEN and bag loaders record them."""
+    x, y, yaw = (float(v) for v in offset)
+    return {
+        "laser_offset_source": source,
+        "laser_offset_x": x,
+        "laser_offset_y": y,
+        "laser_offset_yaw": yaw,
+    }
+
+
 def count_non_monotonic(time: F64) -> int:
     """How many readings of ``time`` have a timestamp smaller than the previous one's."""
     return int(np.count_nonzero(np.diff(time) < 0))

@@ -65,7 +65,7 @@ from slam.errors import DataError, UsageError
 from slam.geometry import interpolate_poses
 from slam.io.carmen import MAX_BEAMS as CARMEN_MAX_BEAMS
 from slam.io.formats import BAG_FORMATS, detect_format
-from slam.io.log import ImuStream, Log, OdometryStream, ScanStream
+from slam.io.log import ImuStream, Log, OdometryStream, ScanStream, laser_offset_meta
 
 F64 = NDArray[np.float64]
 
@@ -742,10 +742,7 @@ def load_bag(
         "odom_stamp_glitches": odom_glitches,
         "base_frame": base,
         "laser_frame": laser_frame,
-        "laser_offset_source": offset_source,
-        "laser_offset_x": float(offset[0]),
-        "laser_offset_y": float(offset[1]),
-        "laser_offset_yaw": float(offset[2]),
+        **laser_offset_meta(offset_source, offset),
         "laser_upside_down": int(upside_down),
         "scan_stamps_from_record_time": scans.record_time_stamps,
         "fast_decoder": ", ".join(f"{k}={v}" for k, v in sorted(streams.fast_decoder.items())),
