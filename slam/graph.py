@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -176,53 +177,69 @@ def _chain_information(seq_z: F64, lc: LoopConfig) -> F64:
     return info
 
 
-def optimize(poses: F64, edges: list, lc: LoopConfig) -> F64:
-    """Gauss-Newton on the chain of ``poses`` plus loop ``edges``; node 0 stays fixed."""
+class PoseGraph(NamedTuple):
+    """The edges of a pose graph: edge ``k`` joins node ``i[k]`` to node ``j[k]``."""
+
+    i: NDArray[np.int64]
+    """``(E,)`` first node of every edge."""
+    j: NDArray[np.int64]
+    """``(E,)`` second node of every edge."""
+    z: F64
+    """``(E, 3)`` C-contiguous measured pose of node ``j`` in the frame of node ``i``."""
+    info: F64
+    """``(E, 3, 3)`` information of every measurement."""
+    robust: F64
+    """``(E,)`` robust-kernel (Cauchy) scale of every edge; 0: none."""
+
+
+def chain_graph(poses: F64, edges: list, robust: F64, lc: LoopConfig) -> PoseGraph:
+    """The pose graph of the chain of ``poses`` (each pose to the next, measuring their relative
+    pose with :func:`_chain_information`, no robust kernel) followed by the loop ``edges``
+    ``(i, j, z, info)``, loop edge ``k`` with robust scale ``robust[k]``."""
     n = poses.shape[0]
     seq_z = relative(poses[:-1], poses[1:])
-    ei = [np.arange(n - 1)]
-    ej = [np.arange(1, n)]
-    meas = [seq_z]
-    info = np.concatenate(
-        [
-            _chain_information(seq_z, lc),
-            np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3),
-        ]
+    loop_info = np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3)
+    return PoseGraph(
+        i=np.concatenate([np.arange(n - 1), [e[0] for e in edges]]).astype(np.int64),
+        j=np.concatenate([np.arange(1, n), [e[1] for e in edges]]).astype(np.int64),
+        z=np.ascontiguousarray(
+            np.concatenate([seq_z, np.array([e[2] for e in edges]).reshape(-1, 3)])
+        ),
+        info=np.concatenate([_chain_information(seq_z, lc), loop_info]),
+        robust=np.concatenate([np.zeros(n - 1), np.asarray(robust, dtype=np.float64)]),
     )
-    robust = np.concatenate([np.zeros(n - 1), np.full(len(edges), lc.robust)])
-    if edges:
-        ei.append(np.array([e[0] for e in edges]))
-        ej.append(np.array([e[1] for e in edges]))
-        meas.append(np.stack([e[2] for e in edges]))
-    edge_i = np.concatenate(ei).astype(np.int64)
-    edge_j = np.concatenate(ej).astype(np.int64)
-    z = np.ascontiguousarray(np.concatenate(meas))
-    return gauss_newton(poses.copy(), edge_i, edge_j, z, info, robust, lc)
 
 
-def gauss_newton(
-    x: F64,
-    edge_i: NDArray[np.int64],
-    edge_j: NDArray[np.int64],
-    z: F64,
-    info: F64,
-    robust: F64,
+def optimize(
+    poses: F64,
+    edges: list,
     lc: LoopConfig,
+    robust: F64 | None = None,
+    start: F64 | None = None,
 ) -> F64:
-    """Gauss-Newton on the pose graph from ``x`` (modified in place and returned): node 0
+    """Gauss-Newton on the :func:`chain_graph` of ``poses`` and loop ``edges`` (node 0 stays
+    fixed), every loop edge with robust scale ``lc.robust`` unless ``robust`` gives one per edge
+    (0: none), the iterations starting from ``start`` (default: ``poses``)."""
+    if robust is None:
+        robust = np.full(len(edges), lc.robust)
+    x = (poses if start is None else start).copy()
+    return gauss_newton(x, chain_graph(poses, edges, robust, lc), lc)
+
+
+def gauss_newton(x: F64, graph: PoseGraph, lc: LoopConfig) -> F64:
+    """Gauss-Newton on the pose ``graph`` from ``x`` (modified in place and returned): node 0
     fixed, at most ``lc.iterations`` steps, until a step moves no node more than
-    ``lc.converged_xy`` / ``lc.converged_th``. Edges ``i → j`` measure ``z`` with information
-    ``info`` and per-edge robust scale ``robust``."""
+    ``lc.converged_xy`` / ``lc.converged_th``."""
     n = x.shape[0]
     diag = np.zeros((n, 3, 3))
     band = np.zeros((max(n - 1, 1), 3, 3))
-    far = np.zeros((edge_i.size, 3, 3))
+    far = np.zeros((graph.i.size, 3, 3))
     grad = np.zeros((n, 3))
     for _ in range(lc.iterations):
-        linearize(x, edge_i, edge_j, z, info, robust, diag, band, far, grad)
+        linearize(x, graph.i, graph.j, graph.z, graph.info, graph.robust, diag, band, far, grad)
         diag[0] += np.eye(3) * 1e9  # node 0 fixed
         delta, _ = solve_system(
-            diag, band, far, edge_i, edge_j, -grad, lc.solver_iterations, lc.solver_tolerance
+            diag, band, far, graph.i, graph.j, -grad, lc.solver_iterations, lc.solver_tolerance
         )
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])

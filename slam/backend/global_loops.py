@@ -40,12 +40,11 @@ from slam.config import Config
 from slam.geometry import compose, inverse, path_along, relative, wrap_angle
 from slam.graph import (
     LoopResult,
-    _chain_information,
     _detect,
     _edge_information,
-    gauss_newton,
     keyframe_edges,
     loop_rounds,
+    optimize,
 )
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
@@ -192,27 +191,6 @@ def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
     return keep
 
 
-def optimize(poses: F64, edges: list, robust: F64, lc, start: F64 | None = None) -> F64:
-    """:func:`slam.graph.optimize` with a robust-kernel scale per loop edge (0: none).
-
-    Verified global closures enter without a kernel: their error at the drifted estimate is
-    metres, which a Cauchy kernel would treat as an outlier and never pull in. The chain's
-    measurements are the relative poses of ``poses``; the iterations start from ``start``.
-    """
-    n = poses.shape[0]
-    seq_z = relative(poses[:-1], poses[1:])
-    loop_info = np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3)
-    info = np.concatenate([_chain_information(seq_z, lc), loop_info])
-    rob = np.concatenate([np.zeros(n - 1), np.asarray(robust, dtype=np.float64)])
-    edge_i = np.concatenate([np.arange(n - 1), [e[0] for e in edges]]).astype(np.int64)
-    edge_j = np.concatenate([np.arange(1, n), [e[1] for e in edges]]).astype(np.int64)
-    z = np.ascontiguousarray(
-        np.concatenate([seq_z, np.array([e[2] for e in edges]).reshape(-1, 3)])
-    )
-    x = (poses if start is None else start).copy()
-    return gauss_newton(x, edge_i, edge_j, z, info, rob, lc)
-
-
 def _chi2(keys_x: F64, edge: tuple) -> float:
     e = edge_error(keys_x[edge[0]], keys_x[edge[1]], np.asarray(edge[2], dtype=np.float64))
     return float(e @ edge[3] @ e)
@@ -245,14 +223,16 @@ def close_loops_global(
         edges = local_edges + global_edges
         start = None
         if global_edges:  # pull the verified global closures in, then gate them
+            # without a robust kernel: their error at the drifted estimate is metres, which a
+            # Cauchy kernel would treat as an outlier and never pull in
             robust = np.array([lc.robust] * len(local_edges) + [0.0] * len(global_edges))
-            pulled = optimize(poses[keys], edges, robust, lc)
+            pulled = optimize(poses[keys], edges, lc, robust)
             passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
             edges = local_edges + passed
             if len(passed) == len(global_edges):
                 return edges, pulled, count + searched  # every closure agrees: nothing to redo
             start = pulled if passed else None
-        new_keys = optimize(poses[keys], edges, np.full(len(edges), lc.robust), lc, start)
+        new_keys = optimize(poses[keys], edges, lc, start=start)
         return edges, new_keys, count + searched
 
     return loop_rounds(poses, path, lc, one_round)
