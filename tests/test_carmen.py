@@ -178,6 +178,10 @@ def test_laser_offset_from_log_is_the_median(tmp_path):
     np.testing.assert_allclose(log.scans.laser_offset, [0.25, 0.05, 0.1], atol=1e-9)
     np.testing.assert_allclose(log.scans.angles, [-np.pi / 4, np.pi / 4])
     assert log.meta["laser_offset_x"] == pytest.approx(0.25)
+    assert log.meta["laser_offset_source"] == "log"
+    assert [log.meta[f"laser_offset_{k}"] for k in ("x", "y", "yaw")] == [
+        float(v) for v in log.scans.laser_offset
+    ]
 
 
 def test_gzip_is_detected_by_magic_bytes(tmp_path):

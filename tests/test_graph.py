@@ -5,7 +5,7 @@ import pytest
 
 from slam.config import LoopConfig
 from slam.geometry import accumulate, compose, relative
-from slam.graph import optimize
+from slam.graph import chain_graph, optimize
 from slam.kernels.graph import _jacobians, edge_error, linearize, solve_system
 
 
@@ -105,6 +105,41 @@ def test_a_wrong_loop_edge_is_down_weighted():
     assert np.abs(out - poses)[:, :2].max() < 0.3
     plain = optimize(poses, wrong, LoopConfig(robust=0.0))
     assert np.abs(plain - poses)[:, :2].max() > np.abs(out - poses)[:, :2].max()
+
+
+def test_chain_graph_is_the_chain_then_the_loops():
+    poses = accumulate(np.tile([0.5, 0.0, 0.1], (3, 1)))  # 4 poses
+    info = np.diag([1.0, 2.0, 3.0])
+    edges = [(0, 3, np.array([0.1, 0.2, 0.3]), info), (1, 3, np.array([0.4, 0.5, 0.6]), info)]
+    graph = chain_graph(poses, edges, np.array([0.7, 0.0]), LoopConfig())
+    assert graph.i.tolist() == [0, 1, 2, 0, 1] and graph.j.tolist() == [1, 2, 3, 3, 3]
+    assert graph.i.dtype == graph.j.dtype == np.int64
+    np.testing.assert_allclose(graph.z[:3], np.tile([0.5, 0.0, 0.1], (3, 1)), atol=1e-12)
+    np.testing.assert_array_equal(graph.z[3:], [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    assert graph.z.flags.c_contiguous and graph.info.shape == (5, 3, 3)
+    np.testing.assert_array_equal(graph.info[3], info)
+    np.testing.assert_array_equal(graph.robust, [0.0, 0.0, 0.0, 0.7, 0.0])
+    empty = chain_graph(poses, [], np.zeros(0), LoopConfig())
+    assert empty.i.tolist() == [0, 1, 2] and empty.z.shape == (3, 3)
+
+
+def test_optimize_robust_scales_and_start():
+    steps = np.tile([0.5, 0.0, 0.0], (30, 1))
+    poses = accumulate(steps)
+    wrong = [(0, 30, np.array([0.0, 3.0, 0.5]), np.diag([400.0, 400.0, 4e4]))]
+    lc = LoopConfig()
+    # per-edge scales equal to lc.robust are the default; 0 is no kernel
+    np.testing.assert_array_equal(
+        optimize(poses, wrong, lc, np.array([lc.robust])), optimize(poses, wrong, lc)
+    )
+    np.testing.assert_array_equal(
+        optimize(poses, wrong, lc, np.zeros(1)), optimize(poses, wrong, LoopConfig(robust=0.0))
+    )
+    # the chain measures the relative poses of ``poses`` whatever ``start`` the steps begin at
+    start = poses + np.array([0.0, 0.05, 0.0])
+    moved = optimize(poses, [], lc, start=start)
+    np.testing.assert_allclose(relative(moved[:-1], moved[1:]), steps, atol=1e-6)
+    np.testing.assert_allclose(moved[0], start[0], atol=1e-6)  # node 0 fixed where it starts
 
 
 @pytest.mark.parametrize("n", [2, 5])
