@@ -1,8 +1,8 @@
 """Arguments and helpers shared by several sub-commands.
 
 Every command module makes its parser with :func:`add_command`, which takes the command's
-description from the module docstring (the paragraphs after the first, one-line one), and a
-command with sub-commands adds them to the group :func:`add_actions` returns.
+description from the module docstring: every paragraph after the first (the one line saying what
+the module owns). A command with sub-commands adds them to the group :func:`add_actions` returns.
 """
 
 from __future__ import annotations
