@@ -196,10 +196,43 @@ class Warmup:
     """Kernels compiled (outermost and callees), in order."""
     background: int = 0
     """Kernel signatures the background compiler compiled meanwhile (:mod:`slam.jit_background`)."""
+    bytecode: int = 0
+    """Source files byte-compiled (:func:`compile_sources`; 0 when all were current)."""
+
+
+def compile_sources() -> int:
+    """Byte-compile slam's own sources and the installed packages of the environment it runs in
+    (a virtual environment's ``site-packages``; nothing outside one) into their ``__pycache__``
+    folders; return how many files needed it. Python writes ``.pyc`` files at import time only
+    where it may (``PYTHONDONTWRITEBYTECODE`` unset, a writable folder): else every run compiles
+    the ~1,500 modules it imports (numba, rerun, ...) again, ~3 s of each ``slam run`` on the
+    benchmark machine. Files whose ``.pyc`` is current are left as they are."""
+    import compileall
+    import importlib.util
+    import sys
+    import sysconfig
+
+    folders = [Path(__file__).resolve().parent]
+    if sys.prefix != sys.base_prefix:  # only a virtual environment's own packages
+        folders += sorted({Path(sysconfig.get_paths()[k]) for k in ("purelib", "platlib")})
+    stale = []
+    for folder in folders:
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            continue
+        for source in folder.rglob("*.py"):
+            cached = Path(importlib.util.cache_from_source(str(source)))
+            if not cached.is_file() or cached.stat().st_mtime < source.stat().st_mtime:
+                stale.append(source)
+    if stale:
+        for folder in folders:  # compileall's own mtime check skips the current files
+            if folder.is_dir() and os.access(folder, os.W_OK):
+                compileall.compile_dir(folder, quiet=2, workers=0)
+    return len(stale)
 
 
 def warmup(data_dir: Path, progress: bool = False) -> Warmup:
-    """Compile into numba's cache every kernel ``slam run demo`` calls, by running that pipeline
+    """Byte-compile the Python sources (:func:`compile_sources`), then compile into numba's cache
+    every kernel ``slam run demo`` calls, by running that pipeline
     (default configuration; texture on every 10th RGB frame; no recording) into a temporary
     folder that is removed afterwards. The demo dataset is generated first when it is not in the
     cache yet (as the first ``slam run demo`` would). Returns what was compiled and how long it
@@ -211,6 +244,7 @@ def warmup(data_dir: Path, progress: bool = False) -> Warmup:
 
     install()
     start, compiled, before = time.perf_counter(), compile_seconds(), len(compiled_kernels())
+    bytecode = compile_sources()
     ref = resolve("demo", data_dir, where="slam warmup")
     config = load_config(
         ref.config_name if ref.shipped_config else "",
@@ -228,6 +262,7 @@ def warmup(data_dir: Path, progress: bool = False) -> Warmup:
         wall_s=time.perf_counter() - start,
         kernels=compiled_kernels()[before:],
         background=sum(background.get("compiled", {}).values()),
+        bytecode=bytecode,
     )
 
 
