@@ -19,7 +19,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from slam.config import TextureConfig
@@ -232,14 +232,16 @@ def _line_of_sight(occ, occ_ox, occ_oy, occ_res, x0, y0, x1, y1):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def mark_swept(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy, occ_res,
                rotations, positions, camera, out):  # fmt: skip
     """Mark in ``out`` the floor cells whose centre one of the cameras sees (see
     :func:`slam.texture.evaluate.swept_cells`).
 
     ``rotations (F, 3, 3)`` (optical → world) and ``positions (F, 3)`` are the cameras; ``camera``
-    the :class:`CameraParameters`, as for :func:`accumulate_frame`.
+    the :class:`CameraParameters`, as for :func:`accumulate_frame`. Rows of the grid in parallel
+    (each writes only its own row; a cell is marked by whichever camera sees it first, so the
+    result does not depend on the thread count).
     """
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     numer, min_depth, max_depth = camera.depth_numerator, camera.min_depth, camera.max_depth
@@ -247,16 +249,26 @@ def mark_swept(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy,
     k_dd, c_j = camera.rgb_row_dd, camera.rgb_col_offset
     nrm, height, width = camera.rgb_norm, camera.height, camera.width
     gh, gw = floor_cells.shape[0], floor_cells.shape[1]
-    for f in range(rotations.shape[0]):
-        r = rotations[f]
-        px, py, pz = positions[f, 0], positions[f, 1], positions[f, 2]
-        x_lo = cell_index(px - max_depth, origin_x, resolution)
-        x_hi = cell_index(px + max_depth, origin_x, resolution)
-        y_lo = cell_index(py - max_depth, origin_y, resolution)
-        y_hi = cell_index(py + max_depth, origin_y, resolution)
-        for iy in range(max(y_lo, 0), min(y_hi + 1, gh)):
-            y = origin_y + (iy + 0.5) * resolution
-            for ix in range(max(x_lo, 0), min(x_hi + 1, gw)):
+    frames = rotations.shape[0]
+    x_lo = np.empty(frames, np.int64)
+    x_hi = np.empty(frames, np.int64)
+    y_lo = np.empty(frames, np.int64)
+    y_hi = np.empty(frames, np.int64)
+    for f in range(frames):
+        px, py = positions[f, 0], positions[f, 1]
+        x_lo[f] = max(cell_index(px - max_depth, origin_x, resolution), 0)
+        x_hi[f] = min(cell_index(px + max_depth, origin_x, resolution) + 1, gw)
+        y_lo[f] = max(cell_index(py - max_depth, origin_y, resolution), 0)
+        y_hi[f] = min(cell_index(py + max_depth, origin_y, resolution) + 1, gh)
+    for row in prange(gh):
+        iy = np.int64(row)
+        y = origin_y + (iy + 0.5) * resolution
+        for f in range(frames):
+            if iy < y_lo[f] or iy >= y_hi[f]:
+                continue
+            r = rotations[f]
+            px, py, pz = positions[f, 0], positions[f, 1], positions[f, 2]
+            for ix in range(x_lo[f], x_hi[f]):
                 if out[iy, ix] or not floor_cells[iy, ix]:
                     continue
                 x = origin_x + (ix + 0.5) * resolution
