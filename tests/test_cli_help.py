@@ -19,6 +19,8 @@ def _commands() -> dict[str, argparse.ArgumentParser]:
 def test_doc_description_takes_the_paragraphs_after_the_first() -> None:
     doc = "``slam x``: one line.\n\nSecond ``a``.\n\n* third\n"
     assert doc_description(doc) == "Second 'a'.\n\n* third\n"
+    roles = "One.\n\nSee :func:`slam.io.x.read` and :class:`~slam.Slam`."
+    assert doc_description(roles) == "See 'slam.io.x.read' and 'slam.Slam'."
     assert doc_description("only one line") is None
     assert doc_description(None) is None
 
@@ -31,6 +33,7 @@ def test_every_command_describes_itself_with_its_module_docstring() -> None:
         assert parser.description == doc_description(doc), name
         assert parser.description, name
         assert "``" not in parser.description, name
+        assert ":func:" not in parser.description and ":class:" not in parser.description, name
 
 
 def test_layout_keeps_line_breaks_and_default_rewraps() -> None:

@@ -8,6 +8,7 @@ the module owns). A command with sub-commands adds them to the group :func:`add_
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -19,12 +20,14 @@ if TYPE_CHECKING:
 
 
 def doc_description(doc: str | None) -> str | None:
-    """The paragraphs of the docstring ``doc`` after its first, with RST double backquotes shown
-    as plain quotes (``None`` when there is nothing after the first, or no docstring, as under
-    ``python -OO``)."""
+    """The paragraphs of the docstring ``doc`` after its first, as plain text: RST double
+    backquotes become plain quotes and a cross-reference role (``:func:`x```) its quoted target
+    (``None`` when there is nothing after the first, or no docstring, as under ``python -OO``)."""
     if doc is None or "\n\n" not in doc:
         return None
-    return doc.split("\n\n", 1)[1].replace("``", "'")
+    text = doc.split("\n\n", 1)[1]
+    text = re.sub(r":(?:func|class|meth|mod|data|attr):`~?([^`]+)`", r"'\1'", text)
+    return text.replace("``", "'")
 
 
 def add_command(
