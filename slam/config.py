@@ -91,6 +91,10 @@ class LidarConfig(Validated):
     """Laser heading relative to the robot heading (rad)."""
     fov_deg: float | None = bounded(None, gt=0.0, le=360.0)
     """Field of view (degrees) for logs whose lines carry no geometry (CARMEN FLASER)."""
+    beam_step_deg: float | None = bounded(None, gt=0.0, le=10.0)
+    """Angle between neighbouring beams (degrees) for logs whose lines carry no geometry (CARMEN
+    FLASER): the ``n`` beams are centred on straight ahead this far apart whatever ``n`` (e.g. 1°
+    for a SICK LMS logged with 180 or 181 readings); unset: ``fov_deg / (n − 1)``."""
     range_min: float | None = bounded(None, ge=0.0, lt=MAX_RANGE_M)
     """Shortest valid range (m); shorter readings are invalid beams."""
     range_max: float | None = bounded(None, gt=0.0, le=MAX_RANGE_M)

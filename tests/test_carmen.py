@@ -402,3 +402,18 @@ def test_fuzz_parses_or_raises_data_error(tmp_path, data, compress):
     assert scans.invalid_beams == int(np.count_nonzero(np.isnan(scans.ranges))) - int(
         np.count_nonzero(np.isnan(scans.angles)) if scans.angles.ndim == 2 else 0
     )
+
+
+def test_beam_step_spaces_flaser_beams_whatever_their_count(tmp_path):
+    """fr-clinic mixes 180- and 181-reading FLASER lines of one laser: with ``beam_step_deg``
+    both are centred on straight ahead 1° apart (the default spreads each over ``fov_deg``)."""
+    lines = [flaser([1.0] * 180, t=1.0), flaser([1.0] * 181, t=2.0)]
+    path = write(tmp_path, lines)
+    stepped = load_carmen(path, lidar=LidarConfig(beam_step_deg=1.0)).scans.angles
+    spread = load_carmen(path, lidar=LidarConfig()).scans.angles
+    np.testing.assert_allclose(np.diff(stepped[0, :180]), np.deg2rad(1.0), atol=1e-12)
+    np.testing.assert_allclose(np.diff(stepped[1]), np.deg2rad(1.0), atol=1e-12)
+    np.testing.assert_allclose(stepped[0, [0, 179]], np.deg2rad([-89.5, 89.5]), atol=1e-12)
+    np.testing.assert_allclose(stepped[1, [0, 180]], np.deg2rad([-90.0, 90.0]), atol=1e-12)
+    np.testing.assert_allclose(spread[0, [0, 179]], np.deg2rad([-90.0, 90.0]), atol=1e-12)
+    np.testing.assert_allclose(np.diff(spread[0, :180]), np.deg2rad(180 / 179), atol=1e-12)

@@ -11,7 +11,8 @@ Messages
 * ``ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp`` → :attr:`Log.odometry`.
 * ``FLASER n r_1 .. r_n x y theta odom_x odom_y odom_theta ipc_timestamp hostname
   logger_timestamp`` → :attr:`Log.scans`. The line carries no geometry: its ``n`` beams span
-  ``fov_deg`` (default 180°) centred on 0, step ``fov / (n − 1)``.
+  ``fov_deg`` (default 180°) centred on 0, step ``fov / (n − 1)``, or with ``beam_step_deg``
+  set are centred on 0 that far apart.
 * ``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
   n_remissions rem_1.. laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
   forward_safety_dist side_safety_dist turn_axis ipc_timestamp hostname logger_timestamp``
@@ -161,7 +162,8 @@ def load_carmen(
 ) -> Log:
     """Read a CARMEN log (plain text or gzip, detected by its magic bytes) into a :class:`Log`.
 
-    ``lidar`` supplies what FLASER lines do not carry: ``fov_deg`` (default 180),
+    ``lidar`` supplies what FLASER lines do not carry: ``fov_deg`` (default 180) or
+    ``beam_step_deg``,
     ``range_min`` (default :data:`DEFAULT_RANGE_MIN`), ``no_return`` (default
     :data:`DEFAULT_NO_RETURN`, or the declared ``max_range`` for ROBOTLASER1-only logs) and
     ``range_max`` (default ``no_return``). The laser offset in the robot frame is the median of
@@ -429,6 +431,8 @@ def _parse_flaser(path: Path, n: int, lines: _Lines, lidar: LidarConfig) -> _Sca
     # values columns: 0 n, 1..n ranges, n+1..n+6 poses, n+7 ipc, n+8 logger
     fov = np.deg2rad(lidar.fov_deg if lidar.fov_deg is not None else DEFAULT_FOV_DEG)
     step = fov / (n - 1) if n > 1 else 0.0
+    if lidar.beam_step_deg is not None:
+        step = np.deg2rad(lidar.beam_step_deg)
     angles = (np.arange(n) - (n - 1) / 2.0) * step
     return _ScanGroup(
         order=np.asarray(lines.lineno, dtype=np.int64),
