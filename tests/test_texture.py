@@ -301,6 +301,33 @@ def test_swept_cells_respect_depth_range_field_of_view_and_walls():
     assert (xs.max() + 1) * res == pytest.approx(5.0)  # up to the wall
 
 
+def test_swept_cells_do_not_depend_on_the_thread_count():
+    """Grid rows are marked in parallel (:func:`slam.texture.kernels.mark_swept`): one thread
+    and two give the same cells, for a camera turning along a path with a wall in view."""
+    import numba
+
+    floor_tex = np.zeros((400, 400, 3), np.uint8)
+    floor = np.ones((400, 400), bool)
+    occ = np.zeros((200, 200), np.uint8)
+    occ[:, int((5.0 + 1.0) / 0.05)] = 1
+    path = ((1.0, 2.0, 0.0), (1.5, 5.0, 1.2))
+    gt = _ground_truth(floor_tex, floor, occ, path=path)
+    shape, res, origin = (160, 160), 0.05, np.zeros(2)
+    _, floor_cells = TrueTexture(gt).on_grid(shape, res, origin)
+    config = TextureConfig(max_depth=6.0, camera_yaw=0.0)
+    frames = np.linspace(0.0, 1.0, 9)
+    before = numba.get_num_threads()
+    try:
+        swept = []
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            swept.append(swept_cells(gt, floor_cells, res, origin, frames, config))
+    finally:
+        numba.set_num_threads(before)
+    assert swept[0].sum() > 500
+    np.testing.assert_array_equal(swept[0], swept[1])
+
+
 def test_evaluate_texture_counts_error_and_coverage():
     tex = np.zeros((250, 250, 3), np.uint8)
     tex[..., 1] = 120
