@@ -26,8 +26,9 @@ from slam.eval.relations import match_times, relation_errors
 from slam.geometry import relative
 from slam.io.datadir import resolve_data_dir
 from slam.io.registry import get_dataset
-from slam.io.relations import read_relations
+from slam.io.relations import Relations, read_relations
 from slam.io.tum import read_tum
+from slam.trajectory import Trajectory
 
 
 def _median(values: np.ndarray, digits: int, scale: float = 1.0) -> float | None:
@@ -35,10 +36,54 @@ def _median(values: np.ndarray, digits: int, scale: float = 1.0) -> float | None
     return round(float(np.median(values)) * scale, digits) if values.size else None
 
 
-def _motions(trajectory, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+def _share(flags: np.ndarray) -> float | None:
+    """The share of true ``flags``, rounded; ``None`` when there are none."""
+    return round(float(flags.mean()), 4) if flags.size else None
+
+
+def _motions(trajectory: Trajectory, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
     i = match_times(trajectory.times, t1)
     j = match_times(trajectory.times, t2)
     return relative(trajectory.poses[i], trajectory.poses[j])
+
+
+def compare(
+    relations: Relations, runs: dict[str, Trajectory], span: float = 10.0, over: float = 0.2
+) -> dict:
+    """The figures of the module docstring for ``runs`` (``{"slam": Trajectory, "odometry":
+    Trajectory}``) against ``relations``, over the relations shorter than ``span`` seconds."""
+    errors = {name: relation_errors(t, relations) for name, t in runs.items()}
+    both = np.intersect1d(errors["slam"].matched_index, errors["odometry"].matched_index)
+    trans = {name: e.trans[np.searchsorted(e.matched_index, both)] for name, e in errors.items()}
+    t1, t2 = relations.t1[both], relations.t2[both]
+    short = (t2 - t1) < span
+    bad = short & (trans["slam"] > over)
+    motion = relations.motions[both]
+    apart = relative(_motions(runs["odometry"], t1, t2), _motions(runs["slam"], t1, t2))
+    apart_m = np.hypot(apart[:, 0], apart[:, 1])
+    half = over / 2
+    return {
+        "short_relations": int(short.sum()),
+        "span_s": span,
+        "over_m": over,
+        "slam_share_over": _share(trans["slam"][short] > over),
+        "odometry_share_over": _share(trans["odometry"][short] > over),
+        "slam_over_odometry_under_half": int((bad & (trans["odometry"] < half)).sum()),
+        "odometry_over_slam_under_half": int(
+            (short & (trans["odometry"] > over) & (trans["slam"] < half)).sum()
+        ),
+        "bad_slam_to_odometry_median_m": _median(apart_m[bad], 3),
+        "bad_slam_within_half_of_odometry": int((apart_m[bad] < half).sum()),
+        "good_slam_to_odometry_median_m": _median(apart_m[short & ~bad], 3),
+        "bad_relation_rotation_median_deg": _median(np.abs(motion[bad, 2]), 2, 180 / np.pi),
+        "good_relation_rotation_median_deg": _median(
+            np.abs(motion[short & ~bad, 2]), 2, 180 / np.pi
+        ),
+        "bad_relation_length_median_m": _median(np.hypot(motion[bad, 0], motion[bad, 1]), 2),
+        "good_relation_length_median_m": _median(
+            np.hypot(motion[short & ~bad, 0], motion[short & ~bad, 1]), 2
+        ),
+    }
 
 
 def main() -> int:
@@ -63,39 +108,7 @@ def main() -> int:
             print(f"{path}: expected a run folder's trajectory.tum", file=sys.stderr)
             return 2
         runs[name] = read_tum(path)
-    errors = {name: relation_errors(t, relations) for name, t in runs.items()}
-    both = np.intersect1d(errors["slam"].matched_index, errors["odometry"].matched_index)
-    trans = {name: e.trans[np.searchsorted(e.matched_index, both)] for name, e in errors.items()}
-    t1, t2 = relations.t1[both], relations.t2[both]
-    short = (t2 - t1) < args.span
-    bad = short & (trans["slam"] > args.over)
-    motion = relations.motions[both]
-    apart = relative(_motions(runs["odometry"], t1, t2), _motions(runs["slam"], t1, t2))
-    apart_m = np.hypot(apart[:, 0], apart[:, 1])
-    half = args.over / 2
-    report = {
-        "log": args.log,
-        "short_relations": int(short.sum()),
-        "span_s": args.span,
-        "over_m": args.over,
-        "slam_share_over": round(float((trans["slam"][short] > args.over).mean()), 4),
-        "odometry_share_over": round(float((trans["odometry"][short] > args.over).mean()), 4),
-        "slam_over_odometry_under_half": int((bad & (trans["odometry"] < half)).sum()),
-        "odometry_over_slam_under_half": int(
-            (short & (trans["odometry"] > args.over) & (trans["slam"] < half)).sum()
-        ),
-        "bad_slam_to_odometry_median_m": _median(apart_m[bad], 3),
-        "bad_slam_within_half_of_odometry": int((apart_m[bad] < half).sum()),
-        "good_slam_to_odometry_median_m": _median(apart_m[short & ~bad], 3),
-        "bad_relation_rotation_median_deg": _median(np.abs(motion[bad, 2]), 2, 180 / np.pi),
-        "good_relation_rotation_median_deg": _median(
-            np.abs(motion[short & ~bad, 2]), 2, 180 / np.pi
-        ),
-        "bad_relation_length_median_m": _median(np.hypot(motion[bad, 0], motion[bad, 1]), 2),
-        "good_relation_length_median_m": _median(
-            np.hypot(motion[short & ~bad, 0], motion[short & ~bad, 1]), 2
-        ),
-    }
+    report = {"log": args.log, **compare(relations, runs, args.span, args.over)}
     if args.json:
         print(json.dumps(report, indent=2))
     else:

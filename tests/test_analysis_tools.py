@@ -1,0 +1,54 @@
+"""The analysis scripts of docs/slam.md: ``tools/short_relations.py`` and
+``tools/beam_step_check.py``, on inputs whose answers are known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from tool_modules import load_tool
+
+from slam.io.relations import Relations
+from slam.trajectory import Trajectory
+
+
+def _straight(n: int) -> Trajectory:
+    times = np.arange(n, dtype=np.float64)
+    return Trajectory(times, np.c_[times, np.zeros(n), np.zeros(n)])
+
+
+def test_short_relations_count_where_slam_is_worse_than_dead_reckoning():
+    tool = load_tool("short_relations")
+    n = 40
+    truth = _straight(n)
+    t1 = np.arange(n - 2, dtype=np.float64)
+    relations = Relations(t1, t1 + 2.0, np.full(n - 2, 2.0), np.zeros(n - 2), np.zeros(n - 2))
+    slam = Trajectory(truth.times, truth.poses.copy())
+    slam.poses[10, 1] = 0.5  # one pose 0.5 m aside: relations 8->10 and 10->12 are 0.5 m off
+    odometry = Trajectory(truth.times, truth.poses.copy())
+    odometry.poses[30:, 0] += 0.3  # a 0.3 m slip before pose 30: relations 28->30, 29->31
+    figures = tool.compare(relations, {"slam": slam, "odometry": odometry}, span=5.0, over=0.2)
+    assert figures["short_relations"] == n - 2
+    assert figures["slam_share_over"] == pytest.approx(2 / (n - 2), abs=1e-4)
+    assert figures["odometry_share_over"] == pytest.approx(2 / (n - 2), abs=1e-4)
+    assert figures["slam_over_odometry_under_half"] == 2
+    assert figures["odometry_over_slam_under_half"] == 2
+    assert figures["bad_slam_to_odometry_median_m"] == pytest.approx(0.5, abs=1e-3)
+    assert figures["bad_relation_length_median_m"] == pytest.approx(2.0)
+    none = tool.compare(relations, {"slam": slam, "odometry": odometry}, span=1.0)
+    assert none["short_relations"] == 0 and none["slam_share_over"] is None
+
+
+def test_icp_residual_is_least_for_the_true_beam_geometry():
+    tool = load_tool("beam_step_check")
+    # A room 6 m wide seen from its middle by 181 beams 1° apart: walls at y = ±3 and x = 4.
+    angles = tool.ANGLES_181
+    with np.errstate(divide="ignore"):
+        to_side = np.where(np.sin(angles) != 0, 3.0 / np.abs(np.sin(angles)), np.inf)
+        ahead = np.where(np.cos(angles) > 0, 4.0 / np.cos(angles), np.inf)
+    ranges = np.minimum(to_side, ahead)
+    dst = tool._points(ranges, angles, 15.0)
+    same = tool.icp_residual(dst, dst, np.zeros(3))
+    assert same == pytest.approx(0.0, abs=1e-9)
+    # the same ranges read at angles stretched by 0.56 % (the 180/179 spread) fit worse
+    stretched = tool._points(ranges, angles * (180 / 179 / 1.0), 15.0)
+    assert tool.icp_residual(stretched, dst, np.zeros(3)) > 0.005
