@@ -140,6 +140,16 @@ def test_a_folder_not_made_by_slam_sweep_is_left_alone(small, tmp_path, capsys):
 # --- resume, crash ----------------------------------------------------------------------------
 
 
+def _signal_state(pid: int) -> str:
+    """The signal lines and thread count of ``/proc/PID/status`` (Linux), or why there are none."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError as exc:
+        return f"no /proc status ({exc.strerror})"
+    keep = ("Sig", "ShdPnd", "Threads", "State")
+    return "; ".join(line for line in status.splitlines() if line.startswith(keep))
+
+
 def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, tmp_path):
     """Ctrl-C during a 4-cell sweep (one worker), sent when the first cell has finished: exit
     130, no partial folder left, the finished cells in results.json; the same command again runs
@@ -155,8 +165,12 @@ def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, 
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
+    time.sleep(0.3)
+    state = _signal_state(proc.pid)  # for the message below, should the signal be lost
     stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, (stdout, stderr)
+    assert proc.returncode == 130, (
+        f"exit {proc.returncode}; 0.3 s after SIGINT: {state}\nstdout:\n{stdout}\nstderr:\n{stderr}"
+    )
     assert "rerun the same command to finish them" in stderr
     done = {c for c, r in results(out).items() if r["status"] == "ok"}
     assert 1 <= len(done) < 4, (stdout, stderr)
