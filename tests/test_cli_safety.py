@@ -710,3 +710,35 @@ def test_file_outputs_never_overwrite_their_input_or_a_folder(data_dir, tmp_path
     assert main(["grid", "run", "tutorial-1d", "--record", str(folder)]) == 2
     assert "expected a file name, found a folder" in one_line(capsys.readouterr().err)
     assert folder.is_dir() and list(folder.iterdir()) == []
+
+
+def test_a_signal_while_the_partial_folder_is_made_leaves_nothing(tmp_path, monkeypatch):
+    """SIGTERM/Ctrl-C can land between the partial folder's ``mkdir`` and its owner record (seen
+    once in the SIGTERM test above: a ``.X.<rand>.partial`` holding an empty ``.slam-partial``,
+    which no later run may delete): the folder and the record go together."""
+    import slam.io.atomic as atomic
+    import slam.io.runfolder as runfolder
+
+    def cut_short(folder, target):
+        (Path(folder) / runfolder.OWNER_FILE).write_bytes(b"")  # created, not yet written
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runfolder, "write_owner", cut_short)
+    with pytest.raises(KeyboardInterrupt):
+        runfolder.make_partial(tmp_path, "a")
+    assert list(tmp_path.iterdir()) == []
+
+    monkeypatch.undo()
+    made = []
+
+    def interrupted(parent, target):  # Ctrl-C arrives right after the folder is complete
+        made.append(real(parent, target))
+        os.kill(os.getpid(), signal.SIGINT)
+        return made[-1]
+
+    real = atomic.make_partial
+    monkeypatch.setattr(atomic, "make_partial", interrupted)
+    with pytest.raises(KeyboardInterrupt), atomic.atomic_dir(tmp_path / "runs" / "b"):
+        raise AssertionError("the block must not start: the interrupt comes first")
+    assert made and not made[0].exists()
+    assert list((tmp_path / "runs").iterdir()) == []

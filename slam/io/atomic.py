@@ -471,8 +471,10 @@ def atomic_dir(
             f"{record.get('started', '?')}) is writing this folder; wait for it to finish or "
             f"choose another {option}"
         )
-    staging = _Staging(make_partial(parent, path.name))
+    staging: _Staging | None = None
     try:
+        with _signals_deferred():  # no signal between the folder and the cleanup that owns it
+            staging = _Staging(make_partial(parent, path.name))
         yield staging.path
         write_marker(staging.path, plan.kind)
         if plan.existing == "own":
@@ -483,8 +485,8 @@ def atomic_dir(
             os.unlink(path / OWNER_FILE)
     except BaseException as exc:
         with _signals_deferred():
-            if staging.ours:
+            if staging is not None and staging.ours:
                 remove_owned_tree(staging.path)
-        if _about_the_output(exc, staging.path):
+        if staging is not None and _about_the_output(exc, staging.path):
             raise OSError(exc.errno, f"{exc.strerror}; nothing was written", str(path)) from None
         raise

@@ -221,6 +221,8 @@ def make_partial(parent: Path, target: str) -> Path:
         try:
             write_owner(folder, target)
         except BaseException:
+            with contextlib.suppress(OSError):  # an owner record cut short: not ours to read
+                os.unlink(folder / OWNER_FILE)
             with contextlib.suppress(OSError):
                 os.rmdir(folder)
             raise
