@@ -200,34 +200,42 @@ class Warmup:
     """Source files byte-compiled (:func:`compile_sources`; 0 when all were current)."""
 
 
-def compile_sources() -> int:
-    """Byte-compile slam's own sources and the installed packages of the environment it runs in
-    (a virtual environment's ``site-packages``; nothing outside one) into their ``__pycache__``
-    folders; return how many files needed it. Python writes ``.pyc`` files at import time only
-    where it may (``PYTHONDONTWRITEBYTECODE`` unset, a writable folder): else every run compiles
-    the ~1,500 modules it imports (numba, rerun, ...) again, ~3 s of each ``slam run`` on the
-    benchmark machine. Files whose ``.pyc`` is current are left as they are."""
-    import compileall
-    import importlib.util
+def environment_sources() -> list[Path]:
+    """The folders :func:`compile_sources` byte-compiles by default: slam's own package and, in a
+    virtual environment, its ``site-packages`` (nothing outside one)."""
     import sys
     import sysconfig
 
     folders = [Path(__file__).resolve().parent]
-    if sys.prefix != sys.base_prefix:  # only a virtual environment's own packages
+    if sys.prefix != sys.base_prefix:
         folders += sorted({Path(sysconfig.get_paths()[k]) for k in ("purelib", "platlib")})
-    stale = []
-    for folder in folders:
-        if not folder.is_dir() or not os.access(folder, os.W_OK):
-            continue
+    return folders
+
+
+def compile_sources(folders: list[Path] | None = None) -> int:
+    """Byte-compile the ``.py`` files under ``folders`` (default :func:`environment_sources`)
+    into their ``__pycache__`` folders; return how many needed it. Python writes ``.pyc`` files
+    at import time only where it may (``PYTHONDONTWRITEBYTECODE`` unset, a writable folder):
+    else every run compiles the ~1,500 modules it imports (numba, rerun, ...) again, ~3 s of
+    each ``slam run`` on the benchmark machine. Files whose ``.pyc`` is current are left as they
+    are; a folder this process may not write is skipped."""
+    import compileall
+    import importlib.util
+
+    writable = [
+        f for f in (environment_sources() if folders is None else folders)
+        if f.is_dir() and os.access(f, os.W_OK)
+    ]  # fmt: skip
+    stale = 0
+    for folder in writable:
         for source in folder.rglob("*.py"):
             cached = Path(importlib.util.cache_from_source(str(source)))
             if not cached.is_file() or cached.stat().st_mtime < source.stat().st_mtime:
-                stale.append(source)
+                stale += 1
     if stale:
-        for folder in folders:  # compileall's own mtime check skips the current files
-            if folder.is_dir() and os.access(folder, os.W_OK):
-                compileall.compile_dir(folder, quiet=2, workers=0)
-    return len(stale)
+        for folder in writable:  # compileall's own check skips the current files
+            compileall.compile_dir(folder, quiet=2, workers=0)
+    return stale
 
 
 def warmup(data_dir: Path, progress: bool = False) -> Warmup:

@@ -417,3 +417,14 @@ def test_beam_step_spaces_flaser_beams_whatever_their_count(tmp_path):
     np.testing.assert_allclose(stepped[1, [0, 180]], np.deg2rad([-90.0, 90.0]), atol=1e-12)
     np.testing.assert_allclose(spread[0, [0, 179]], np.deg2rad([-90.0, 90.0]), atol=1e-12)
     np.testing.assert_allclose(np.diff(spread[0, :180]), np.deg2rad(180 / 179), atol=1e-12)
+
+
+def test_a_beam_step_beyond_a_full_turn_is_one_clear_error(tmp_path):
+    path = write(tmp_path, [flaser([1.0] * 181, t=1.0)])
+    with pytest.raises(
+        ConfigError, match=r"log\.clf: lidar\.beam_step_deg: expected at most 2° .* 181 beams"
+    ):
+        load_carmen(path, lidar=LidarConfig(beam_step_deg=2.5))
+    assert load_carmen(path, lidar=LidarConfig(beam_step_deg=2.0)).scans.angles[
+        -1
+    ] == pytest.approx(np.pi)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from numba import njit
 
@@ -91,3 +93,33 @@ def test_the_compile_report_is_written_at_exit(tmp_path) -> None:
     data = json.loads(report.read_text())
     assert data["compile_cpu_s"] > 0.0 and data["compile_s"] >= data["compile_cpu_s"] * 0.5
     assert len(data["outermost"]) == 1 and data["kernels_compiled"] >= 1
+
+
+def test_compile_sources_writes_missing_bytecode_once_and_skips_what_it_may_not_write(tmp_path):
+    """``slam warmup``'s first step: a stale or missing ``.pyc`` is written, a current one is left
+    alone (0 the second time), a folder this process may not write is skipped."""
+    import importlib.util
+    import os
+
+    from slam.jit import compile_sources
+
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "a.py").write_text("X = 1\n")
+    (package / "b.py").write_text("Y = 2\n")
+    assert compile_sources([package]) == 2
+    cached = Path(importlib.util.cache_from_source(str(package / "a.py")))
+    assert cached.is_file()
+    stamp = cached.stat().st_mtime_ns
+    assert compile_sources([package]) == 0
+    assert cached.stat().st_mtime_ns == stamp  # current: not rewritten
+    assert compile_sources([tmp_path / "absent"]) == 0
+    if os.geteuid() != 0:  # root may write anywhere
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        (locked / "c.py").write_text("Z = 3\n")
+        locked.chmod(0o555)
+        try:
+            assert compile_sources([locked]) == 0
+        finally:
+            locked.chmod(0o755)

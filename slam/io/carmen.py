@@ -432,7 +432,13 @@ def _parse_flaser(path: Path, n: int, lines: _Lines, lidar: LidarConfig) -> _Sca
     fov = np.deg2rad(lidar.fov_deg if lidar.fov_deg is not None else DEFAULT_FOV_DEG)
     step = fov / (n - 1) if n > 1 else 0.0
     if lidar.beam_step_deg is not None:
-        step = np.deg2rad(lidar.beam_step_deg)
+        if lidar.beam_step_deg * (n - 1) > 360.0:
+            raise ConfigError(
+                f"{path}: lidar.beam_step_deg: expected at most {360.0 / max(n - 1, 1):g}° for "
+                f"its FLASER lines of {n} beams (a span of at most 360°), found "
+                f"{lidar.beam_step_deg:g}° ({lidar.beam_step_deg * (n - 1):g}° in all)"
+            )
+        step = np.deg2rad(lidar.beam_step_deg)  # fov_deg is not used then
     angles = (np.arange(n) - (n - 1) / 2.0) * step
     return _ScanGroup(
         order=np.asarray(lines.lineno, dtype=np.int64),
