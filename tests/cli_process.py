@@ -7,10 +7,20 @@ Not a test module (no ``test_`` prefix); the tests import it (pytest puts ``test
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def sigint_as_a_terminal_gives_it() -> None:
+    """``preexec_fn`` of a CLI subprocess a test interrupts with SIGINT: the default disposition,
+    so that Python turns the signal into ``KeyboardInterrupt`` as in a terminal. A shell without
+    job control starts its background jobs with SIGINT and SIGQUIT ignored (POSIX), and a process
+    that inherits an ignored SIGINT keeps ignoring it (Python too): a suite started that way (a
+    CI runner's ``cmd &``, ``nohup``) would otherwise send Ctrl-C into the void."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def cli_env(**extra: str) -> dict[str, str]:

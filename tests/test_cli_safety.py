@@ -712,7 +712,7 @@ def test_file_outputs_never_overwrite_their_input_or_a_folder(data_dir, tmp_path
     assert folder.is_dir() and list(folder.iterdir()) == []
 
 
-def test_a_signal_while_the_partial_folder_is_made_leaves_nothing(tmp_path, monkeypatch):
+def test_a_signal_while_the_partial_folder_is_made_leaves_nothing(tmp_path, monkeypatch, request):
     """SIGTERM/Ctrl-C can land between the partial folder's ``mkdir`` and its owner record (seen
     once in the SIGTERM test above: a ``.X.<rand>.partial`` holding an empty ``.slam-partial``,
     which no later run may delete): the folder and the record go together."""
@@ -738,6 +738,10 @@ def test_a_signal_while_the_partial_folder_is_made_leaves_nothing(tmp_path, monk
 
     real = atomic.make_partial
     monkeypatch.setattr(atomic, "make_partial", interrupted)
+    # Python's own handler, as in a terminal (a suite started as a background job of a shell
+    # without job control inherits SIGINT ignored: cli_process.sigint_as_a_terminal_gives_it)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    request.addfinalizer(lambda: signal.signal(signal.SIGINT, previous))
     with pytest.raises(KeyboardInterrupt), atomic.atomic_dir(tmp_path / "runs" / "b"):
         raise AssertionError("the block must not start: the interrupt comes first")
     assert made and not made[0].exists()

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 from cli_process import cli_env as env
-from cli_process import slam_cmd
+from cli_process import sigint_as_a_terminal_gives_it, slam_cmd
 
 from slam.cli import main
 from slam.errors import UsageError
@@ -158,8 +158,9 @@ def test_sigint_then_rerun_finishes_only_the_missing_cells(small, local_hashes, 
     cmd = slam_cmd("sweep", "--logs", str(small), "--seeds", "0-3", "--workers", "1", "--out",
                    str(out), *RUN_OPTIONS)  # fmt: skip
     proc = subprocess.Popen(
-        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
+        cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=sigint_as_a_terminal_gives_it,
+    )  # fmt: skip
     deadline = time.monotonic() + 240
     while not list(out.glob("*/eval.json")) and time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
