@@ -16,14 +16,16 @@ one :class:`CameraParameters` NamedTuple. Kernels allocate nothing and draw noth
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from slam.config import TextureConfig
 from slam.kernels.cells import cell_index
+from slam.kernels.threads import in_threads
 from slam.kinect import KinectModel
 
 F64 = NDArray[np.float64]
@@ -232,17 +234,62 @@ def _line_of_sight(occ, occ_ox, occ_oy, occ_res, x0, y0, x1, y1):
     return True
 
 
-@njit(cache=True, parallel=True)
-def mark_swept(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy, occ_res,
-               rotations, positions, camera, out):  # fmt: skip
+def mark_swept(
+    floor_cells: np.ndarray,
+    origin_x: float,
+    origin_y: float,
+    resolution: float,
+    occ: np.ndarray,
+    occ_ox: float,
+    occ_oy: float,
+    occ_res: float,
+    rotations: np.ndarray,
+    positions: np.ndarray,
+    camera: CameraParameters,
+    out: np.ndarray,
+) -> None:
     """Mark in ``out`` the floor cells whose centre one of the cameras sees (see
     :func:`slam.texture.evaluate.swept_cells`).
 
     ``rotations (F, 3, 3)`` (optical → world) and ``positions (F, 3)`` are the cameras; ``camera``
-    the :class:`CameraParameters`, as for :func:`accumulate_frame`. Rows of the grid in parallel
-    (each writes only its own row; a cell is marked by whichever camera sees it first, so the
-    result does not depend on the thread count).
+    the :class:`CameraParameters`, as for :func:`accumulate_frame`. Bands of :data:`SWEPT_ROWS`
+    rows of the grid on a few threads (:func:`~slam.kernels.threads.in_threads`: a serial
+    kernel compiles in a fraction of a ``parallel=True`` one's time); each band writes only its
+    own rows, and a cell is marked by whichever camera sees it first, so the result does not
+    depend on the thread count.
     """
+    in_threads(
+        [
+            partial(
+                _mark_swept_rows,
+                floor_cells,
+                origin_x,
+                origin_y,
+                resolution,
+                occ,
+                occ_ox,
+                occ_oy,
+                occ_res,
+                rotations,
+                positions,
+                camera,
+                out,
+                r,
+                min(r + SWEPT_ROWS, floor_cells.shape[0]),
+            )
+            for r in range(0, floor_cells.shape[0], SWEPT_ROWS)
+        ]
+    )
+
+
+SWEPT_ROWS = 32
+"""Grid rows per call of :func:`_mark_swept_rows` (many bands: the threads share the load)."""
+
+
+@njit(cache=True, nogil=True)
+def _mark_swept_rows(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy, occ_res,
+                     rotations, positions, camera, out, row0, row1):  # fmt: skip
+    """:func:`mark_swept` for the grid rows ``row0 .. row1 − 1``."""
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     numer, min_depth, max_depth = camera.depth_numerator, camera.min_depth, camera.max_depth
     g, c_i = camera.rgb_gain, camera.rgb_row_offset
@@ -260,8 +307,7 @@ def mark_swept(floor_cells, origin_x, origin_y, resolution, occ, occ_ox, occ_oy,
         x_hi[f] = min(cell_index(px + max_depth, origin_x, resolution) + 1, gw)
         y_lo[f] = max(cell_index(py - max_depth, origin_y, resolution), 0)
         y_hi[f] = min(cell_index(py + max_depth, origin_y, resolution) + 1, gh)
-    for row in prange(gh):
-        iy = np.int64(row)
+    for iy in range(row0, row1):
         y = origin_y + (iy + 0.5) * resolution
         for f in range(frames):
             if iy < y_lo[f] or iy >= y_hi[f]:

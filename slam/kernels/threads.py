@@ -1,0 +1,36 @@
+"""Serial ``nogil`` kernels run side by side on Python threads: :func:`in_threads`.
+
+numba's ``parallel=True`` compiles a loop into a parallel gufunc, which costs seconds on a fresh
+cache (the parfors passes and the gufunc's own compilation). For kernels that run once per run
+(the map-quality score, the texture's coverage), a serial kernel declared ``nogil`` called on a
+few Python threads is as fast and compiles in a fraction of the time. The caller fixes which
+call computes what, so results never depend on the number of threads.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numba
+
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def threads() -> int:
+    """The threads to use: numba's (``NUMBA_NUM_THREADS``, or :func:`numba.set_num_threads`)."""
+    return max(1, int(numba.get_num_threads()))
+
+
+def in_threads(calls: list[Callable[[], Any]]) -> list[Any]:
+    """The results of ``calls``, in order, computed on up to :func:`threads` threads (in this
+    thread when there is one call or one thread)."""
+    if len(calls) <= 1 or threads() == 1:
+        return [call() for call in calls]
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="slam-kernels"))
+    if _POOL[0]._max_workers < threads():  # numba's count was raised since: a larger pool
+        _POOL[0].shutdown(wait=False)
+        _POOL[0] = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="slam-kernels")
+    return list(_POOL[0].map(lambda call: call(), calls))
