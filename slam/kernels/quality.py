@@ -16,10 +16,14 @@ few pages; and a building's corridors fill a small part of its bounding box, so 
 fraction of a full grid. :func:`touched_tiles` finds the tiles to allocate, :func:`to_rows`
 returns plain ``(H, W)`` grids, :func:`map_shades` a one-byte picture.
 
-**Threads.** :func:`touched_tiles` and :func:`count_rays` run serial ``nogil`` kernels on a few
-threads (:func:`~slam.kernels.threads.in_threads`): as ``parallel=True`` kernels they took 5.9 s
-to compile on a fresh cache, serially 1.7 s, for the same speed. :func:`classify_beams` stays a
-``parallel=True`` kernel (its docstring says why).
+**Threads.** :func:`touched_tiles`, :func:`count_rays` and :func:`classify_beams` run serial
+``nogil`` kernels on a few threads (:func:`~slam.kernels.threads.in_threads`): as
+``parallel=True`` kernels the first two took 5.9 s to compile on a fresh cache, serially 1.7 s,
+for the same speed. The helpers called per beam take arrays and are compiled without numba's
+reference counting (``_nrt=False``: they allocate nothing): with it, every call increments and
+decrements the count of each array it is passed, atomically, and that made the serial
+:func:`classify_beams` 7 times slower (3.9 s against 0.55 s on the demo's 4,960 scans; a
+``parallel=True`` kernel escapes it, as numba passes its loop body arrays without counts).
 
 Rays are given in the robot frame, one row per scan: ``ex[k, j], ey[k, j]`` is where ray ``j``
 of scan ``k`` ends, ``kind[k, j]`` is :data:`NO_RAY`, :data:`HIT` (an obstacle return) or
@@ -34,7 +38,7 @@ from functools import partial
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from slam.kernels.cells import cell_index
 from slam.kernels.grid import line_start, line_step
@@ -155,14 +159,14 @@ def _add(table, pool, x, y, layer, value):
     pool[table[y >> SHIFT, x >> SHIFT], y & (TILE - 1), x & (TILE - 1), layer] += value
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _world(poses, k, c, s, x, y):
     """The point ``(x, y)`` of scan ``k``'s robot frame in the world frame (``c``, ``s``: cosine
     and sine of its heading)."""
     return poses[k, 0] + c * x - s * y, poses[k, 1] + s * x + c * y
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _laser(poses, k, lx, ly):
     """``(c, s, sx, sy)``: cosine and sine of scan ``k``'s heading and the world position of the
     laser (``(lx, ly)`` in the robot frame)."""
@@ -177,14 +181,13 @@ BLOCK_SCANS = 128
 covering them, by one thread; see :func:`count_rays`)."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _block_box(rays, k0, k1, ox, oy, res, w, h):
     """``(x0, y0, x1, y1)``: the cells (half-open, clipped to the ``w × h`` grid) holding every
     laser position and ray end of scans ``k0 .. k1 − 1``, hence every cell their rays cross."""
     poses, lx, ly, ex, ey, kind = rays
     bx0, by0, bx1, by1 = w, h, 0, 0
-    for p in prange(k1 - k0):
-        k = k0 + np.int64(p)  # the prange index is another integer type: one callee signature
+    for k in range(k0, k1):
         c, s, sx, sy = _laser(poses, k, lx, ly)
         for j in range(-1, kind.shape[1]):
             if j >= 0 and kind[k, j] == NO_RAY:
@@ -203,7 +206,7 @@ def _block_box(rays, k0, k1, ox, oy, res, w, h):
     return bx0, by0, max(bx1, bx0), max(by1, by0)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _walk_scan(rays, k, ox, oy, res, w, h, patch, px0, py0, mask):
     """Walk the rays of scan ``k`` cell by cell (Bresenham) over the ``w × h`` grid: every cell a
     ray passes through gets a miss (end cell excluded), the end cell a hit for a :data:`HIT` ray
@@ -327,25 +330,25 @@ def _add_patch(table, pool, patch, x0, y0, sign):
                     _add(table, pool, x0 + xx, y0 + yy, layer, sign * v)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _occupied(table, pool, x, y, l_hit, l_miss, occupied_above):
     n_hit = _hits(table, pool, x, y)
     return n_hit > 0 and n_hit * l_hit + _misses(table, pool, x, y) * l_miss > occupied_above
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _solid(table, pool, x, y):
     n_hit = _hits(table, pool, x, y)
     return n_hit > 0 and n_hit >= _misses(table, pool, x, y)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _free(table, pool, x, y, l_hit, l_miss, min_free_rays):
     n_miss = _misses(table, pool, x, y)
     return n_miss >= min_free_rays and _hits(table, pool, x, y) * l_hit + n_miss * l_miss < 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _near_surface(table, pool, x, y, disc, w, h, l_hit, l_miss, occupied_above):
     for d in range(disc.shape[0]):
         cx = x + disc[d, 0]
@@ -359,7 +362,7 @@ def _near_surface(table, pool, x, y, disc, w, h, l_hit, l_miss, occupied_above):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _near_hit(table, pool, x, y, disc, w, h):
     for d in range(disc.shape[0]):
         cx = x + disc[d, 0]
@@ -369,7 +372,7 @@ def _near_hit(table, pool, x, y, disc, w, h):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _incidence_sin(poses, ex, ey, kind, k, j, sx, sy, wx, wy, c, s, gap, relative_gap):
     """|sin| of the angle between beam ``j`` and the surface the scan's neighbouring returns
     trace (1: the beam meets it head on, 0: it grazes it); −1 when no neighbour is close."""
@@ -399,7 +402,7 @@ def _incidence_sin(poses, ex, ey, kind, k, j, sx, sy, wx, wy, c, s, gap, relativ
     return abs(ux * ty - uy * tx) / norm
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
     """Distance along the ray from cell ``(x0, y0)`` to cell ``(x1, y1)`` (``r`` metres long) of
     the first solid cell it crosses (Bresenham) before ``stop`` metres, or −1. Solid: at least
@@ -418,7 +421,6 @@ def _through(table, pool, x0, y0, x1, y1, r, stop, w, h):
     return -1.0
 
 
-@njit(cache=True, parallel=True)
 def classify_beams(
     counts: CountMap,
     rays: ScanRays,
@@ -454,13 +456,34 @@ def classify_beams(
     A cell is occupied when it has hits and ``hits·l_hit + misses·l_miss > occupied_above``,
     solid when it has hits and ``hits ≥ misses``, free when it has at least ``min_free_rays``
     misses and that sum is negative. Beams that are not
-    returns get :data:`UNCHECKED`. The thresholds are the fields of ``judging``. Parallel over
-    the scans (each writes only its own rows; the counts are only read), so the verdicts do not
-    depend on the number of threads. Long because the four tests share the beam's geometry.
-
-    ``parallel=True`` here, not :func:`~slam.kernels.threads.in_threads`: compiled serially,
-    this loop ran 2.6 times slower on one thread (4.0 s against 1.5 s on the demo's 4,960 scans).
+    returns get :data:`UNCHECKED`. The thresholds are the fields of ``judging``. Chunks of scans
+    on a few threads (:func:`~slam.kernels.threads.in_threads`; each writes only its own rows,
+    the counts are only read), so the verdicts do not depend on the number of threads.
     """
+    n = k1 - k0
+    chunks = max(1, min(threads(), n))
+    in_threads(
+        [
+            partial(
+                _classify,
+                counts,
+                rays,
+                k0 + n * c // chunks,
+                k0 + n * (c + 1) // chunks,
+                disc,
+                judging,
+                verdict,
+                offset,
+            )
+            for c in range(chunks)
+        ]
+    )
+
+
+@njit(cache=True, nogil=True)
+def _classify(counts, rays, k0, k1, disc, judging, verdict, offset):
+    """:func:`classify_beams` for scans ``k0 .. k1 − 1``. Long because the four tests share the
+    beam's geometry."""
     table, pool, ox, oy, res = counts
     poses, lx, ly, ex, ey, kind = rays
     tolerance, l_hit, l_miss, occupied_above, min_free_rays = judging[:5]
@@ -468,8 +491,7 @@ def classify_beams(
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
     nb = kind.shape[1]
-    for p in prange(k1 - k0):
-        k = k0 + np.int64(p)  # the prange index is another integer type: one callee signature
+    for k in range(k0, k1):
         c, s, sx, sy = _laser(poses, k, lx, ly)
         x0 = cell_index(sx, ox, res)
         y0 = cell_index(sy, oy, res)
