@@ -82,15 +82,19 @@ def max_pyramid(grid: np.ndarray, levels: int) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _score(level: np.ndarray, bx: np.ndarray, by: np.ndarray, dx: int, dy: int) -> float:
-    h, w = level.shape
+def _score(pyramid: np.ndarray, lev: int, bxs: np.ndarray, bys: np.ndarray, a: int, dx: int,
+           dy: int) -> float:  # fmt: skip
+    """Mean of level ``lev`` at the points of rotation ``a`` shifted by ``(dx, dy)`` cells (the
+    arrays indexed whole: no views made per call)."""
+    h, w = pyramid.shape[1], pyramid.shape[2]
+    n = bxs.shape[1]
     total = 0.0
-    for k in range(bx.size):
-        ix = bx[k] + dx
-        iy = by[k] + dy
+    for k in range(n):
+        ix = bxs[a, k] + dx
+        iy = bys[a, k] + dy
         if ix >= 0 and iy >= 0 and ix < w and iy < h:
-            total += level[iy, ix]
-    return total / bx.size
+            total += pyramid[lev, iy, ix]
+    return total / n
 
 
 @njit(cache=True)
@@ -146,7 +150,7 @@ def bnb_search(
                 dx = -wc + i * step
                 dy = -wc + j * step
                 ca[m], cxs[m], cys[m] = a, dx, dy
-                scores[m] = _score(pyramid[top], bxs[a], bys[a], dx, dy)
+                scores[m] = _score(pyramid, top, bxs, bys, a, dx, dy)
                 m += 1
     order = np.argsort(scores)  # ascending: the best is pushed last, popped first
     sp = 0
@@ -160,6 +164,7 @@ def bnb_search(
     ch_s = np.empty(4)
     ch_x = np.empty(4, dtype=np.int64)
     ch_y = np.empty(4, dtype=np.int64)
+    ch_i = np.empty(4, dtype=np.int64)
     while sp > 0:
         sp -= 1
         a, x0, y0, h, sc = st_a[sp], st_x[sp], st_y[sp], st_h[sp], st_s[sp]
@@ -177,11 +182,16 @@ def bnb_search(
                 if x1 > wc or y1 > wc:
                     continue
                 ch_x[nc], ch_y[nc] = x1, y1
-                ch_s[nc] = _score(pyramid[h - 1], bxs[a], bys[a], x1, y1)
+                ch_s[nc] = _score(pyramid, h - 1, bxs, bys, a, x1, y1)
                 nc += 1
-        idx = np.argsort(ch_s[:nc])
+        for q in range(nc):  # ascending by score: an insertion sort of ≤ 4, no allocation
+            k = q
+            while k > 0 and ch_s[ch_i[k - 1]] > ch_s[q]:
+                ch_i[k] = ch_i[k - 1]
+                k -= 1
+            ch_i[k] = q
         for q in range(nc):
-            k = idx[q]
+            k = ch_i[q]
             if ch_s[k] > best:
                 st_a[sp], st_x[sp], st_y[sp], st_h[sp], st_s[sp] = (
                     a,

@@ -263,7 +263,7 @@ def normal_equations(
     return accumulate(geo, cost_row, weight_row, step_inv, h, g)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def beam_geometry(
     geo: np.ndarray,
     view: FieldView,
@@ -301,7 +301,7 @@ def beam_geometry(
             geo[j, 3] = -gx * ry + gy * rx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def accumulate(
     geo: np.ndarray,
     cost_row: np.ndarray,
@@ -553,7 +553,7 @@ def select_new_hits(
         _select_particle(pool, poses, np.int64(p), hx, hy, skip_below, keep)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _select_particle(
     pool: TilePool,
     poses: np.ndarray,
@@ -617,7 +617,7 @@ def claim_tiles(
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _claim_particle(
     pool: TilePool,
     poses: np.ndarray,
@@ -666,7 +666,7 @@ def _claim_particle(
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _fill_tile(dist: np.ndarray, surface: np.ndarray, tile: int, dmax: float) -> None:
     """Make ``tile`` an empty tile: distance ``dmax``, surface unknown (NaN).
 
@@ -679,7 +679,7 @@ def _fill_tile(dist: np.ndarray, surface: np.ndarray, tile: int, dmax: float) ->
             surface[tile, r, c] = np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int) -> None:
     """Copy tile ``src`` (both layers) into tile ``dst``."""
     for r in range(dist.shape[1]):
@@ -707,7 +707,7 @@ def splat_hits(
         _splat_particle(pool, poses, np.int64(p), hits, keep, signed)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _splat_particle(
     pool: TilePool, poses: np.ndarray, p: int, hits: np.ndarray, keep: np.ndarray, signed: bool
 ) -> None:

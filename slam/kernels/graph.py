@@ -79,7 +79,9 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
     return total
 
 
-@njit(cache=True)
+@njit(
+    cache=True, _nrt=False
+)  # allocates nothing: no reference counts per call (kernels/quality.py)
 def scan_cost(
     view: FieldView,
     x: float,

@@ -65,7 +65,7 @@ def bresenham(x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _add_clamped(grid, ix, iy, value, lo, hi):
     v = grid[iy, ix] + value
     if v < lo:

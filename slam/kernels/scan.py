@@ -8,7 +8,7 @@ from numba import njit, prange
 from slam.kernels.cells import cell_index
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def correlation(
     occupied: np.ndarray,
     ox: float,

@@ -327,7 +327,7 @@ def distance_gradient(view: DistanceView, x: float, y: float) -> tuple[float, fl
     return d, ddx, ddy
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _refine_system(
     view: DistanceView,
     x: float,

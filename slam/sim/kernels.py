@@ -23,7 +23,7 @@ NaNs keep their IEEE meaning (the kernels use ``inf`` for "no hit")."""
 # ------------------------------------------------------------------------------------ ray casting
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def first_hit(labels, gx, gy, dx, dy, max_cells):
     """Amanatides–Woo grid traversal from grid point ``(gx, gy)`` along the unit ``(dx, dy)``.
 
@@ -139,7 +139,7 @@ def _azimuth_table(labels, origin_x, origin_y, resolution, cam, ref, perp, t_min
     return dist, lab, side
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, _nrt=False)
 def _cast_ray(rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, height, near2):
     """Where the camera ray ``(rx, ry, rz)`` (world frame, optical z component 1) ends.
 
@@ -193,7 +193,7 @@ def _cast_ray(rx, ry, rz, cam, ref, perp, t_min, inv_step, dist, lab, side, heig
     return math.inf, -1, -1, 0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _column_near2(bx, by, ux, uy, i_lo, i_hi, cy, fy, ref, perp, t_min, inv_step, dist):
     """Squared distance of the nearest table obstacle over a pixel column's azimuth range.
 

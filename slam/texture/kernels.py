@@ -219,7 +219,7 @@ def accumulate_frame(disparity, rgb, stride, camera, depth_lut, rot_d, cam_d, ro
     return added
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _line_of_sight(occ, occ_ox, occ_oy, occ_res, x0, y0, x1, y1):
     """No obstacle cell of ``occ`` on the segment (sampled every quarter cell)."""
     length = math.hypot(x1 - x0, y1 - y0)
