@@ -251,6 +251,12 @@ class RbpfConfig(Validated):
     proposal_motion_prior: bool = False
     """Include the odometry model in the proposal's covariance (else the scan likelihood alone,
     with a unit ridge)."""
+    proposal_mean: str = bounded("match", choices=("match", "fused"))
+    """Where each particle's proposal is centred: ``match``, its scan-matched pose; ``fused``,
+    the mean of the Gaussian product of the tempered scan likelihood at the match and the
+    odometry model at its predicted pose (``μ = x_m + (H/T + Σ_m⁻¹)⁻¹ Σ_m⁻¹ (x_p − x_m)``): where
+    the scan constrains the pose it stays at the match, along a direction it does not (a
+    corridor, a wide hall's far walls) it stays with the odometry instead of sliding."""
     refine_passes: int = bounded(3, ge=0, le=100)
     """After the filter, re-register the update scans of the final lineage against the map they
     build this many times (removes the jitter the proposal's sampling leaves; 0: off)."""

@@ -365,6 +365,11 @@ class RbpfFilter:
         match = self._retry(predicted, hits, match)
         match = self._probe(predicted, hits, match)
         self.particles = match.poses
+        if rc.proposal_mean == "fused":
+            motion = motion_covariance(predicted, moved, self.alphas, self.floor)
+            self.particles = fuse_with_prediction(
+                match.poses, predicted, match.hessian, rc.temperature, motion
+            )
         if rc.proposal_spread > 0:
             motion_cov = None
             if rc.proposal_motion_prior:
@@ -672,6 +677,23 @@ def motion_covariance(poses: F64, increment: F64, alphas: F64, floor: F64) -> F6
     cov[:, 0, 1] = cov[:, 1, 0] = c * s * (sx**2 - sy**2)
     cov[:, 2, 2] = st**2
     return cov
+
+
+def fuse_with_prediction(
+    matched: F64, predicted: F64, hessian: F64, temperature: float, motion_cov: F64
+) -> F64:
+    """The mean of the Gaussian product of the tempered scan likelihood at each particle's match
+    (information ``H / T`` around ``matched``) and the odometry model around its predicted pose
+    (covariance ``Σ_m``): ``x_m + (H/T + Σ_m⁻¹)⁻¹ Σ_m⁻¹ (x_p − x_m)``, headings wrapped
+    (``rbpf.proposal_mean = "fused"``). A particle whose match was not trusted has
+    ``matched == predicted`` and stays there."""
+    prior = np.linalg.inv(motion_cov)
+    gain = np.linalg.solve(hessian / temperature + prior, prior)
+    d = predicted - matched
+    d[:, 2] = wrap_angle(d[:, 2])
+    out = matched + np.einsum("pij,pj->pi", gain, d)
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
 
 
 def sample_around(

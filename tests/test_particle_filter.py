@@ -99,3 +99,23 @@ def test_cloud_covariance_known_values():
     # headings either side of ±π: the mean is π, the deviations ±0.1
     wrap = np.array([[0.0, 0.0, np.pi - 0.1], [0.0, 0.0, -np.pi + 0.1]])
     assert cloud_covariance(wrap, np.array([0.5, 0.5]))[2, 2] == pytest.approx(0.01)
+
+
+def test_the_fused_proposal_mean_keeps_the_match_where_the_scan_constrains_and_odometry_where_not():
+    """rbpf.proposal_mean = "fused": a corridor along x (the scan constrains y and the heading,
+    not x) keeps the predicted x and the matched y and heading; a scan that constrains every
+    direction keeps the match; headings across ±π are fused the short way round."""
+    from slam.particle_filter import fuse_with_prediction
+
+    matched = np.array([[1.0, 2.0, 0.1], [1.0, 2.0, 0.1], [0.0, 0.0, np.pi - 0.01]])
+    predicted = np.array([[1.5, 2.2, 0.2], [1.5, 2.2, 0.2], [0.0, 0.0, -np.pi + 0.01]])
+    motion = np.tile(np.diag([0.01, 0.01, 0.001]), (3, 1, 1))
+    hessian = np.stack([np.diag([0.0, 1e9, 1e9]), np.eye(3) * 1e9, np.zeros((3, 3))])
+    out = fuse_with_prediction(matched, predicted, hessian, 10.0, motion)
+    np.testing.assert_allclose(out[0], [1.5, 2.0, 0.1], atol=1e-6)
+    np.testing.assert_allclose(out[1], matched[1], atol=1e-6)
+    assert out[2, 2] == pytest.approx(-np.pi + 0.01, abs=1e-9)  # not through 0
+    # equal information on both sides: half way
+    half = fuse_with_prediction(matched[:1], predicted[:1], np.linalg.inv(motion[:1]) * 10.0,
+                                10.0, motion[:1])  # fmt: skip
+    np.testing.assert_allclose(half[0], [1.25, 2.1, 0.15], atol=1e-9)
