@@ -15,7 +15,8 @@ from typing import Any
 
 import numba
 
-_POOL: list[ThreadPoolExecutor] = []
+_POOL: dict[int, ThreadPoolExecutor] = {}
+"""The pool of each thread count asked for so far (one, unless ``numba.set_num_threads`` changes)."""
 
 
 def threads() -> int:
@@ -28,9 +29,8 @@ def in_threads(calls: list[Callable[[], Any]]) -> list[Any]:
     thread when there is one call or one thread)."""
     if len(calls) <= 1 or threads() == 1:
         return [call() for call in calls]
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="slam-kernels"))
-    if _POOL[0]._max_workers < threads():  # numba's count was raised since: a larger pool
-        _POOL[0].shutdown(wait=False)
-        _POOL[0] = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="slam-kernels")
-    return list(_POOL[0].map(lambda call: call(), calls))
+    n = threads()
+    pool = _POOL.get(n)
+    if pool is None:
+        pool = _POOL[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="slam-kernels")
+    return list(pool.map(lambda call: call(), calls))
