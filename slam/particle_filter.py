@@ -365,18 +365,18 @@ class RbpfFilter:
         match = self._retry(predicted, hits, match)
         match = self._probe(predicted, hits, match)
         self.particles = match.poses
-        if rc.proposal_mean == "fused":
-            motion = motion_covariance(predicted, moved, self.alphas, self.floor)
+        fused = rc.proposal_mean == "fused"
+        motion_cov = None
+        if fused or (rc.proposal_spread > 0 and rc.proposal_motion_prior):
+            motion_cov = motion_covariance(predicted, moved, self.alphas, self.floor)
+        if fused:
             self.particles = fuse_with_prediction(
-                match.poses, predicted, match.hessian, rc.temperature, motion
+                match.poses, predicted, match.hessian, rc.temperature, motion_cov
             )
         if rc.proposal_spread > 0:
-            motion_cov = None
-            if rc.proposal_motion_prior:
-                motion_cov = motion_covariance(predicted, moved, self.alphas, self.floor)
             self.particles = sample_around(
-                self.particles, match.hessian, rc.temperature, motion_cov, rc.proposal_spread,
-                self.rng,
+                self.particles, match.hessian, rc.temperature,
+                motion_cov if rc.proposal_motion_prior else None, rc.proposal_spread, self.rng,
             )  # fmt: skip
         self.fallbacks += int(np.count_nonzero(match.inliers < rc.min_inliers))
         return match
