@@ -1,8 +1,11 @@
 """The ``slam`` command line: one sub-command per module in :mod:`slam.commands`.
 
-Each command module exposes ``register(subparsers)``, which adds its parser with
-:func:`~slam.commands._common.add_command` (the description is the module docstring after its
-first paragraph; sub-commands go in :func:`~slam.commands._common.add_actions`) and sets ``func``.
+:data:`COMMANDS` lists the sub-commands in help order, each with its line in ``slam --help``;
+each is the module of its name, which exposes ``add_arguments(parser)``: it adds the command's
+arguments (sub-commands go in :func:`~slam.commands._common.add_actions`) and sets ``func``.
+:func:`build_parser` makes every command's parser with
+:func:`~slam.commands._common.add_command`, the description being the module docstring after its
+first paragraph.
 Heavy imports (numba kernels, rerun) happen inside the handlers so ``slam --help`` stays instant.
 Errors meant for people (:class:`~slam.errors.SlamError`) print one line and exit with code 2.
 
@@ -34,32 +37,55 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator, Sequence
+from typing import NamedTuple
 
 from slam import __version__
-from slam.commands._common import add_actions
+from slam.commands._common import add_actions, add_command
 from slam.errors import SlamError, Terminated
 
-COMMAND_ORDER: tuple[str, ...] = (
-    "run",
-    "warmup",
-    "localize",
-    "data",
-    "sim",
-    "eval",
-    "export",
-    "texture",
-    "view",
-    "grid",
-    "maze",
-    "runs",
-    "sweep",
-    "tune",
-)
-"""Order of the sub-commands in ``slam --help``; any other module of the package comes after."""
+
+class Command(NamedTuple):
+    """How a sub-command presents itself in ``slam --help`` and in its own help."""
+
+    help: str
+    """Its line in the list of commands of ``slam --help``."""
+    layout: bool = False
+    """Print its description with the docstring's own line breaks (lists, examples) instead of
+    rewrapping it to the terminal."""
+
+
+COMMANDS: dict[str, Command] = {
+    "run": Command("run SLAM (or dead reckoning) on a dataset and write a run folder"),
+    "warmup": Command(
+        "compile the kernels of `slam run` into numba's cache (first run at full speed)"
+    ),
+    "localize": Command(
+        "localize a log on a saved map (Monte Carlo localization, global localization)"
+    ),
+    "data": Command("list and verify the datasets under the data directory", layout=True),
+    "sim": Command("simulate a robot log with ground truth (ECE276A format)", layout=True),
+    "eval": Command("evaluate a run: map quality without ground truth, relations metric, ATE, RPE"),
+    "export": Command(
+        "write a finished run's map or trajectory for other tools (map_server, evo, KITTI)",
+        layout=True,
+    ),
+    "texture": Command("recompute the floor texture (RGB-D) of a finished run"),
+    "view": Command("open a run's recording.rrd in the rerun viewer (native, or web with --web)"),
+    "grid": Command("grid-world localization (exact histogram filter)", layout=True),
+    "maze": Command(
+        "micromouse mazes: run, bench, show and convert (Udacity tester rules)", layout=True
+    ),
+    "runs": Command("manage run folders: remove partial folders left by killed runs (runs clean)"),
+    "sweep": Command("run many cells (logs × seeds × settings), evaluate, tabulate; resumable"),
+    "tune": Command("random/grid search over declared ranges for the least mean error"),
+}
+"""The sub-commands in the order of ``slam --help``: each is the module of its name in
+:mod:`slam.commands`."""
 
 
 def command_modules() -> list[str]:
-    """Names of the modules in :mod:`slam.commands`, in help order."""
+    """Names of the modules in :mod:`slam.commands`, in help order (those :data:`COMMANDS` does
+    not list, which it should, last)."""
     import slam.commands
 
     found = [
@@ -67,7 +93,7 @@ def command_modules() -> list[str]:
         for m in pkgutil.iter_modules(slam.commands.__path__)
         if not m.ispkg and not m.name.startswith("_")
     ]
-    rank = {name: i for i, name in enumerate(COMMAND_ORDER)}
+    rank = {name: i for i, name in enumerate(COMMANDS)}
     return sorted(found, key=lambda n: (rank.get(n, len(rank)), n))
 
 
@@ -79,8 +105,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"slam {__version__}")
     subparsers = add_actions(parser, "command", "COMMAND")
-    for name in command_modules():
-        importlib.import_module(f"slam.commands.{name}").register(subparsers)
+    for name, command in COMMANDS.items():
+        module = importlib.import_module(f"slam.commands.{name}")
+        module.add_arguments(
+            add_command(subparsers, name, module.__doc__, command.help, command.layout)
+        )
     return parser
 
 

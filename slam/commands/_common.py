@@ -1,8 +1,9 @@
 """Arguments and helpers shared by several sub-commands.
 
-Every command module makes its parser with :func:`add_command`, which takes the command's
-description from the module docstring: every paragraph after the first (the one line saying what
-the module owns). A command with sub-commands adds them to the group :func:`add_actions` returns.
+Every command's parser is made by :func:`add_command` (:func:`slam.cli.build_parser` calls it
+with the command's line of :data:`slam.cli.COMMANDS`), which takes the command's description from
+the module docstring: every paragraph after the first (the one line saying what the module owns).
+A command with sub-commands adds them to the group :func:`add_actions` returns.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import argparse
 import re
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from slam.io.datadir import resolve_data_dir
 
@@ -56,6 +57,27 @@ def add_actions(
     actions = parser.add_subparsers(dest=dest, metavar=metavar)
     actions.required = True
     return actions
+
+
+def add_log_argument(parser: argparse.ArgumentParser, metavar: str) -> None:
+    """Add the positional log (``args.name``, shown as ``metavar``) of a command that reads one:
+    a dataset name of the registry, ``demo``, or a path (see :func:`slam.io.sources.resolve`)."""
+    parser.add_argument("name", metavar=metavar, help="dataset name, 'demo', or a path")
+
+
+def add_quiet_argument(parser: argparse.ArgumentParser, help: str = "no progress bar") -> None:
+    """Add ``--quiet`` (help text ``help``); :func:`show_progress` reads it."""
+    parser.add_argument("--quiet", action="store_true", help=help)
+
+
+def add_record_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--record FILE``: also write a rerun recording (``.rrd``) holding ``what``."""
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help=f"also write a rerun recording (.rrd): {what}",
+    )
 
 
 def add_data_dir_argument(parser: argparse.ArgumentParser) -> None:
@@ -106,7 +128,20 @@ def add_output_arguments(
         action="store_true",
         help=f"replace an existing {folder} (never any other folder)",
     )
-    parser.add_argument("--quiet", action="store_true", help=quiet)
+    add_quiet_argument(parser, quiet)
+
+
+def output_request_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """The fields of a folder-writing command's request (:class:`slam.pipeline.RunRequest`,
+    :class:`slam.localize.run.LocalizeRequest`) that its ``--out``, ``--force``, ``--config``
+    and ``--quiet`` set: ``out``, ``force``, ``inputs`` (the ``--config`` file, which the folder
+    may not hold) and ``progress``."""
+    return {
+        "out": args.out,
+        "force": args.force,
+        "inputs": (args.config,) if args.config is not None else (),
+        "progress": show_progress(args),
+    }
 
 
 def data_dir_from(args: argparse.Namespace) -> Path:

@@ -35,15 +35,8 @@ from slam.commands._common import (
 from slam.io.datadir import DATA_DIR_ENV
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``slam data`` and its sub-commands."""
-    parser = add_command(
-        subparsers,
-        "data",
-        __doc__,
-        "list and verify the datasets under the data directory",
-        layout=True,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the sub-commands of ``slam data`` and their arguments."""
     actions = add_actions(parser, "data_command", "ACTION")
 
     listing = add_command(

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from slam.commands._common import add_command, add_data_dir_argument, data_dir_from
+from slam.commands._common import add_data_dir_argument, data_dir_from
 from slam.errors import DataError, SlamError, UsageError
 
 if TYPE_CHECKING:
@@ -30,17 +30,11 @@ TRAJECTORY_FILE = "trajectory.tum"
 """The trajectory a run folder holds."""
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``eval`` sub-command."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam eval``."""
     from slam.eval.relations import DEFAULT_TOLERANCE_S
     from slam.eval.trajectory import Alignment, DeltaUnit
 
-    parser = add_command(
-        subparsers,
-        "eval",
-        __doc__,
-        "evaluate a run: map quality without ground truth, relations metric, ATE, RPE",
-    )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder to evaluate")
     parser.add_argument(
         "--relations",

@@ -16,20 +16,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.commands._common import add_command
 
-
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``export`` sub-command."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam export``."""
     from slam.io.exports import EXPORT_FORMATS
 
-    parser = add_command(
-        subparsers,
-        "export",
-        __doc__,
-        "write a finished run's map or trajectory for other tools (map_server, evo, KITTI)",
-        layout=True,
-    )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder (slam run)")
     parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="what to write")
     parser.add_argument("--out", type=Path, metavar="PATH", help="file to write")

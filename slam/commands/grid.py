@@ -17,19 +17,17 @@ from pathlib import Path
 
 from slam.commands._common import (
     add_actions,
-    add_command,
     add_data_dir_argument,
+    add_quiet_argument,
+    add_record_argument,
     data_dir_from,
     show_progress,
 )
 from slam.errors import UsageError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``slam grid`` and its sub-commands."""
-    parser = add_command(
-        subparsers, "grid", __doc__, "grid-world localization (exact histogram filter)", layout=True
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the sub-commands of ``slam grid`` and their arguments."""
     sub = add_actions(parser, "grid_command")
 
     p_list = sub.add_parser("list", help="list the shipped scenarios")
@@ -45,12 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "scenario", help="shipped name (see 'slam grid list'), udacity:<case>, or a TOML file"
     )
     p_run.add_argument("--json", action="store_true", help="print the steps as JSON")
-    p_run.add_argument(
-        "--record",
-        type=Path,
-        metavar="FILE",
-        help="also write a rerun recording (.rrd): the posterior heat map after every step",
-    )
+    add_record_argument(p_run, "the posterior heat map after every step")
     p_run.add_argument(
         "--no-stop",
         action="store_true",
@@ -86,7 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--out", type=Path, default=Path("grid-study.png"), help="PNG plot (default: %(default)s)"
     )
     p_study.add_argument("--json", action="store_true", help="print the rows as JSON")
-    p_study.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_argument(p_study)
     p_study.set_defaults(func=cmd_study)
 
 

@@ -13,25 +13,19 @@ import argparse
 from pathlib import Path
 
 from slam.commands._common import (
-    add_command,
     add_config_arguments,
     add_data_dir_argument,
+    add_log_argument,
     add_output_arguments,
     add_scan_arguments,
     data_dir_from,
-    show_progress,
+    output_request_fields,
 )
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``localize`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "localize",
-        __doc__,
-        "localize a log on a saved map (Monte Carlo localization, global localization)",
-    )
-    parser.add_argument("name", metavar="LOG", help="dataset name, 'demo', or a path")
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam localize``."""
+    add_log_argument(parser, "LOG")
     parser.add_argument(
         "--map",
         required=True,
@@ -79,10 +73,7 @@ def localize_command(args: argparse.Namespace) -> int:
             config=config,
             data_dir=data_dir,
             initial=initial,
-            out=args.out,
-            force=args.force,
-            inputs=(args.config,) if args.config is not None else (),
-            progress=show_progress(args),
+            **output_request_fields(args),
         )
     )
     m = json.loads((out / "metrics.json").read_text())

@@ -24,25 +24,19 @@ from typing import Any
 
 from slam.commands._common import (
     add_actions,
-    add_command,
     add_data_dir_argument,
+    add_quiet_argument,
+    add_record_argument,
     data_dir_from,
     show_progress,
 )
 from slam.errors import ConfigError, UsageError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``maze`` sub-command and its ``run``, ``bench``, ``show``, ``convert``."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the sub-commands ``run``, ``bench``, ``show`` and ``convert`` of ``slam maze``."""
     from slam.maze.robots import DEFAULT_ROBOT, ROBOTS
 
-    parser = add_command(
-        subparsers,
-        "maze",
-        __doc__,
-        "micromouse mazes: run, bench, show and convert (Udacity tester rules)",
-        layout=True,
-    )
     sub = add_actions(parser, "maze_command", "ACTION")
 
     def robot_args(p: argparse.ArgumentParser) -> None:
@@ -67,12 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument(
         "--json", action="store_true", help="JSON with the per-step history and wall knowledge"
     )
-    run.add_argument(
-        "--record",
-        type=Path,
-        metavar="FILE",
-        help="also write a rerun recording (.rrd): known walls and the path after every step",
-    )
+    add_record_argument(run, "known walls and the path after every step")
     run.set_defaults(func=run_maze)
 
     bench = sub.add_parser("bench", help="many mazes: score against the lower bound")
@@ -82,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     robot_args(bench)
     bench.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     bench.add_argument("--json", action="store_true", help="rows and summary as JSON")
-    bench.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_argument(bench)
     bench.set_defaults(func=bench_mazes)
 
     show = sub.add_parser("show", help="PNG of the walls, the explored area and both runs")

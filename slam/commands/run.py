@@ -15,27 +15,21 @@ from pathlib import Path
 
 from slam.commands._common import (
     add_bag_arguments,
-    add_command,
     add_config_arguments,
     add_data_dir_argument,
+    add_log_argument,
     add_output_arguments,
     add_scan_arguments,
     bag_options_from,
     data_dir_from,
-    show_progress,
+    output_request_fields,
 )
 from slam.config import METHODS
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``run`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "run",
-        __doc__,
-        "run SLAM (or dead reckoning) on a dataset and write a run folder",
-    )
-    parser.add_argument("name", metavar="NAME", help="dataset name, 'demo', or a path")
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam run``."""
+    add_log_argument(parser, "NAME")
     parser.add_argument("--method", choices=METHODS, help="estimation method (default: rbpf)")
     parser.add_argument("--out", type=Path, help="run folder (default runs/NAME-<time>)")
     add_config_arguments(parser)
@@ -94,12 +88,9 @@ def run_command(args: argparse.Namespace) -> int:
             name=args.name,
             config=config,
             data_dir=data_dir,
-            out=args.out,
-            force=args.force,
-            inputs=(args.config,) if args.config is not None else (),
-            progress=show_progress(args),
             viewer=getattr(args, "viewer", False),
             bag=bag_options_from(args),
+            **output_request_fields(args),
         )
     )
     metrics = json.loads((out / "metrics.json").read_text())

@@ -18,14 +18,8 @@ from slam.commands._common import add_actions, add_command
 from slam.errors import UsageError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``slam runs`` and its sub-command ``clean``."""
-    parser = add_command(
-        subparsers,
-        "runs",
-        __doc__,
-        "manage run folders: remove partial folders left by killed runs (runs clean)",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the sub-command ``clean`` of ``slam runs``."""
     sub = add_actions(parser, "runs_command")
     clean = add_command(
         sub,

@@ -12,21 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.commands._common import add_command, add_output_arguments, show_progress
+from slam.commands._common import add_output_arguments, show_progress
 from slam.io.atomic import check_output_dir
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``sim`` sub-command."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam sim``."""
     from slam.sim.scenarios import SCENARIOS
 
-    parser = add_command(
-        subparsers,
-        "sim",
-        __doc__,
-        "simulate a robot log with ground truth (ECE276A format)",
-        layout=True,
-    )
     parser.add_argument(
         "name",
         metavar="NAME",

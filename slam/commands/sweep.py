@@ -13,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from slam.commands._common import add_command, add_data_dir_argument, data_dir_from
+from slam.commands._common import add_data_dir_argument, data_dir_from
 from slam.config import METHODS
 from slam.sweep.spec import EXECUTORS
 
@@ -38,14 +38,8 @@ def add_sweep_arguments(parser: argparse.ArgumentParser) -> None:
     add_data_dir_argument(parser)
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``sweep`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "sweep",
-        __doc__,
-        "run many cells (logs × seeds × settings), evaluate, tabulate; resumable",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam sweep``."""
     add_sweep_arguments(parser)
     parser.add_argument(
         "--set",

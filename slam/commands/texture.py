@@ -13,15 +13,17 @@ import sys
 import warnings
 from pathlib import Path
 
-from slam.commands._common import add_command, add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_data_dir_argument,
+    add_quiet_argument,
+    data_dir_from,
+    show_progress,
+)
 from slam.config import TEXTURE_MODES
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``texture`` sub-command."""
-    parser = add_command(
-        subparsers, "texture", __doc__, "recompute the floor texture (RGB-D) of a finished run"
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam texture``."""
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder of `slam run`")
     parser.add_argument(
         "--mode",
@@ -34,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME_OR_PATH",
         help="dataset to read the frames from (default: the 'dataset' of the run's config.toml)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_argument(parser)
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_texture)
 

@@ -12,19 +12,13 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from slam.commands._common import add_command, data_dir_from
+from slam.commands._common import data_dir_from
 from slam.commands.sweep import add_sweep_arguments
 from slam.sweep.tune import SEARCHES
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``tune`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "tune",
-        __doc__,
-        "random/grid search over declared ranges for the least mean error",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam tune``."""
     add_sweep_arguments(parser)
     parser.add_argument("--trials", type=int, help="trials, the default included (budget)")
     parser.add_argument("--search", choices=SEARCHES, help="random (default) or grid")

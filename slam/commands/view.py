@@ -15,18 +15,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-from slam.commands._common import add_command
 from slam.errors import DataError, UsageError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``view`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "view",
-        __doc__,
-        "open a run's recording.rrd in the rerun viewer (native, or web with --web)",
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam view``."""
     parser.add_argument(
         "run_dir", metavar="RUN_DIR", type=Path, help="run folder (or a .rrd recording)"
     )

@@ -15,18 +15,17 @@ from __future__ import annotations
 
 import argparse
 
-from slam.commands._common import add_command, add_data_dir_argument, data_dir_from, show_progress
+from slam.commands._common import (
+    add_data_dir_argument,
+    add_quiet_argument,
+    data_dir_from,
+    show_progress,
+)
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``warmup`` sub-command."""
-    parser = add_command(
-        subparsers,
-        "warmup",
-        __doc__,
-        "compile the kernels of `slam run` into numba's cache (first run at full speed)",
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``slam warmup``."""
+    add_quiet_argument(parser)
     add_data_dir_argument(parser)
     parser.set_defaults(func=run_warmup)
 
