@@ -37,6 +37,7 @@ from slam.geometry import compose, path_along, relative, spread_corrections, wra
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
 from slam.mapping import ParticleMaps, likelihood_tables
+from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
 
@@ -70,14 +71,20 @@ def _empty_map(center: F64, config: Config) -> ParticleMaps:
     )
 
 
-def _insert_node(maps: ParticleMaps, seq, step: int, pose: F64, config: Config) -> None:
+def node_hits(seq, steps: NDArray[np.int64], config: Config) -> ScanHits:
+    """The hits the submaps are built from: every node's scan thinned to ``rbpf.insert_beams``
+    (computed once for all rounds of the stage)."""
+    return seq.hit_table(steps, config.rbpf.insert_beams)
+
+
+def insert_nodes(
+    maps: ParticleMaps, table: ScanHits, nodes: NDArray[np.int64], poses: F64, config: Config
+) -> None:
+    """Insert the scans of ``nodes`` (rows of ``table``, :func:`node_hits`) at their ``poses``
+    into the submap ``maps``, in order (:meth:`~slam.mapping.ParticleMaps.insert_scans`)."""
     rc = config.rbpf
-    hx, hy = seq.hits(step, rc.insert_beams)
-    if hx.size == 0:
-        return
-    reach = float(np.sqrt((hx * hx + hy * hy).max())) + rc.dmax + 1.0
-    maps.ensure_contains(pose[0] - reach, pose[1] - reach, pose[0] + reach, pose[1] + reach)
-    maps.insert(np.ascontiguousarray(pose[None, :]), hx, hy, hx, hy, rc.skip_insert_below)
+    hits, offsets, reach = table.take(nodes)
+    maps.insert_scans(poses[nodes], hits, offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
 
 
 def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
@@ -93,15 +100,20 @@ def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
     return out
 
 
-def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
+def _detect(
+    seq, steps, poses, path, config: Config, table: ScanHits | None = None
+) -> tuple[list, int]:
     """Loop edges ``(j, i, z)``: node ``i``'s scan registered against a submap around node ``j``.
 
     The submap holds the nodes within ``submap_path`` of ``j`` along the path that are at least
     ``min_path / 2`` behind ``i`` — a stretch of trajectory that is locally consistent, so a
     drifted later visit of the same place does not blur it, and never ``i``'s own neighbours.
     Consecutive candidates with the same submap share it. When the scan already fits where it
-    is, the brute-force search is skipped and only Levenberg-Marquardt runs.
+    is, the brute-force search is skipped and only Levenberg-Marquardt runs. ``table`` holds the
+    nodes' hits (:func:`node_hits`; computed here when not given).
     """
+    if table is None:
+        table = node_hits(seq, steps, config)
     lc, rc = config.loops, config.rbpf
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     coarse, coarse_inv = likelihood_tables(
@@ -118,8 +130,7 @@ def _detect(seq, steps, poses, path, config: Config) -> tuple[list, int]:
         )
         if (lo, hi) != window:
             maps, window = _empty_map(poses[j], config), (lo, hi)
-            for k in range(lo, hi, lc.submap_stride):
-                _insert_node(maps, seq, int(steps[k]), poses[k], config)
+            insert_nodes(maps, table, np.arange(lo, hi, lc.submap_stride), poses, config)
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         if ex.size < lc.min_beams:
             continue
@@ -318,11 +329,12 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
     """
     lc = config.loops
     path = path_along(poses)
+    table = node_hits(seq, steps, config)
 
     def one_round(
         x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
     ) -> tuple[list, F64 | None, int]:
-        found, count = _detect(seq, steps, x, path, config)
+        found, count = _detect(seq, steps, x, path, config, table)
         if not found:
             return [], None, count
         edges = keyframe_edges(found, x, keys, key_of)

@@ -33,6 +33,7 @@ from slam.kernels.field import (
     MatchSettings,
     TilePool,
     claim_tiles,
+    insert_scans,
     insert_serial,
     match_particles,
     match_scans,
@@ -334,13 +335,18 @@ class ParticleMaps:
         self.free_stack = stack
         self.free_top[0] = top + new - old
 
+    def _extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` (m) the tile tables cover."""
+        tile_m = self.tile * self.resolution
+        _, nty, ntx = self.tables.shape
+        x0, y0 = self.origin
+        return x0, y0, x0 + ntx * tile_m, y0 + nty * tile_m
+
     def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
         """Grow every particle's tile table so the box lies inside it."""
         tile_m = self.tile * self.resolution
         _, nty, ntx = self.tables.shape
-        x0, y0 = self.origin
-        extent = (x0, y0, x0 + ntx * tile_m, y0 + nty * tile_m)
-        grow = growth_steps((xmin, ymin, xmax, ymax), extent, tile_m, self.grow_margin_m)
+        grow = growth_steps((xmin, ymin, xmax, ymax), self._extent(), tile_m, self.grow_margin_m)
         if grow is None:
             return
         left, bottom, right, top = grow
@@ -388,6 +394,52 @@ class ParticleMaps:
             self._grow_pool()
             start = stopped
         splat_hits(self._pool(), poses, hits, keep, self.signed)
+
+    def insert_scans(
+        self, poses: F64, hits: F64, offsets: NDArray[np.int64], reach: F64, skip_below: float
+    ) -> None:
+        """Insert several scans, in order, into a one-particle map (a submap of the back end).
+
+        Scan ``k`` is ``hits[:, offsets[k]:offsets[k + 1]]`` (``(4, N)``: robot-frame hits and
+        unit normals, every scan's side by side) at ``poses[k]``; before it goes in, the tables
+        grow to contain ``poses[k] ± reach[k]`` (a scan without hits is skipped). The same map,
+        bit for bit, as :meth:`ensure_contains` and :meth:`insert` scan by scan, in one kernel
+        call per stretch of scans that needs no growth
+        (:func:`~slam.kernels.field.insert_scans`).
+        """
+        if self.tables.shape[0] != 1:
+            raise ValueError(
+                f"insert_scans: expected a one-particle map, found {self.tables.shape[0]}"
+            )
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        hits = np.ascontiguousarray(hits, dtype=np.float64)
+        offsets = np.ascontiguousarray(offsets, dtype=np.int64)
+        boxes = np.stack(
+            [poses[:, 0] - reach, poses[:, 1] - reach, poses[:, 0] + reach, poses[:, 1] + reach]
+        )
+        empty = offsets[1:] == offsets[:-1]
+        n = poses.shape[0]
+        k = 0
+        while k < n:
+            xmin, ymin, xmax, ymax = boxes[:, k]
+            if not empty[k]:
+                self.ensure_contains(xmin, ymin, xmax, ymax)
+            x0, y0, x1, y1 = self._extent()
+            b = boxes[:, k + 1 :]
+            inside = empty[k + 1 :] | (
+                (b[0] >= x0) & (b[1] >= y0) & (b[2] < x1) & (b[3] < y1)
+            )  # the test of growth_steps: these scans need no growth
+            outside = np.flatnonzero(~inside)
+            stop = n if outside.size == 0 else k + 1 + int(outside[0])
+            start = k
+            while True:
+                start = insert_scans(
+                    self._pool(), poses, hits, offsets, skip_below, self.signed, start, stop
+                )
+                if start < 0:
+                    break
+                self._grow_pool()
+            k = stop
 
     def _pool(self) -> TilePool:
         """The tiles as the insertion kernels write them (built anew: growing replaces arrays)."""

@@ -353,6 +353,29 @@ class ScanSequence:
         """Returns and surface normals of scan ``k`` (:meth:`Scan.hits_with_normals`)."""
         return self._scans[k].hits_with_normals(max_beams)
 
+    def hit_table(self, steps: ArrayLike, max_beams: int = 0, normals: bool = False) -> ScanHits:
+        """The hits of scans ``steps`` (:meth:`hits`, or :meth:`hits_with_normals` with
+        ``normals``) side by side, in that order."""
+        parts = []
+        reach = np.zeros(len(steps))
+        for i, k in enumerate(np.asarray(steps, dtype=np.int64)):
+            if normals:
+                part = self.hits_with_normals(int(k), max_beams)
+            else:
+                part = self.hits(int(k), max_beams)
+            hx, hy = part[0], part[1]
+            if hx.size:
+                reach[i] = float(np.sqrt((hx * hx + hy * hy).max()))
+            parts.append(part)
+        offsets = np.zeros(len(parts) + 1, dtype=np.int64)
+        np.cumsum([part[0].size for part in parts], out=offsets[1:])
+        rows = 4 if normals else 2
+        xy = np.empty((rows, int(offsets[-1])))
+        for i, part in enumerate(parts):
+            for r in range(rows):
+                xy[r, offsets[i] : offsets[i + 1]] = part[r]
+        return ScanHits(xy, offsets, reach)
+
     def rays(
         self, k: int, free_range_no_return: float, stride: int = 1
     ) -> tuple[F64, NDArray[np.bool_]]:
@@ -367,6 +390,39 @@ class ScanSequence:
         for scan, odometry in source:
             seq.append(scan, odometry)
         return seq
+
+
+@dataclass(frozen=True, eq=False)
+class ScanHits:
+    """The obstacle returns of some scans of a :class:`ScanSequence`, side by side: what the
+    back end inserts into its submaps, thinned once instead of at every insertion.
+
+    Row ``i`` (the ``i``-th of the scans asked for) is ``xy[:, offsets[i]:offsets[i + 1]]``.
+    """
+
+    xy: F64
+    """``(2, N)`` robot-frame hits ``(hx, hy)`` of every scan, or ``(4, N)`` with the unit
+    surface normals ``(nx, ny)`` below them."""
+    offsets: NDArray[np.int64]
+    """``(S + 1,)`` where each scan's hits start (and the end)."""
+    reach: F64
+    """``(S,)`` distance of each scan's farthest hit from the robot (m; 0 without hits)."""
+
+    def take(self, rows: NDArray[np.int64]) -> tuple[F64, NDArray[np.int64], F64]:
+        """The hits of scans ``rows`` for :meth:`slam.mapping.ParticleMaps.insert_scans`:
+        ``(4, N')`` hits and normals (the hits again in place of normals when none were kept:
+        the unsigned field ignores them), their ``(len(rows) + 1,)`` offsets and the scans'
+        reach."""
+        rows = np.asarray(rows, dtype=np.int64)
+        first = self.offsets[rows]
+        counts = self.offsets[rows + 1] - first
+        offsets = np.zeros(rows.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=offsets[1:])
+        index = np.repeat(first - offsets[:-1], counts) + np.arange(offsets[-1])
+        xy = self.xy[:, index]
+        if xy.shape[0] == 2:
+            xy = np.concatenate([xy, xy])
+        return xy, offsets, self.reach[rows]
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,7 +30,6 @@ from slam.geometry import compose, relative, spread_corrections, transform_point
 from slam.mapping import OccupancyGrid, _check_growth, growth_steps, likelihood_tables
 from slam.particle_filter import (
     FilterOutput,
-    hits_for_insert,
     integrate_scan,
     particle_maps,
 )
@@ -260,15 +259,10 @@ def refine_trajectory(
     """
     rc = config.rbpf
     maps = particle_maps(config, poses[0], 1)
-    reach = 0.0
-    for pose, k in zip(poses, steps, strict=True):
-        hx, hy, nx, ny = hits_for_insert(seq, int(k), rc.insert_beams, maps.signed)
-        if hx.size == 0:
-            continue
-        reach = max(reach, float(np.sqrt((hx * hx + hy * hy).max())))
-        r = reach + rc.dmax + 1.0
-        maps.ensure_contains(pose[0] - r, pose[1] - r, pose[0] + r, pose[1] + r)
-        maps.insert(np.ascontiguousarray(pose[None, :]), hx, hy, nx, ny, rc.skip_insert_below)
+    table = seq.hit_table(steps, rc.insert_beams, normals=maps.signed)
+    hits, offsets, reach = table.take(np.arange(len(steps)))
+    reach = np.maximum.accumulate(reach) if reach.size else reach  # the farthest hit so far
+    maps.insert_scans(poses, hits, offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
     width = max(1, min(rc.match_beams or seq.num_beams, seq.num_beams))
     ex = np.zeros((len(steps), width))
     ey = np.zeros((len(steps), width))

@@ -264,6 +264,74 @@ def test_one_pose_insert_equals_the_parallel_kernels(signed):
             assert np.array_equal(a, b, equal_nan=True)
 
 
+@pytest.mark.parametrize("signed", [True, False])
+def test_inserting_scans_in_one_call_equals_inserting_them_one_by_one(signed):
+    """ParticleMaps.insert_scans (one kernel call per stretch that needs no growth) gives the
+    map of ensure_contains + insert scan by scan, bit for bit: the robot drives 12 m out of a
+    4 m map (the tables grow on the way, the tile pool too) and one scan has no hits."""
+    rng = np.random.default_rng(3)
+    scans, poses, reach = [], [], []
+    for k in range(14):
+        angles = np.linspace(-1.5, 1.5, 90)
+        ranges = 1.5 + 0.5 * np.sin(2.0 * angles + k) + 0.01 * rng.standard_normal(90)
+        hx, hy = ranges * np.cos(angles), ranges * np.sin(angles)
+        if k == 5:
+            hx, hy = hx[:0], hy[:0]  # a scan without hits is skipped
+        nx, ny = -np.cos(angles[: hx.size]), -np.sin(angles[: hx.size])
+        scans.append((hx, hy, nx, ny))
+        poses.append([0.9 * k, 0.05 * k, 0.1 * k])
+        reach.append(float(np.sqrt((hx * hx + hy * hy).max())) + 1.3 if hx.size else 0.0)
+    poses = np.array(poses)
+    reach = np.array(reach)
+    one = ParticleMaps(1, 0.05, 0.3, tile=8, size_m=4.0, capacity=4, signed=signed)
+    for pose, r, (hx, hy, nx, ny) in zip(poses, reach, scans, strict=True):
+        if hx.size:
+            one.ensure_contains(pose[0] - r, pose[1] - r, pose[0] + r, pose[1] + r)
+            one.insert(pose[None, :].copy(), hx, hy, nx, ny, 0.01)
+    batch = ParticleMaps(1, 0.05, 0.3, tile=8, size_m=4.0, capacity=4, signed=signed)
+    offsets = np.cumsum([0] + [hx.size for hx, _, _, _ in scans])
+    hits = np.concatenate([np.stack(part) for part in scans], axis=1)
+    batch.insert_scans(poses, hits, offsets, reach, 0.01)
+    assert batch.tables.shape == one.tables.shape and batch.tables.shape[2] > 8
+    assert np.array_equal(batch.origin, one.origin)
+    assert batch.capacity == one.capacity > 4
+    assert np.array_equal(batch.tables, one.tables)
+    used = one.tables[one.tables >= 0]
+    for layer in ("dist", "surface"):
+        assert np.array_equal(
+            getattr(batch, layer)[used], getattr(one, layer)[used], equal_nan=True
+        )
+    with pytest.raises(ValueError, match="one-particle map, found 2"):
+        ParticleMaps(2, 0.05, 0.3).insert_scans(poses, hits, offsets, reach, 0.01)
+
+
+def test_scan_hits_take_gathers_the_rows_asked_for():
+    """ScanSequence.hit_table keeps each scan's hits as Scan.hits gives them; take() gathers
+    any rows, in the order asked, with the hits again where no normals were kept."""
+    from slam.config import LidarConfig
+    from slam.scans import Scan, ScanSequence
+
+    seq = ScanSequence()
+    angles = np.linspace(-1.0, 1.0, 50)
+    for k in range(4):
+        ranges = np.full(50, 2.0 + k, dtype=np.float32)
+        ranges[: 10 * k] = np.nan  # fewer returns each scan
+        scan = Scan(float(k), ranges, angles).resolved(LidarConfig())
+        seq.append(scan, [0.0, 0.0, 0.0])
+    table = seq.hit_table([3, 1, 2], max_beams=20)
+    hits, offsets, reach = table.take(np.array([2, 0]))
+    hx2, hy2 = seq.hits(2, 20)
+    hx3, hy3 = seq.hits(3, 20)
+    assert offsets.tolist() == [0, hx2.size, hx2.size + hx3.size]
+    assert np.array_equal(hits[0], np.concatenate([hx2, hx3]))
+    assert np.array_equal(hits[3], np.concatenate([hy2, hy3]))  # normals: the hits again
+    far = [np.sqrt((hx * hx + hy * hy).max()) for hx, hy in ((hx2, hy2), (hx3, hy3))]
+    assert reach.tolist() == far
+    with_normals = seq.hit_table([1], normals=True)
+    assert with_normals.xy.shape[0] == 4
+    assert np.array_equal(with_normals.xy[2], seq.hits_with_normals(1)[2])
+
+
 def test_particle_score_and_hessian_are_those_at_the_reported_pose():
     """match_particles reuses the matcher's last evaluation when it was at the reported pose;
     its score and Hessian equal a fresh normal_equations there either way."""

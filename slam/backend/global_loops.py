@@ -44,12 +44,14 @@ from slam.graph import (
     _edge_information,
     keyframe_edges,
     loop_rounds,
+    node_hits,
     optimize,
 )
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import edge_error, fit_counts
 from slam.mapping import likelihood_tables
+from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
 
@@ -69,13 +71,20 @@ def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
 
 
 def detect_global(
-    seq, steps, x: F64, path: F64, config: Config, local: list = ()
+    seq,
+    steps,
+    x: F64,
+    path: F64,
+    config: Config,
+    local: list = (),
+    table: ScanHits | None = None,
 ) -> tuple[list, int]:
     """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
 
     See the module docstring (steps 1-3); :func:`consistent` is step 4. A submap that a local
     closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node within
-    ``keyframe_path`` of the keyframe is not searched again: that loop is closed.
+    ``keyframe_path`` of the keyframe is not searched again: that loop is closed. ``table``:
+    the nodes' hits (:func:`slam.graph.node_hits`; computed when first needed if not given).
     """
     bc, lc, rc = config.backend, config.loops, config.rbpf
     subs = stretches(path, bc.submap_length)
@@ -85,7 +94,7 @@ def detect_global(
     )
     end_path = np.array([path[hi - 1] for _, hi in subs])
     mid_path = np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs])
-    cache = SubmapCache(seq, steps, x, config)
+    cache = SubmapCache(seq, steps, x, config, table=table)
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     sub_of = np.zeros(x.shape[0], dtype=np.int64)
     for s, (lo, hi) in enumerate(subs):
@@ -209,12 +218,13 @@ def close_loops_global(
     lc, bc = config.loops, config.backend
     if path is None:
         path = path_along(poses)
+    table = node_hits(seq, steps, config)
 
     def one_round(
         x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
     ) -> tuple[list, F64 | None, int]:
-        local, count = _detect(seq, steps, x, path, config)
-        glob, searched = detect_global(seq, steps, x, path, config, local)
+        local, count = _detect(seq, steps, x, path, config, table)
+        glob, searched = detect_global(seq, steps, x, path, config, local, table)
         glob = consistent(glob, x, path, config)
         if not local and not glob:
             return [], None, count + searched

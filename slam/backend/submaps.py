@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from slam.config import Config
 from slam.kernels.bnb import max_pyramid, splat_likelihood
 from slam.mapping import ParticleMaps
+from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
 
@@ -52,8 +53,17 @@ def world_hits(seq, step: int, pose: F64, max_range: float, beams: int = 0) -> t
 class SubmapCache:
     """The submaps of one round (poses fixed), built when first asked for, a few kept."""
 
-    def __init__(self, seq, steps: NDArray[np.int64], poses: F64, config: Config, keep: int = 8):
+    def __init__(
+        self,
+        seq,
+        steps: NDArray[np.int64],
+        poses: F64,
+        config: Config,
+        keep: int = 8,
+        table: ScanHits | None = None,
+    ):
         self.seq, self.steps, self.poses, self.config = seq, steps, poses, config
+        self.table = table  # the nodes' hits for the field maps (slam.graph.node_hits)
         self.keep = keep
         self._pyramids: OrderedDict[tuple[int, int], Pyramid] = OrderedDict()
         self._maps: OrderedDict[tuple[int, int], ParticleMaps] = OrderedDict()
@@ -97,15 +107,17 @@ class SubmapCache:
 
     def field_map(self, lo: int, hi: int) -> ParticleMaps:
         """The distance-field map of nodes ``[lo, hi)`` (as :mod:`slam.graph` builds its own)."""
-        from slam.graph import _empty_map, _insert_node
+        from slam.graph import _empty_map, insert_nodes, node_hits
 
         key = (lo, hi)
         if key in self._maps:
             self._maps.move_to_end(key)
             return self._maps[key]
+        if self.table is None:
+            self.table = node_hits(self.seq, self.steps, self.config)
         maps = _empty_map(self.poses[lo], self.config)
-        for k in range(lo, hi, self.config.loops.submap_stride):
-            _insert_node(maps, self.seq, int(self.steps[k]), self.poses[k], self.config)
+        nodes = np.arange(lo, hi, self.config.loops.submap_stride)
+        insert_nodes(maps, self.table, nodes, self.poses, self.config)
         self._maps[key] = maps
         if len(self._maps) > self.keep:
             self._maps.popitem(last=False)

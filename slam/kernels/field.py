@@ -779,6 +779,45 @@ def insert_serial(
 
 
 @njit(cache=True)
+def insert_scans(
+    pool: TilePool,
+    poses: np.ndarray,
+    hits: np.ndarray,
+    offsets: np.ndarray,
+    skip_below: float,
+    signed: bool,
+    start: int,
+    stop: int,
+) -> int:
+    """Scans ``start`` to ``stop - 1`` one after another into a one-particle map, each by
+    :func:`insert_serial`: scan ``k``'s hits are ``hits[:, offsets[k]:offsets[k + 1]]``
+    (``hits`` as for :func:`splat_hits`, every scan's side by side) at ``poses[k]``.
+
+    One call for a whole stretch of scans instead of one per scan (the back end builds its
+    submaps from thousands): each scan gets its own contiguous copies, so :func:`insert_serial`
+    runs on the very arrays a one-scan insertion gives it, and the map is the same bit for bit.
+    Returns -1 when done, or the scan that ran out of free tiles (grow the pool and call again
+    from there: that scan had not written anything yet).
+    """
+    for k in range(start, stop):
+        a = offsets[k]
+        n = offsets[k + 1] - a
+        if n == 0:
+            continue
+        pose = np.empty((1, 3))
+        for c in range(3):
+            pose[0, c] = poses[k, c]
+        own = np.empty((4, n))
+        for r in range(4):
+            for j in range(n):
+                own[r, j] = hits[r, a + j]
+        keep = np.empty((1, n), dtype=np.bool_)
+        if insert_serial(pool, pose, own, skip_below, signed, keep, 0) >= 0:
+            return k
+    return -1
+
+
+@njit(cache=True)
 def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarray) -> int:
     """Recompute tile reference counts from the tables and rebuild the free stack.
 
