@@ -19,10 +19,20 @@ def wrap_angle(theta: ArrayLike) -> Array:
     return (theta + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def _wrap(theta: np.float64) -> np.float64:
+    """:func:`wrap_angle` of one angle (the same operations on a scalar)."""
+    return (theta + np.pi) % (2.0 * np.pi) - np.pi
+
+
 def compose(a: ArrayLike, b: ArrayLike) -> Array:
     """Return ``a ⊕ b``: pose ``b`` (expressed in the frame of ``a``) mapped to the world frame."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:  # one pose (the filter's every scan): no stacking
+        c, s = np.cos(a[2]), np.sin(a[2])
+        return np.array(
+            [a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2])]
+        )
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -42,6 +52,10 @@ def relative(a: ArrayLike, b: ArrayLike) -> Array:
     """Return ``a⁻¹ ⊕ b``: the motion from pose ``a`` to pose ``b`` in the frame of ``a``."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:  # one pose: the same arithmetic without stacking
+        c, s = np.cos(a[2]), np.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(b[2] - a[2])])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx = b[..., 0] - a[..., 0]
     dy = b[..., 1] - a[..., 1]

@@ -170,7 +170,10 @@ def _interpolate(
     surface: np.ndarray, table: np.ndarray, shift: int, gx: float, gy: float, inv_res: float
 ) -> tuple[float, float, float]:
     """The bilinear value and gradient of :func:`surface_at` at grid coordinates ``(gx, gy)``
-    (``≥ 0``, in cells from the centre of cell (0, 0)); a NaN value where a corner is unknown."""
+    (``≥ 0``, in cells from the centre of cell (0, 0)); a NaN value where a corner is unknown.
+
+    The indices are unsigned: numba then omits the negative-index wraparound it adds to every
+    signed index (they are never negative here), which makes the field lookups ~8 % faster."""
     ix = int(gx)  # truncation is the floor for non-negative values, and much cheaper
     iy = int(gy)
     fx = gx - ix
@@ -183,13 +186,14 @@ def _interpolate(
         ty = iy >> shift
         if ty >= table.shape[0] or tx >= table.shape[1]:
             return np.nan, 0.0, 0.0
-        t = table[ty, tx]
+        t = table[np.uint64(ty), np.uint64(tx)]
         if t < 0:
             return np.nan, 0.0, 0.0
-        d00 = surface[t, ly, lx]
-        d10 = surface[t, ly, lx + 1]
-        d01 = surface[t, ly + 1, lx]
-        d11 = surface[t, ly + 1, lx + 1]
+        ut, uy, ux, one = np.uint64(t), np.uint64(ly), np.uint64(lx), np.uint64(1)
+        d00 = surface[ut, uy, ux]
+        d10 = surface[ut, uy, ux + one]
+        d01 = surface[ut, uy + one, ux]
+        d11 = surface[ut, uy + one, ux + one]
     else:
         d00 = _cell(surface, table, shift, ix, iy)
         d10 = _cell(surface, table, shift, ix + 1, iy)
@@ -203,15 +207,16 @@ def _interpolate(
 
 @njit(cache=True, inline="always")
 def _cell(layer: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int) -> float:
+    """``layer`` at cell ``(ix, iy)`` (``≥ 0``) of one particle's map, NaN where unknown."""
     tx = ix >> shift
     ty = iy >> shift
     if ty >= table.shape[0] or tx >= table.shape[1]:
         return np.nan
-    t = table[ty, tx]
+    t = table[np.uint64(ty), np.uint64(tx)]
     if t < 0:
         return np.nan
     mask = (1 << shift) - 1
-    return layer[t, iy & mask, ix & mask]
+    return layer[np.uint64(t), np.uint64(iy & mask), np.uint64(ix & mask)]
 
 
 @njit(cache=True, inline="always")
@@ -332,15 +337,16 @@ def accumulate(
         u = abs(d) * step_inv
         i = int(u)
         f = u - i
+        ui = np.uint64(i)  # ≥ 0: no negative-index wraparound (see _interpolate)
         if u >= last_c:
             cost += cost_row[last_c]
         else:
-            cost += cost_row[i] + f * (cost_row[i + 1] - cost_row[i])
+            cost += cost_row[ui] + f * (cost_row[ui + np.uint64(1)] - cost_row[ui])
         inliers += 1
         if u >= last_w:
             wgt = weight_row[last_w]
         else:
-            wgt = weight_row[i] + f * (weight_row[i + 1] - weight_row[i])
+            wgt = weight_row[ui] + f * (weight_row[ui + np.uint64(1)] - weight_row[ui])
         wgx = wgt * gx
         wgy = wgt * gy
         wj2 = wgt * j2
