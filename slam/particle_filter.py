@@ -279,6 +279,7 @@ class RbpfFilter:
         p = fc.particles
         start = scans.odometry[0]
         self.maps = particle_maps(config, start, p)
+        self._reach = (-1, 0.0)  # (scan, its reach) of the last _make_room
         self.particles = np.tile(start, (p, 1))
         self.logw = np.zeros(p)
         self.weights = np.full(p, 1.0 / p)
@@ -307,8 +308,11 @@ class RbpfFilter:
         """The outcome of scan 0 (the initial map)."""
 
     def _make_room(self, k: int, poses: F64) -> None:
-        """Grow the maps to hold scan ``k`` seen from any of ``poses``."""
-        r = scan_reach(self.scans, k) + self.config.rbpf.dmax + 1.0
+        """Grow the maps to hold scan ``k`` seen from any of ``poses`` (an update asks twice:
+        for the proposal and for the insertion; the scan's reach is computed once)."""
+        if self._reach[0] != k:
+            self._reach = (k, scan_reach(self.scans, k))
+        r = self._reach[1] + self.config.rbpf.dmax + 1.0
         lo = poses[:, :2].min(axis=0) - r
         hi = poses[:, :2].max(axis=0) + r
         self.maps.ensure_contains(lo[0], lo[1], hi[0], hi[1])
