@@ -401,7 +401,8 @@ class ParticleMaps:
         """Insert several scans, in order, into a one-particle map (a submap of the back end).
 
         Scan ``k`` is ``hits[:, offsets[k]:offsets[k + 1]]`` (``(4, N)``: robot-frame hits and
-        unit normals, every scan's side by side) at ``poses[k]``; before it goes in, the tables
+        unit normals, every scan's side by side; ``(2, N)``: the hits alone, standing for their
+        own normals as in :meth:`insert` for the unsigned field) at ``poses[k]``; before it goes in, the tables
         grow to contain ``poses[k] ± reach[k]`` (a scan without hits is skipped). The same map,
         bit for bit, as :meth:`ensure_contains` and :meth:`insert` scan by scan, in one kernel
         call per stretch of scans that needs no growth

@@ -410,19 +410,15 @@ class ScanHits:
 
     def take(self, rows: NDArray[np.int64]) -> tuple[F64, NDArray[np.int64], F64]:
         """The hits of scans ``rows`` for :meth:`slam.mapping.ParticleMaps.insert_scans`:
-        ``(4, N')`` hits and normals (the hits again in place of normals when none were kept:
-        the unsigned field ignores them), their ``(len(rows) + 1,)`` offsets and the scans'
-        reach."""
+        ``(2, N')`` hits or ``(4, N')`` hits and normals (as kept), their ``(len(rows) + 1,)``
+        offsets and the scans' reach."""
         rows = np.asarray(rows, dtype=np.int64)
         first = self.offsets[rows]
         counts = self.offsets[rows + 1] - first
         offsets = np.zeros(rows.size + 1, dtype=np.int64)
         np.cumsum(counts, out=offsets[1:])
         index = np.repeat(first - offsets[:-1], counts) + np.arange(offsets[-1])
-        xy = self.xy[:, index]
-        if xy.shape[0] == 2:
-            xy = np.concatenate([xy, xy])
-        return xy, offsets, self.reach[rows]
+        return self.xy[:, index], offsets, self.reach[rows]
 
 
 @dataclass(frozen=True, eq=False)

@@ -260,9 +260,8 @@ def refine_trajectory(
     rc = config.rbpf
     maps = particle_maps(config, poses[0], 1)
     table = seq.hit_table(steps, rc.insert_beams, normals=maps.signed)
-    hits, offsets, reach = table.take(np.arange(len(steps)))
-    reach = np.maximum.accumulate(reach) if reach.size else reach  # the farthest hit so far
-    maps.insert_scans(poses, hits, offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
+    reach = np.maximum.accumulate(table.reach) if len(steps) else table.reach  # farthest so far
+    maps.insert_scans(poses, table.xy, table.offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
     width = max(1, min(rc.match_beams or seq.num_beams, seq.num_beams))
     ex = np.zeros((len(steps), width))
     ey = np.zeros((len(steps), width))

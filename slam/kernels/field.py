@@ -797,7 +797,8 @@ def insert_scans(
 ) -> int:
     """Scans ``start`` to ``stop - 1`` one after another into a one-particle map, each by
     :func:`insert_serial`: scan ``k``'s hits are ``hits[:, offsets[k]:offsets[k + 1]]``
-    (``hits`` as for :func:`splat_hits`, every scan's side by side) at ``poses[k]``.
+    (``hits`` as for :func:`splat_hits`, every scan's side by side, or only its first two rows:
+    the unsigned field ignores the normals, which then are the hits again) at ``poses[k]``.
 
     One call for a whole stretch of scans instead of one per scan (the back end builds its
     submaps from thousands): each scan gets its own contiguous copies, so :func:`insert_serial`
@@ -815,8 +816,9 @@ def insert_scans(
             pose[0, c] = poses[k, c]
         own = np.empty((4, n))
         for r in range(4):
+            row = r if r < hits.shape[0] else r - 2  # (2, N) hits: the hits again as normals
             for j in range(n):
-                own[r, j] = hits[r, a + j]
+                own[r, j] = hits[row, a + j]
         keep = np.empty((1, n), dtype=np.bool_)
         if insert_serial(pool, pose, own, skip_below, signed, keep, 0) >= 0:
             return k
