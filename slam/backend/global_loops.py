@@ -71,13 +71,7 @@ def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
 
 
 def detect_global(
-    seq,
-    steps,
-    x: F64,
-    path: F64,
-    config: Config,
-    local: list = (),
-    table: ScanHits | None = None,
+    seq, steps, x: F64, path: F64, config: Config, local: list = (), table: ScanHits | None = None
 ) -> tuple[list, int]:
     """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
 
