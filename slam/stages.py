@@ -262,7 +262,7 @@ def refine_trajectory(
     table = seq.hit_table(steps, rc.insert_beams, normals=maps.signed)
     reach = np.maximum.accumulate(table.reach) if len(steps) else table.reach  # farthest so far
     maps.insert_scans(poses, table.xy, table.offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
-    width = max(1, min(rc.match_beams or seq.num_beams, seq.num_beams))
+    width = max(1, min(rc.refine_beams or seq.num_beams, seq.num_beams))
     ex = np.zeros((len(steps), width))
     ey = np.zeros((len(steps), width))
     counts = np.zeros(len(steps), dtype=np.int64)

@@ -95,3 +95,27 @@ def test_the_room_map_grows_many_times(room):
     plan, _ = _growth_plan(seq, poses, steps, config.map, start, span)
     shapes = {(s[1], s[2]) for s in plan if s is not None}
     assert len(shapes) >= 3
+
+
+def test_the_reregistration_uses_every_beam_unless_told(tmp_path):
+    """rbpf.refine_beams = 0 (the default) registers each scan with all of its beams: on a
+    360-beam room it gives the poses of refine_beams = 360, and others than the filter's 180,
+    both closer to the true poses than the perturbed start."""
+    from slam.stages import refine_trajectory
+
+    path = write_carmen(tmp_path, carmen_lines(30, beams=360))
+    ref = sources.resolve(str(path), path.parent, where="test")
+    runs = {}
+    for beams in (0, 360, 180):
+        config = load_config("", None, [f"rbpf.refine_beams={beams}"])
+        log = sources.load(ref, config, ("scans",)).log
+        seq = ScanSequence.from_log(log, config)
+        steps = np.arange(0, len(seq), 3)
+        truth = seq.odometry[steps]  # the synthetic log's odometry is exact
+        start = truth + np.random.default_rng(1).normal(0.0, [0.02, 0.02, 0.01], truth.shape)
+        runs[beams] = refine_trajectory(seq, start, steps, config)
+    assert seq.num_beams == 360
+    assert np.array_equal(runs[0], runs[360])
+    assert not np.array_equal(runs[0], runs[180])
+    for got in runs.values():
+        assert np.abs(got[:, :2] - truth[:, :2]).mean() < np.abs(start[:, :2] - truth[:, :2]).mean()
