@@ -20,7 +20,7 @@ method (:class:`Stage`), so a caller can drop, reorder or add stages.
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +33,7 @@ from slam.particle_filter import (
     integrate_scan,
     particle_maps,
 )
-from slam.scans import ScanSequence
+from slam.scans import ScanHits, ScanSequence
 
 F64 = NDArray[np.float64]
 
@@ -79,8 +79,11 @@ class Reregistration:
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """Refined node poses (:func:`refine_trajectory`)."""
         poses = output.node_poses
+        if config.rbpf.refine_passes == 0:
+            return output
+        scans = RegistrationScans.of(output.scans, output.steps, config)
         for _ in range(config.rbpf.refine_passes):
-            poses = refine_trajectory(output.scans, poses, output.steps, config)
+            poses = refine_trajectory(output.scans, poses, output.steps, config, scans)
         return dataclasses.replace(output, node_poses=poses)
 
 
@@ -247,30 +250,58 @@ def interpolate_between_updates(
     return spread_corrections(odo, update_steps, update_poses, np.cumsum(step))
 
 
+class RegistrationScans(NamedTuple):
+    """The node scans as the re-registration reads them, extracted once for all its passes."""
+
+    table: ScanHits
+    """Their hits (with normals for the signed field) to build the map from."""
+    ex: F64
+    """``(S, W)`` robot-frame x of the beams each scan is registered with (``rbpf.refine_beams``)."""
+    ey: F64
+    """``(S, W)`` robot-frame y of those beams."""
+    counts: NDArray[np.int64]
+    """``(S,)`` beams of each scan in ``ex``, ``ey``."""
+
+    @classmethod
+    def of(cls, seq: ScanSequence, steps: NDArray[np.int64], config: Config) -> RegistrationScans:
+        """The scans ``steps`` of ``seq`` with ``config``'s beam budgets."""
+        rc = config.rbpf
+        table = seq.hit_table(steps, rc.insert_beams, normals=rc.field == "plane")
+        width = max(1, min(rc.refine_beams or seq.num_beams, seq.num_beams))
+        ex = np.zeros((len(steps), width))
+        ey = np.zeros((len(steps), width))
+        counts = np.zeros(len(steps), dtype=np.int64)
+        for i, k in enumerate(steps):
+            hx, hy = seq.hits(int(k), width)
+            counts[i] = hx.size
+            ex[i, : hx.size] = hx
+            ey[i, : hy.size] = hy
+        return cls(table, ex, ey, counts)
+
+
 def refine_trajectory(
-    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], config: Config
+    seq: ScanSequence,
+    poses: F64,
+    steps: NDArray[np.int64],
+    config: Config,
+    scans: RegistrationScans | None = None,
 ) -> F64:
     """Re-register the scans ``steps`` (taken at ``poses``) against the map they build together.
 
     The filter's lineage carries the jitter of the proposal's sampling (that is what gives the
     filter the diversity to close loops); with the best lineage chosen, one map is built from its
     scans and each of them is registered against that map again, which keeps the global shape and
-    removes the jitter. Returns the refined poses ``(len(steps), 3)``.
+    removes the jitter. ``scans``: the scans as :meth:`RegistrationScans.of` extracts them (done
+    here when not given; a caller running several passes extracts them once). Returns the
+    refined poses ``(len(steps), 3)``.
     """
     rc = config.rbpf
+    if scans is None:
+        scans = RegistrationScans.of(seq, steps, config)
+    table, ex, ey, counts = scans
     maps = particle_maps(config, poses[0], 1)
-    table = seq.hit_table(steps, rc.insert_beams, normals=maps.signed)
     reach = np.maximum.accumulate(table.reach) if len(steps) else table.reach  # farthest so far
     maps.insert_scans(poses, table.xy, table.offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
-    width = max(1, min(rc.refine_beams or seq.num_beams, seq.num_beams))
-    ex = np.zeros((len(steps), width))
-    ey = np.zeros((len(steps), width))
-    counts = np.zeros(len(steps), dtype=np.int64)
-    for i, k in enumerate(steps):
-        hx, hy = seq.hits(int(k), width)
-        counts[i] = hx.size
-        ex[i, : hx.size] = hx
-        ey[i, : hy.size] = hy
     luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     return maps.register(
         poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers,

@@ -69,6 +69,7 @@ def one_line_error(capsys) -> str:
         ("filter.motion_alphas=[0.1, -0.05, 0.05, 0.1, 0.02]", "filter.motion_alphas[1]: expected a finite number in [0, 10], found -0.05"),
         ("filter.motion_alphas=[0.1, 0.05]", "filter.motion_alphas: expected a list of 5 values, each a finite number in [0, 10], found (0.1, 0.05)"),
         ("rbpf.refine_passes=-1", "rbpf.refine_passes: expected an integer in [0, 100], found -1"),
+        ("rbpf.refine_beams=-1", "rbpf.refine_beams: expected an integer in [0, 100000], found -1"),
         ("rbpf.match_beams=0", "rbpf.match_beams: expected an integer in [1, 100000], found 0"),
         ("rbpf.sigmas=[]", "rbpf.sigmas: expected a list of at least 1 values, each a finite number in (0, 10], found ()"),
         ("lidar.range_min=30", "lidar.range_min, lidar.range_max: expected range_min < range_max, found range_min=30.0, range_max=27.0"),
