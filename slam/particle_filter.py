@@ -245,12 +245,15 @@ def scan_reach(seq: ScanSequence, k: int) -> float:
     return float(np.sqrt((hx * hx + hy * hy).max())) if hx.size else 0.0
 
 
-def particle_maps(config: Config, center: F64, particles: int) -> ParticleMaps:
-    """Empty ``rbpf`` particle maps around ``center`` (geometry from ``[rbpf]`` and ``[map]``)."""
+def particle_maps(
+    config: Config, center: F64, particles: int, resolution: float = 0.0
+) -> ParticleMaps:
+    """Empty ``rbpf`` particle maps around ``center`` (geometry from ``[rbpf]`` and ``[map]``;
+    ``resolution``, when given, instead of the filter's cell size)."""
     rc = config.rbpf
     return ParticleMaps(
         particles,
-        rc.resolution or config.map.resolution,
+        resolution or rc.resolution or config.map.resolution,
         rc.dmax,
         tile=rc.tile,
         center=(float(center[0]), float(center[1])),

@@ -10,9 +10,11 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
    (:func:`refine_trajectory`, ``rbpf.refine_passes`` times);
 3. :class:`BetweenUpdates` — a pose for every scan: odometry between the nodes, the correction
    found at each node spread along the way (:func:`interpolate_between_updates`);
-4. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
+4. :class:`ScanRegistration` — every scan registered against the map of the node scans
+   (:func:`register_every_scan`, ``rbpf.register_scans``);
+5. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
-``rbpf`` runs all four (:func:`default_stages`); ``classic`` none (its filter outputs every
+``rbpf`` runs all five (:func:`default_stages`); ``classic`` none (its filter outputs every
 scan's pose and its own map). A stage is anything with a ``name`` and a ``run(output, config)``
 method (:class:`Stage`), so a caller can drop, reorder or add stages.
 """
@@ -27,7 +29,13 @@ from numpy.typing import NDArray
 
 from slam.config import Config, MapConfig
 from slam.geometry import compose, relative, spread_corrections, transform_points
-from slam.mapping import OccupancyGrid, _check_growth, growth_steps, likelihood_tables
+from slam.mapping import (
+    OccupancyGrid,
+    ParticleMaps,
+    _check_growth,
+    growth_steps,
+    likelihood_tables,
+)
 from slam.particle_filter import (
     FilterOutput,
     integrate_scan,
@@ -98,6 +106,20 @@ class BetweenUpdates:
         return dataclasses.replace(output, poses=poses)
 
 
+class ScanRegistration:
+    """Register every scan against the node map (``rbpf.register_scans``; after
+    :class:`BetweenUpdates`)."""
+
+    name = "scan registration"
+
+    def run(self, output: FilterOutput, config: Config) -> FilterOutput:
+        """Every scan's pose registered (:func:`register_every_scan`); the nodes' poses follow."""
+        if not config.rbpf.register_scans or output.poses is None or len(output.steps) == 0:
+            return output
+        poses = register_every_scan(output.scans, output.poses, output.steps, config)
+        return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps])
+
+
 class FinalMap:
     """The occupancy grid of the node scans at their final poses (after :class:`BetweenUpdates`)."""
 
@@ -114,7 +136,7 @@ class FinalMap:
 def default_stages(config: Config) -> list[Stage]:
     """The stages a run of ``config.filter.method`` goes through after its filter."""
     if config.filter.method == "rbpf":
-        return [LoopClosing(), Reregistration(), BetweenUpdates(), FinalMap()]
+        return [LoopClosing(), Reregistration(), BetweenUpdates(), ScanRegistration(), FinalMap()]
     return []
 
 
@@ -267,16 +289,46 @@ class RegistrationScans(NamedTuple):
         """The scans ``steps`` of ``seq`` with ``config``'s beam budgets."""
         rc = config.rbpf
         table = seq.hit_table(steps, rc.insert_beams, normals=rc.field == "plane")
-        width = max(1, min(rc.refine_beams or seq.num_beams, seq.num_beams))
-        ex = np.zeros((len(steps), width))
-        ey = np.zeros((len(steps), width))
-        counts = np.zeros(len(steps), dtype=np.int64)
-        for i, k in enumerate(steps):
-            hx, hy = seq.hits(int(k), width)
-            counts[i] = hx.size
-            ex[i, : hx.size] = hx
-            ey[i, : hy.size] = hy
-        return cls(table, ex, ey, counts)
+        return cls(table, *registration_beams(seq, steps, config))
+
+
+def registration_beams(
+    seq: ScanSequence, scans: NDArray[np.int64], config: Config
+) -> tuple[F64, F64, NDArray[np.int64]]:
+    """The robot-frame beams ``(ex, ey, counts)`` the scans ``scans`` of ``seq`` are registered
+    with (at most ``rbpf.refine_beams`` each, evenly spread; see :class:`RegistrationScans`)."""
+    width = max(1, min(config.rbpf.refine_beams or seq.num_beams, seq.num_beams))
+    ex = np.zeros((len(scans), width))
+    ey = np.zeros((len(scans), width))
+    counts = np.zeros(len(scans), dtype=np.int64)
+    for i, k in enumerate(scans):
+        hx, hy = seq.hits(int(k), width)
+        counts[i] = hx.size
+        ex[i, : hx.size] = hx
+        ey[i, : hy.size] = hy
+    return ex, ey, counts
+
+
+def registration_map(table: ScanHits, poses: F64, config: Config) -> ParticleMaps:
+    """The distance field the stages register against: the hits ``table`` (of the node scans)
+    at ``poses`` (one per node), with cells of ``rbpf.refine_resolution``."""
+    rc = config.rbpf
+    resolution = rc.refine_resolution or rc.resolution or config.map.resolution
+    maps = particle_maps(config, poses[0], 1, resolution=resolution)
+    reach = np.maximum.accumulate(table.reach) if len(poses) else table.reach  # farthest so far
+    maps.insert_scans(poses, table.xy, table.offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
+    return maps
+
+
+def _register(maps: ParticleMaps, poses: F64, ex: F64, ey: F64, counts: NDArray[np.int64],
+              config: Config) -> F64:  # fmt: skip
+    """``poses`` (one per row of ``ex``) registered against ``maps`` with ``rbpf``'s matcher."""
+    rc = config.rbpf
+    luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
+    return maps.register(
+        poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
+        coarse_stride=rc.coarse_stride,
+    )  # fmt: skip
 
 
 def refine_trajectory(
@@ -295,15 +347,32 @@ def refine_trajectory(
     here when not given; a caller running several passes extracts them once). Returns the
     refined poses ``(len(steps), 3)``.
     """
-    rc = config.rbpf
     if scans is None:
         scans = RegistrationScans.of(seq, steps, config)
     table, ex, ey, counts = scans
-    maps = particle_maps(config, poses[0], 1)
-    reach = np.maximum.accumulate(table.reach) if len(steps) else table.reach  # farthest so far
-    maps.insert_scans(poses, table.xy, table.offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
-    luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
-    return maps.register(
-        poses, ex, ey, counts, luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
-        coarse_stride=rc.coarse_stride,
-    )  # fmt: skip
+    return _register(registration_map(table, poses, config), poses, ex, ey, counts, config)
+
+
+REGISTER_CHUNK = 4096
+"""Scans whose beams :func:`register_every_scan` extracts at a time (bounds its memory)."""
+
+
+def register_every_scan(
+    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], config: Config
+) -> F64:
+    """Every scan of ``seq`` (placed at ``poses``, one per scan) registered against the map of
+    the node scans ``steps`` at ``poses[steps]``.
+
+    Between two updates a scan is placed by odometry (:func:`interpolate_between_updates`), which
+    errs by up to a few degrees there; the node map is the run's best picture of the building,
+    so each scan is matched against it from its placed pose. Scans are matched independently
+    (no scan's pose feeds another's), in chunks of :data:`REGISTER_CHUNK`. Returns ``(N, 3)``.
+    """
+    table = seq.hit_table(steps, config.rbpf.insert_beams, normals=config.rbpf.field == "plane")
+    maps = registration_map(table, poses[steps], config)
+    out = np.empty_like(poses)
+    for a in range(0, len(seq), REGISTER_CHUNK):
+        chunk = np.arange(a, min(a + REGISTER_CHUNK, len(seq)), dtype=np.int64)
+        ex, ey, counts = registration_beams(seq, chunk, config)
+        out[chunk] = _register(maps, poses[chunk], ex, ey, counts, config)
+    return out
