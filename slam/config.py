@@ -268,17 +268,17 @@ class RbpfConfig(Validated):
     instead of ``match_beams``, fr079's and mit-csail's (360 beams) relation errors fall on
     seeds 0–3 on average (docs/slam.md); logs of at most ``match_beams`` beams are unchanged."""
     refine_resolution: float = bounded(
-        0.1,
+        0.0,
         ge=0.0,
         le=10.0,
         test=lambda v: v == 0.0 or v >= 0.001,
         expected="0 (use the particle maps' cell) or a finite number in [0.001, 10]",
     )
     """Cell size (m) of the distance field the stages after the filter register scans against
-    (re-registration and :attr:`register_scans`); 0: the particle maps' own. Coarser than the
-    filter's 0.05 m because after the filter the field is built from every node scan of a long
-    run at once, whose walls are a few centimetres thick; on seeds 0 of the five benchmark logs
-    0.1 gives smaller relation errors than 0.05 on each (docs/slam.md)."""
+    (re-registration and :attr:`register_scans`); 0 (the default): the particle maps' own.
+    A coarser field (0.1 m) scores better on the benchmark's relations but worse against the
+    demo's ground truth and on a synthetic room, since an unsigned field pulls each scan towards
+    its cell centres (docs/slam.md)."""
     register_scans: bool = True
     """After the scans between updates are placed by odometry, register every scan (not only
     the update scans) against the map of the update scans at their final poses: the odometry
