@@ -302,10 +302,16 @@ def registration_beams(
     ey = np.zeros((len(scans), width))
     counts = np.zeros(len(scans), dtype=np.int64)
     for i, k in enumerate(scans):
-        hx, hy = seq.hits(int(k), width)
-        counts[i] = hx.size
-        ex[i, : hx.size] = hx
-        ey[i, : hy.size] = hy
+        all_x, all_y = seq.scan(int(k)).endpoints()
+        hit = ~np.isnan(all_x)
+        n = int(np.count_nonzero(hit))
+        if n > width:  # thinned as Scan.hits thins
+            hx, hy = seq.hits(int(k), width)
+            n = hx.size
+            ex[i, :n], ey[i, :n] = hx, hy
+        else:  # every return, without the copies of Scan.hits
+            ex[i, :n], ey[i, :n] = all_x[hit], all_y[hit]
+        counts[i] = n
     return ex, ey, counts
 
 
@@ -353,7 +359,7 @@ def refine_trajectory(
     return _register(registration_map(table, poses, config), poses, ex, ey, counts, config)
 
 
-REGISTER_CHUNK = 4096
+REGISTER_CHUNK = 1024
 """Scans whose beams :func:`register_every_scan` extracts at a time (bounds its memory)."""
 
 
