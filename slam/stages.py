@@ -293,11 +293,13 @@ class RegistrationScans(NamedTuple):
 
 
 def registration_beams(
-    seq: ScanSequence, scans: NDArray[np.int64], config: Config
+    seq: ScanSequence, scans: NDArray[np.int64], config: Config, most: int | None = None
 ) -> tuple[F64, F64, NDArray[np.int64]]:
     """The robot-frame beams ``(ex, ey, counts)`` the scans ``scans`` of ``seq`` are registered
-    with (at most ``rbpf.refine_beams`` each, evenly spread; see :class:`RegistrationScans`)."""
-    width = max(1, min(config.rbpf.refine_beams or seq.num_beams, seq.num_beams))
+    with: at most ``most`` each (0: all), evenly spread; by default ``rbpf.refine_beams`` (see
+    :class:`RegistrationScans`)."""
+    most = config.rbpf.refine_beams if most is None else most
+    width = max(1, min(most or seq.num_beams, seq.num_beams))
     ex = np.zeros((len(scans), width))
     ey = np.zeros((len(scans), width))
     counts = np.zeros(len(scans), dtype=np.int64)
@@ -371,7 +373,8 @@ def register_every_scan(
 
     Between two updates a scan is placed by odometry (:func:`interpolate_between_updates`), which
     errs by up to a few degrees there; the node map is the run's best picture of the building,
-    so each scan is matched against it from its placed pose. Scans are matched independently
+    so each scan is matched against it from its placed pose, with at most
+    ``rbpf.register_beams`` of its beams. Scans are matched independently
     (no scan's pose feeds another's), in chunks of :data:`REGISTER_CHUNK`. Returns ``(N, 3)``.
     """
     table = seq.hit_table(steps, config.rbpf.insert_beams, normals=config.rbpf.field == "plane")
@@ -379,6 +382,6 @@ def register_every_scan(
     out = np.empty_like(poses)
     for a in range(0, len(seq), REGISTER_CHUNK):
         chunk = np.arange(a, min(a + REGISTER_CHUNK, len(seq)), dtype=np.int64)
-        ex, ey, counts = registration_beams(seq, chunk, config)
+        ex, ey, counts = registration_beams(seq, chunk, config, config.rbpf.register_beams)
         out[chunk] = _register(maps, poses[chunk], ex, ey, counts, config)
     return out
