@@ -14,6 +14,7 @@ overhead of the interpreter and libraries is not part of them.
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -32,8 +33,13 @@ _CGROUP_LIMITS = (
 )
 
 
+@functools.cache
 def physical_memory_bytes() -> int:
-    """The machine's physical memory, or the cgroup's memory limit when that is lower (bytes)."""
+    """The machine's physical memory, or the cgroup's memory limit when that is lower (bytes).
+
+    Read once per process: a run checks its budget at every map growth, and the files behind it
+    do not change while it runs.
+    """
     try:
         total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
     except (ValueError, OSError, AttributeError):  # not POSIX: assume a small machine

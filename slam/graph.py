@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -36,6 +37,7 @@ from slam.config import Config, LoopConfig
 from slam.geometry import compose, path_along, relative, spread_corrections, wrap_angle
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
+from slam.kernels.threads import in_threads, threads
 from slam.mapping import ParticleMaps, likelihood_tables
 from slam.scans import ScanHits
 
@@ -100,6 +102,31 @@ def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
     return out
 
 
+def _submap_window(path: F64, j: int, i: int, lc: LoopConfig) -> tuple[int, int]:
+    """Nodes ``[lo, hi)`` of candidate ``(j, i)``'s submap: within ``submap_path`` of ``j`` along
+    the path and at least ``min_path / 2`` behind ``i``."""
+    lo = int(np.searchsorted(path, path[j] - lc.submap_path))
+    hi = int(
+        np.searchsorted(path, min(path[j] + lc.submap_path, path[i] - lc.min_path / 2), "right")
+    )
+    return lo, hi
+
+
+def window_chunks(windows: list[tuple[int, int]], parts: int) -> list[tuple[int, int]]:
+    """``[a, b)`` ranges of about equal length that cover ``windows`` in order, cut only where the
+    window changes, so that consecutive candidates sharing a submap stay in one range."""
+    n = len(windows)
+    cuts = [0]
+    for p in range(1, parts):
+        k = max(cuts[-1], (n * p) // parts)
+        while 0 < k < n and windows[k] == windows[k - 1]:
+            k += 1
+        if cuts[-1] < k < n:
+            cuts.append(k)
+    cuts.append(n)
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+
+
 def _detect(
     seq, steps, poses, path, config: Config, table: ScanHits | None = None
 ) -> tuple[list, int]:
@@ -111,23 +138,77 @@ def _detect(
     Consecutive candidates with the same submap share it. When the scan already fits where it
     is, the brute-force search is skipped and only Levenberg-Marquardt runs. ``table`` holds the
     nodes' hits (:func:`node_hits`; computed here when not given).
+
+    The candidates are independent: they are matched in ranges on the kernel threads
+    (:func:`slam.kernels.threads.in_threads`), cut where the submap changes
+    (:func:`window_chunks`), and the edges are joined in candidate order, so the result does not
+    depend on the number of threads.
     """
     if table is None:
         table = node_hits(seq, steps, config)
-    lc, rc = config.loops, config.rbpf
-    luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
-    coarse, coarse_inv = likelihood_tables(
-        np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
-    )
-    iterations = rc.max_iterations * lc.match_iteration_factor
+    lc = config.loops
     candidates = _candidates(poses, path, lc)
+    windows = [_submap_window(path, j, i, lc) for j, i in candidates]
+    context = _MatchContext.of(config)
+    ranges = window_chunks(windows, 4 * threads())
+    parts = in_threads(
+        [
+            partial(
+                _detect_range,
+                seq,
+                steps,
+                poses,
+                config,
+                table,
+                context,
+                candidates[a:b],
+                windows[a:b],
+            )
+            for a, b in ranges
+        ]
+    )
+    return [edge for part in parts for edge in part], len(candidates)
+
+
+class _MatchContext(NamedTuple):
+    """The likelihood tables a loop match uses (the filter's levels, the search's coarse one)."""
+
+    luts: F64
+    step_inv: float
+    coarse: F64
+    coarse_inv: float
+    iterations: int
+
+    @classmethod
+    def of(cls, config: Config) -> _MatchContext:
+        """The tables of ``config``'s ``[rbpf]`` and ``[loops]`` settings."""
+        lc, rc = config.loops, config.rbpf
+        luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
+        coarse, coarse_inv = likelihood_tables(
+            np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
+        )
+        return cls(
+            luts, step_inv, coarse, coarse_inv, rc.max_iterations * lc.match_iteration_factor
+        )
+
+
+def _detect_range(
+    seq,
+    steps,
+    poses: F64,
+    config: Config,
+    table: ScanHits,
+    context: _MatchContext,
+    candidates: list[tuple[int, int]],
+    windows: list[tuple[int, int]],
+) -> list:
+    """The loop edges of ``candidates`` (their submaps ``windows``): :func:`_detect`'s work on one
+    range of candidates, a submap built once for consecutive candidates that share it."""
+    lc, rc = config.loops, config.rbpf
+    luts, step_inv = context.luts, context.step_inv
     edges = []
     maps, window = None, (-1, -1)
-    for j, i in candidates:
-        lo = int(np.searchsorted(path, path[j] - lc.submap_path))
-        hi = int(
-            np.searchsorted(path, min(path[j] + lc.submap_path, path[i] - lc.min_path / 2), "right")
-        )
+    for (j, i), (lo, hi) in zip(candidates, windows, strict=True):
         if (lo, hi) != window:
             maps, window = _empty_map(poses[j], config), (lo, hi)
             insert_nodes(maps, table, np.arange(lo, hi, lc.submap_stride), poses, config)
@@ -140,10 +221,13 @@ def _detect(
         if close < lc.min_fit * ex.size:
             thin = slice(None, None, max(1, ex.size // lc.search_beams))
             start = correlative_search(
-                view, poses[i], ex[thin].copy(), ey[thin].copy(), coarse[0, 0], coarse_inv,
-                lc.search_xy, lc.search_step, lc.search_th, lc.search_th_step,
+                view, poses[i], ex[thin].copy(), ey[thin].copy(), context.coarse[0, 0],
+                context.coarse_inv, lc.search_xy, lc.search_step, lc.search_th,
+                lc.search_th_step,
             )[:3].copy()  # fmt: skip
-        refined, _, _ = match_one(view, start, ex, ey, luts, step_inv, iterations, rc.tolerance, 1)
+        refined, _, _ = match_one(
+            view, start, ex, ey, luts, step_inv, context.iterations, rc.tolerance, 1
+        )
         shift = refined - poses[i]
         if np.hypot(shift[0], shift[1]) > lc.search_xy or abs(wrap_angle(shift[2])) > lc.search_th:
             continue  # slid out of the searched window (along a corridor): unverified
@@ -157,7 +241,7 @@ def _detect(
         edges.append(
             (j, i, relative(poses[j], refined), _edge_information(hessian, refined, lc, rc))
         )
-    return edges, len(candidates)
+    return edges
 
 
 def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:

@@ -221,3 +221,58 @@ def test_close_loops_keeps_a_consistent_trajectory(small_log):
     result = close_loops(seq, steps, truth[steps], config)
     np.testing.assert_array_equal(result.poses, truth[steps])  # nothing to repair
     assert result.accepted > 5
+
+
+def test_window_chunks_cut_only_where_the_submap_changes():
+    from slam.graph import window_chunks
+
+    windows = [(0, 5)] * 7 + [(2, 8)] * 2 + [(3, 9)] + [(4, 12)] * 6
+    for parts in (1, 2, 3, 4, 8, 40):
+        ranges = window_chunks(windows, parts)
+        assert ranges[0][0] == 0 and ranges[-1][1] == len(windows)
+        assert all(a < b for a, b in ranges)
+        assert all(b == c for (_, b), (c, _) in zip(ranges[:-1], ranges[1:], strict=True))
+        assert all(windows[a] != windows[a - 1] for a, _ in ranges[1:])  # cut at a change only
+        assert len(ranges) <= min(parts, 4)  # four distinct windows: at most four ranges
+    assert window_chunks(windows, 2) == [(0, 9), (9, 16)]  # the middle (8) moves to the change
+    assert window_chunks([], 4) == []
+
+
+def test_loop_search_does_not_depend_on_the_thread_count(small_log):
+    """The local and global loop searches split their candidates over the kernel threads; the
+    edges, in order and to the bit, are those of one thread."""
+    import numba
+
+    from slam.backend.global_loops import detect_global
+    from slam.config import load_config
+    from slam.geometry import path_along
+    from slam.graph import _detect
+
+    seq, truth, _ = small_log
+    # the small loop is 34 m long: keyframes every 0.5 m and a lower score bar give the global
+    # search closures to find on it
+    config = load_config("", None, ["backend.keyframe_path=0.5", "backend.min_score=0.3"])
+    steps = np.arange(0, len(seq), 8)
+    true_nodes = truth[steps]
+    moves = relative(true_nodes[:-1], true_nodes[1:])
+    moves[:, :2] *= 1.015
+    moves[:, 2] += np.deg2rad(5.0) / len(moves)
+    drifted = np.vstack([true_nodes[:1], compose_all(true_nodes[0], moves)])
+    path = path_along(drifted)
+    found = {}
+    before = numba.get_num_threads()
+    try:
+        for n in (1, 2):
+            numba.set_num_threads(n)
+            local, count = _detect(seq, steps, drifted, path, config)
+            glob, searched = detect_global(seq, steps, drifted, path, config)
+            found[n] = (local, count, glob, searched)
+    finally:
+        numba.set_num_threads(before)
+    (l1, c1, g1, s1), (l2, c2, g2, s2) = found[1], found[2]
+    assert len(l1) > 5 and len(g1) > 5  # both searches found closures
+    assert (c1, s1) == (c2, s2)
+    for a, b in zip(l1 + g1, l2 + g2, strict=True):
+        assert a[:2] == b[:2]
+        np.testing.assert_array_equal(a[2], b[2])
+        np.testing.assert_array_equal(a[3], b[3])

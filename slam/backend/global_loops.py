@@ -32,6 +32,9 @@ keyframes and the do-no-harm rule are those of :func:`slam.graph.close_loops`.
 
 from __future__ import annotations
 
+from functools import partial
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -50,6 +53,7 @@ from slam.graph import (
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
 from slam.kernels.graph import edge_error, fit_counts
+from slam.kernels.threads import in_threads, threads
 from slam.mapping import likelihood_tables
 from slam.scans import ScanHits
 
@@ -70,6 +74,47 @@ def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
     return np.ascontiguousarray(hx), np.ascontiguousarray(hy)
 
 
+class _Stretches(NamedTuple):
+    """The submaps of one round as the search sees them (nodes at their current poses)."""
+
+    subs: list[tuple[int, int]]
+    """Node range ``[lo, hi)`` of every submap."""
+    centre: F64
+    """``(S, 2)`` mean position of each submap's nodes."""
+    spread: F64
+    """``(S,)`` largest distance of a submap's node from its centre."""
+    end_path: F64
+    """``(S,)`` path position of each submap's last node."""
+    mid_path: F64
+    """``(S,)`` path position halfway through each submap."""
+    closed_at: F64
+    """Path position of the keyframe of every local closure."""
+    closed_sub: NDArray[np.int64]
+    """The submap that holds the earlier node of every local closure."""
+
+    @classmethod
+    def of(cls, x: F64, path: F64, length: float, local: list) -> _Stretches:
+        """The submaps of ``length`` metres of ``path`` at the node poses ``x``; ``local``: the
+        local closures ``(j, i, z, info)``."""
+        subs = stretches(path, length)
+        centre = np.array([x[lo:hi, :2].mean(axis=0) for lo, hi in subs])
+        spread = np.array(
+            [np.hypot(*(x[lo:hi, :2] - centre[s]).T).max() for s, (lo, hi) in enumerate(subs)]
+        )
+        sub_of = np.zeros(x.shape[0], dtype=np.int64)
+        for s, (lo, hi) in enumerate(subs):
+            sub_of[lo:hi] = s
+        return cls(
+            subs,
+            centre,
+            spread,
+            np.array([path[hi - 1] for _, hi in subs]),
+            np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs]),
+            np.array([path[i] for _, i, _, _ in local]),
+            np.array([sub_of[j] for j, _, _, _ in local], dtype=np.int64),
+        )
+
+
 def detect_global(
     seq, steps, x: F64, path: F64, config: Config, local: list = (), table: ScanHits | None = None
 ) -> tuple[list, int]:
@@ -78,32 +123,53 @@ def detect_global(
     See the module docstring (steps 1-3); :func:`consistent` is step 4. A submap that a local
     closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node within
     ``keyframe_path`` of the keyframe is not searched again: that loop is closed. ``table``:
-    the nodes' hits (:func:`slam.graph.node_hits`; computed when first needed if not given).
+    the nodes' hits (:func:`slam.graph.node_hits`; computed here when not given).
+
+    Keyframes are independent: ranges of them are searched on the kernel threads
+    (:func:`slam.kernels.threads.in_threads`), each with its own :class:`SubmapCache`, and the
+    closures are joined in keyframe order, so the result does not depend on the thread count.
     """
-    bc, lc, rc = config.backend, config.loops, config.rbpf
-    subs = stretches(path, bc.submap_length)
-    centre = np.array([x[lo:hi, :2].mean(axis=0) for lo, hi in subs])
-    spread = np.array(
-        [np.hypot(*(x[lo:hi, :2] - centre[s]).T).max() for s, (lo, hi) in enumerate(subs)]
+    bc = config.backend
+    if table is None:
+        table = node_hits(seq, steps, config)
+    frames = keyframes(path, bc.keyframe_path)
+    st = _Stretches.of(x, path, bc.submap_length, list(local))
+    cuts = np.linspace(0, frames.size, 4 * threads() + 1).round().astype(np.int64)
+    parts = in_threads(
+        [
+            partial(_search_keyframes, seq, steps, x, path, config, table, st, frames[a:b])
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+            if b > a
+        ]
     )
-    end_path = np.array([path[hi - 1] for _, hi in subs])
-    mid_path = np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs])
+    edges = [edge for part, _ in parts for edge in part]
+    return edges, sum(searched for _, searched in parts)
+
+
+def _search_keyframes(
+    seq,
+    steps,
+    x: F64,
+    path: F64,
+    config: Config,
+    table: ScanHits,
+    st: _Stretches,
+    frames: NDArray[np.int64],
+) -> tuple[list, int]:
+    """:func:`detect_global`'s search from the keyframes ``frames``: their verified closures
+    and the searches made."""
+    bc, lc, rc = config.backend, config.loops, config.rbpf
     cache = SubmapCache(seq, steps, x, config, table=table)
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
-    sub_of = np.zeros(x.shape[0], dtype=np.int64)
-    for s, (lo, hi) in enumerate(subs):
-        sub_of[lo:hi] = s
-    closed_at = np.array([path[i] for _, i, _, _ in local])
-    closed_sub = np.array([sub_of[j] for j, _, _, _ in local], dtype=np.int64)
     edges, searched = [], 0
-    for i in keyframes(path, bc.keyframe_path):
-        eligible = np.flatnonzero(end_path <= path[i] - lc.min_path)
+    for i in frames:
+        eligible = np.flatnonzero(st.end_path <= path[i] - lc.min_path)
         if eligible.size == 0:
             continue
-        gap = path[i] - mid_path[eligible]
+        gap = path[i] - st.mid_path[eligible]
         wxy = np.minimum(bc.window_xy_min + bc.drift_xy * gap, bc.window_xy_max)
         wth = np.minimum(bc.window_th_min + bc.drift_th * gap, bc.window_th_max)
-        reach = np.maximum(np.hypot(*(centre[eligible] - x[i, :2]).T) - spread[eligible], 0.0)
+        reach = np.maximum(np.hypot(*(st.centre[eligible] - x[i, :2]).T) - st.spread[eligible], 0.0)
         ok = reach <= wxy
         if not ok.any():
             continue
@@ -116,10 +182,10 @@ def detect_global(
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         for q in order:
             s = int(eligible[ok][q])
-            near = np.abs(closed_at - path[i]) <= bc.keyframe_path
-            if np.any(near & (closed_sub == s)):
+            near = np.abs(st.closed_at - path[i]) <= bc.keyframe_path
+            if np.any(near & (st.closed_sub == s)):
                 continue
-            lo, hi = subs[s]
+            lo, hi = st.subs[s]
             pyr = cache.pyramid(lo, hi)
             if pyr is None:
                 continue

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def splat_likelihood(
     hx: np.ndarray, hy: np.ndarray, ox: float, oy: float, res: float, sigma: float,
     grid: np.ndarray,
@@ -51,7 +51,7 @@ def splat_likelihood(
                     grid[iy, ix] = v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def max_pyramid(grid: np.ndarray, levels: int) -> np.ndarray:
     """``(levels, H, W)``: level ``h`` is the max of ``grid`` over ``[x, x+2^h) × [y, y+2^h)``.
 
@@ -97,7 +97,7 @@ def _score(pyramid: np.ndarray, lev: int, bxs: np.ndarray, bys: np.ndarray, a: i
     return total / n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bnb_search(
     pyramid: np.ndarray, ox: float, oy: float, res: float, px: np.ndarray, py: np.ndarray,
     cx: float, cy: float, cth: float, window_xy: float, window_th: float, th_step: float,

@@ -232,7 +232,7 @@ def table_lookup(row: np.ndarray, step_inv: float, d: float) -> float:
     return row[i] + f * (row[i + 1] - row[i])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def normal_equations(
     view: FieldView,
     x: float,
@@ -374,7 +374,7 @@ def accumulate(
     return cost, inliers
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def match_one(
     view: FieldView,
     pose: np.ndarray,
@@ -784,7 +784,7 @@ def insert_serial(
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def insert_scans(
     pool: TilePool,
     poses: np.ndarray,

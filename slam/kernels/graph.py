@@ -103,7 +103,7 @@ def scan_cost(
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def correlative_search(
     view: FieldView,
     pose: np.ndarray,
@@ -409,7 +409,7 @@ def solve_system(
     return x, used
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit_counts(
     view: FieldView,
     pose: np.ndarray,
