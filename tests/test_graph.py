@@ -176,6 +176,15 @@ def compose_all(start, moves):
     return np.array(out)
 
 
+def opened_loop(true_nodes):
+    """``true_nodes`` with the loop opened the way a filter drifts: every step over-turns a little
+    and over-counts its length by 1.5 %, until the path has turned 5 degrees too far."""
+    moves = relative(true_nodes[:-1], true_nodes[1:])
+    moves[:, :2] *= 1.015
+    moves[:, 2] += np.deg2rad(5.0) / len(moves)
+    return np.vstack([true_nodes[:1], compose_all(true_nodes[0], moves)])
+
+
 def relation_error(poses, truth, a, b):
     """Mean translational error of the relative poses ``a → b`` (m)."""
     diff = relative(poses[a], poses[b]) - relative(truth[a], truth[b])
@@ -188,12 +197,7 @@ def test_close_loops_repairs_an_opened_loop(small_log):
     seq, truth, config = small_log
     steps = np.arange(0, len(seq), 8)
     true_nodes = truth[steps]
-    # open the loop the way a filter drifts: every step over-turns a little and over-counts its
-    # length by 1.5 %, until the path has turned 5 degrees too far
-    moves = relative(true_nodes[:-1], true_nodes[1:])
-    moves[:, :2] *= 1.015
-    moves[:, 2] += np.deg2rad(5.0) / len(moves)
-    broken = np.vstack([true_nodes[:1], compose_all(true_nodes[0], moves)])
+    broken = opened_loop(true_nodes)
     result = close_loops(seq, steps, broken, config)
     assert result.accepted > 5
     assert result.correction_max_m > 0.1
@@ -253,11 +257,7 @@ def test_loop_search_does_not_depend_on_the_thread_count(small_log):
     # search closures to find on it
     config = load_config("", None, ["backend.keyframe_path=0.5", "backend.min_score=0.3"])
     steps = np.arange(0, len(seq), 8)
-    true_nodes = truth[steps]
-    moves = relative(true_nodes[:-1], true_nodes[1:])
-    moves[:, :2] *= 1.015
-    moves[:, 2] += np.deg2rad(5.0) / len(moves)
-    drifted = np.vstack([true_nodes[:1], compose_all(true_nodes[0], moves)])
+    drifted = opened_loop(truth[steps])
     path = path_along(drifted)
     found = {}
     before = numba.get_num_threads()
