@@ -70,6 +70,16 @@ class RobotConfig(Validated):
     """Cut-off of the low-pass filter on the gyro z rate (Hz); 0 disables filtering."""
     max_imu_gap_s: float = bounded(0.1, ge=0.0, le=60.0)
     """Longest stretch past the IMU's last sample that odometry may hold the last rate (s)."""
+    odometry_sync: str = bounded("auto", choices=("auto", "scan", "stream"))
+    """The odometry of a log that gives both the pose written with each scan and a stream of
+    odometry messages (CARMEN ``FLASER`` and ``ODOM``): ``"scan"`` the written poses,
+    ``"stream"`` the messages interpolated at each scan's time plus ``odometry_lag_s``, ``"auto"``
+    whichever of the written poses and the stream at a lag within ±0.3 s agrees best with the
+    rotations the laser measures (:mod:`slam.calibration`; ``metrics.json`` says what it
+    chose). Logs with one odometry only use it as it is."""
+    odometry_lag_s: float = bounded(0.0, ge=-10.0, le=10.0)
+    """With ``odometry_sync = "stream"``: the stream is read this long after each scan's time
+    (s; negative: before it)."""
 
 
 @dataclass(frozen=True)

@@ -299,6 +299,8 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     from slam.scans import LogScans
 
     scans = LogScans.from_log(log, config)
+    if scans.odometry_sync is not None:
+        base["odometry_sync"] = scans.odometry_sync.as_dict()
     beams = int(log.scans.ranges.shape[1])  # type: ignore[union-attr]
     _check_memory(log.name, len(scans), beams, scans.odometry, scans.range_max, config)
     bar = ProgressObserver(len(scans), enabled=progress, label=f"{log.name} {method}")

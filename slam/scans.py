@@ -21,6 +21,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,6 +29,9 @@ from numpy.typing import ArrayLike, NDArray
 from slam.config import Config, LidarConfig
 from slam.errors import DataError, UsageError
 from slam.io.log import Log
+
+if TYPE_CHECKING:
+    from slam.calibration import OdometrySync
 
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
@@ -437,6 +441,8 @@ class LogScans:
     """Longest hit (m): ``lidar.range_max``, else the log's; at most ``no_return``."""
     no_return: float
     """"No return" reading (m): ``lidar.no_return``, else the log's."""
+    odometry_sync: OdometrySync | None = None
+    """Which odometry ``robot.odometry_sync`` chose for a log that has two (None: the log has one)."""
 
     @classmethod
     def from_log(cls, log: Log, config: Config) -> LogScans:
@@ -467,7 +473,7 @@ class LogScans:
         )
         if sparse is not None:  # the pipeline records warnings in metrics.json and on stderr
             warnings.warn(sparse, DataWarning, stacklevel=2)
-        return cls(
+        selected = cls(
             log=log,
             indices=idx,
             odometry=np.ascontiguousarray(odometry[idx], dtype=np.float64),
@@ -475,6 +481,30 @@ class LogScans:
             range_max=float(min(range_max, no_return)),
             no_return=float(no_return),
         )
+        return selected.synchronised(config)
+
+    def synchronised(self, config: Config) -> LogScans:
+        """These scans with the odometry ``robot.odometry_sync`` picks when the log gives both
+        a pose with each scan and a stream of odometry messages (:mod:`slam.calibration`);
+        unchanged when it gives one of them, or with ``"scan"``."""
+        from slam.calibration import OdometrySync, stream_at, synchronise_odometry
+
+        mode, stream = config.robot.odometry_sync, self.log.odometry
+        if mode == "scan" or stream is None or len(stream.time) < 2 or len(self) < 2:
+            return self
+        if self.log.scans.odometry is None:  # type: ignore[union-attr]
+            return self  # the stream is the only odometry: scan_odometry interpolated it
+        if mode == "stream":
+            lag = config.robot.odometry_lag_s
+            poses = stream_at(stream.time, stream.poses, self.times + lag)
+            nan = float("nan")
+            sync = OdometrySync("stream", lag, nan, nan, lag, nan, 0)
+        else:
+            poses, sync = synchronise_odometry(
+                lambda k: self.scan(k).hits(), self.times, self.odometry,
+                (stream.time, stream.poses), config,
+            )  # fmt: skip
+        return replace(self, odometry=np.ascontiguousarray(poses), odometry_sync=sync)
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])

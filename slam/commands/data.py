@@ -13,12 +13,16 @@ List and verify the datasets of the registry (data/datasets.toml) under the data
 * ``slam data inspect FILE [--json]``: what a ROS bag / MCAP file / ROS 2 bag folder, CARMEN log
   or ECE276A folder holds (topics, message types, counts, rates, time span, tf frames, or the
   loader's stream summary) and the ``slam run`` command that would use it.
+* ``slam data calibrate LOG [--config F] [--set K=V] [--json]``: which odometry of the log agrees
+  with its laser and where the laser sits on the robot, measured from the data
+  (:mod:`slam.calibration`), beside what the log states.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -28,7 +32,9 @@ from slam.commands._common import (
     add_actions,
     add_bag_arguments,
     add_command,
+    add_config_arguments,
     add_data_dir_argument,
+    add_log_argument,
     bag_options_from,
     data_dir_from,
 )
@@ -68,6 +74,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     inspect.add_argument("--json", action="store_true", help="print the report as JSON")
     add_bag_arguments(inspect)
     inspect.set_defaults(func=run_inspect)
+
+    calibrate = actions.add_parser(
+        "calibrate",
+        help="measure the odometry's timing and the laser's mount from a log's own data",
+        description="Measure, from the log's scans and odometry and without ground truth, which "
+        "of its odometries (the poses written with the scans, the odometry messages at a lag) "
+        'agrees with the laser (what `slam run` uses with robot.odometry_sync = "auto") and '
+        "where the laser sits on the robot (a hand-eye fit over the turns), beside what the log "
+        "states (docs/slam.md).",
+    )
+    add_log_argument(calibrate, "LOG")
+    add_data_dir_argument(calibrate)
+    add_config_arguments(calibrate)
+    calibrate.add_argument("--json", action="store_true", help="print the report as JSON")
+    calibrate.set_defaults(func=run_calibrate)
 
 
 def _data_dir_origin(args: argparse.Namespace) -> str:
@@ -219,3 +240,81 @@ def run_inspect(args: argparse.Namespace) -> int:
     report = inspect_path(args.path, bag_options_from(args))
     print(json.dumps(report, indent=2) if args.json else format_inspection(report), end="")
     return 0
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """``slam data calibrate``: the odometry synchronisation and the mount estimate."""
+    from slam.calibration import calibrate_mount
+    from slam.commands.run import overrides_from
+    from slam.config import load_config
+    from slam.io.sources import resolve
+    from slam.pipeline import load_source
+    from slam.scans import LogScans
+
+    data_dir = data_dir_from(args)
+    ref = resolve(args.name, data_dir, where="slam data calibrate LOG")
+    name = ref.config_name if ref.shipped_config else ""
+    config = load_config(name, args.config, overrides_from(args))
+    log = load_source(args.name, data_dir, config).log
+    scans = LogScans.from_log(log, config)
+    sync = scans.odometry_sync
+    try:
+        mount = calibrate_mount(scans, config)
+    except ValueError as exc:
+        from slam.errors import DataError
+
+        raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
+    stated = [float(v) for v in log.scans.laser_offset]  # type: ignore[union-attr]
+    report = {
+        "log": str(log.source or args.name),
+        "scans": len(scans),
+        "odometry_sync": None if sync is None else sync.as_dict(),
+        "mount": mount.as_dict(),
+        "stated_mount": {"x": stated[0], "y": stated[1], "yaw_deg": math.degrees(stated[2])},
+    }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    for line in _calibration_lines(report, config.robot.odometry_sync):
+        print(line)
+    return 0
+
+
+def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
+    """The text form of a ``slam data calibrate`` report."""
+    lines = [f"{report['log']}: {report['scans']} scans"]
+    sync = report["odometry_sync"]
+    if sync is None:
+        lines.append("odometry  the log has one odometry; nothing to choose")
+    elif sync["pairs"] == 0:
+        lines.append(f"odometry  {sync['source']} at {sync['lag_s']:+.2f} s (set, not measured)")
+    else:
+        lines.append(
+            f"odometry  the poses written with the scans disagree with the laser's rotations by "
+            f"{sync['scan_disagreement_deg']:.3f}° (trimmed RMS over {sync['pairs']} pairs of "
+            f"consecutive scans), the odometry messages at {sync['stream_lag_s']:+.2f} s by "
+            f"{sync['stream_disagreement_deg']:.3f}°"
+        )
+        chosen = (
+            "the written poses"
+            if sync["source"] == "scan"
+            else (f"the messages at {sync['lag_s']:+.2f} s")
+        )
+        lines.append(f"          robot.odometry_sync = {json.dumps(mode)}: {chosen}")
+    m, st = report["mount"], report["stated_mount"]
+    lines.append(
+        f"laser     measured at x {m['x']:+.3f} m, y {m['y']:+.3f} m, yaw {m['yaw_deg']:+.2f}° on "
+        f"the robot (± {m['std_x']:.3f} m, {m['std_y']:.3f} m, {m['std_yaw_deg']:.2f}°; "
+        f"{m['pairs']} turning pairs), residual {m['residual_m'] * 100:.1f} cm"
+    )
+    lines.append(
+        f"          the log states x {st['x']:+.3f} m, y {st['y']:+.3f} m, yaw "
+        f"{st['yaw_deg']:+.2f}°: residual {m['residual_stated_m'] * 100:.1f} cm"
+    )
+    lines.append(
+        f"          to use the measured mount: --set lidar.use_log_laser_pose=false "
+        f"--set lidar.x={m['x']:.3f} --set lidar.y={m['y']:.3f} "
+        f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/slam.md: ground truth may "
+        f"refer to the laser or to the odometry point)"
+    )
+    return lines

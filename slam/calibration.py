@@ -1,0 +1,348 @@
+"""How a log's odometry relates to its laser, measured from the log itself (no ground truth).
+
+Two things a log may state wrongly or not at all, and that the scans can check:
+
+**When the odometry was taken** (:func:`synchronise_odometry`, run by ``slam run`` when
+``robot.odometry_sync = "auto"``). A CARMEN log gives every scan an odometry pose, and also the
+stream of ``ODOM`` messages. The pose written with a scan is often the last ``ODOM`` message
+before it, held (aces: 7215 of 7374 scans; 0.02–0.2 s stale), or the stream runs ahead of or
+behind the laser (fr079: about 0.14 s). Either puts the odometry's turns at the wrong scans, which
+the filter must then undo. Candidates: the pose written with each scan, and the stream
+interpolated at each scan's time plus a lag in ``±max_lag`` (``lag_step`` apart). For evenly
+spread pairs of consecutive scans, the rotation between them is measured by the filter's own
+matcher (scan ``j`` registered onto a one-scan distance field of scan ``i``; a pair whose beams do
+not fit is dropped: :func:`pair_motions`) and compared with each candidate's rotation; the
+candidate with the smallest trimmed RMS disagreement wins, a stream candidate only when it beats
+the written poses by ``min_gain``. Logs whose stream times cannot be trusted keep their written
+poses by that rule (intel's ``ODOM`` times are arrival times of bursts and go backwards 808
+times; interpolating them disagrees with the laser more than the written poses do).
+
+**Where the laser sits** (:func:`calibrate_mount`, reported by ``slam data calibrate``, never
+applied by itself): for pairs of scans between which the odometry turned, the laser's motion
+``A`` (matched as above) and the odometry's ``B`` obey ``A = L⁻¹ ⊕ B ⊕ L`` with ``L`` the laser's
+pose on the robot, which is linear in ``(x, y, cos yaw, sin yaw)``; a trimmed least-squares fit
+gives ``L`` and a bootstrap its spread. What it measures is the laser against the odometry's
+reference point; a log's ground truth may be expressed at either (docs/slam.md, "The laser's
+mount"), so the estimate is printed beside what the log states, for the user to decide.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.config import Config
+from slam.geometry import interpolate_poses, relative, wrap_angle
+from slam.kernels.field import match_one
+from slam.kernels.graph import fit_counts
+from slam.mapping import ParticleMaps, likelihood_tables
+
+F64 = NDArray[np.float64]
+HitsOf = Callable[[int], tuple[F64, F64]]
+"""Robot-frame (or laser-frame) returns ``(ex, ey)`` of scan ``k``."""
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Which scan pairs the measurements use, and how they are weighed."""
+
+    pairs: int = 1000
+    """Pairs of consecutive scans the odometry synchronisation compares, evenly spread."""
+    max_lag: float = 0.3
+    """The stream is tried from this far before each scan to this far after it (s)."""
+    lag_step: float = 0.02
+    """... in steps of this (s)."""
+    min_gain: float = 0.1
+    """A stream candidate replaces the poses written with the scans only when its disagreement
+    with the laser is at least this share smaller."""
+    trim: float = 0.05
+    """Share of the pairs with the largest disagreement left out of the comparison."""
+    min_turn: float = 0.1
+    """The mount's pairs: odometry rotation at least this (rad) ..."""
+    max_dt: float = 3.0
+    """... within this time (s) ..."""
+    max_step: float = 1.0
+    """... and this odometry translation (m)."""
+    mount_pairs: int = 600
+    """At most this many mount pairs, evenly spread over the log."""
+    mount_trim: float = 0.2
+    """Share of the mount pairs with the largest residuals dropped in the hand-eye fit."""
+    bootstrap: int = 100
+    """Bootstrap resamplings of the mount pairs for the estimate's spread (seeded)."""
+    max_range: float = 20.0
+    """Returns farther than this (m) are not matched (far returns carry the matcher's noise)."""
+    min_fit: float = 0.6
+    """A pair counts when this share of scan ``j``'s returns lands within ``fit_distance``."""
+    fit_distance: float = 0.1
+    """See ``min_fit`` (m)."""
+
+
+def pair_motions(
+    hits_of: HitsOf,
+    odometry: F64,
+    pairs: NDArray[np.int64],
+    config: Config,
+    settings: CalibrationSettings,
+) -> tuple[F64, NDArray[np.int64]]:
+    """The motions ``(K', 3)`` from scan ``i`` to scan ``j`` of the ``pairs`` that fit, in the
+    frame ``hits_of`` gives the returns in (scan ``j`` registered onto a one-scan distance field
+    of scan ``i`` by the filter's matcher, from the odometry's motion), and which pairs those are
+    (rows of ``pairs``)."""
+    rc, lc = config.rbpf, config.loops
+    luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
+    iterations = rc.max_iterations * lc.match_iteration_factor
+    motions, kept = [], []
+    for row, (i, j) in enumerate(pairs):
+        hx, hy = _near(hits_of(int(i)), settings.max_range)
+        ex, ey = _near(hits_of(int(j)), settings.max_range)
+        if hx.size < lc.min_beams or ex.size < lc.min_beams:
+            continue
+        maps = ParticleMaps(
+            1, rc.resolution or config.map.resolution, rc.dmax, tile=rc.tile,
+            size_m=2.0 * settings.max_range + 2.0, capacity=256,
+        )  # fmt: skip
+        reach = float(np.sqrt((hx * hx + hy * hy).max())) + rc.dmax + 1.0
+        maps.insert_scans(
+            np.zeros((1, 3)), np.vstack([hx, hy]), np.array([0, hx.size]), np.array([reach]), 0.0
+        )
+        view = maps.field(0)
+        start = relative(odometry[i], odometry[j])
+        found, _, _ = match_one(view, start, ex, ey, luts, step_inv, iterations, rc.tolerance, 1)
+        _, close = fit_counts(view, found, ex, ey, settings.fit_distance)
+        if close >= settings.min_fit * ex.size:
+            motions.append(found)
+            kept.append(row)
+    return np.array(motions).reshape(-1, 3), np.array(kept, dtype=np.int64)
+
+
+def _near(hits: tuple[F64, F64], max_range: float) -> tuple[F64, F64]:
+    ex, ey = hits
+    keep = ex * ex + ey * ey <= max_range * max_range
+    return np.ascontiguousarray(ex[keep]), np.ascontiguousarray(ey[keep])
+
+
+# --- when the odometry was taken -------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OdometrySync:
+    """Which odometry :func:`synchronise_odometry` chose, and why."""
+
+    source: str
+    """``"scan"`` (the poses written with the scans) or ``"stream"`` (the odometry messages
+    interpolated at each scan's time plus ``lag_s``)."""
+    lag_s: float
+    """The stream's lag (s; 0 for ``"scan"``): negative reads the stream before the scan."""
+    disagreement_deg: float
+    """Trimmed RMS difference between the laser's and the chosen odometry's rotation over the
+    compared pairs (degrees)."""
+    scan_disagreement_deg: float
+    """The same for the poses written with the scans."""
+    stream_lag_s: float
+    """The stream's best lag (s), chosen or not."""
+    stream_disagreement_deg: float
+    """The disagreement of the stream at that lag (degrees)."""
+    pairs: int
+    """Pairs of consecutive scans compared (those whose match fitted)."""
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        """The choice as plain values (for ``metrics.json``)."""
+        out = dataclasses.asdict(self)
+        return {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
+
+
+def _disagreement(first: F64, second: F64, laser_turn: F64, trim: float) -> float:
+    """Trimmed RMS (degrees) of the rotation from poses ``first`` to ``second`` minus
+    ``laser_turn``, pair by pair."""
+    turn = relative(first, second)[:, 2]
+    d = np.sort(np.abs(wrap_angle(turn - laser_turn)))
+    d = d[: max(1, int(round((1.0 - trim) * d.size)))]
+    return float(np.degrees(np.sqrt(np.mean(d * d))))
+
+
+def stream_at(stream_times: F64, stream_poses: F64, times: F64) -> F64:
+    """The odometry stream interpolated at ``times`` (messages sorted by time first; times
+    outside the stream hold its end poses)."""
+    order = np.argsort(stream_times, kind="stable")
+    return interpolate_poses(stream_times[order], stream_poses[order], times)
+
+
+def synchronise_odometry(
+    hits_of: HitsOf,
+    times: F64,
+    written: F64,
+    stream: tuple[F64, F64],
+    config: Config,
+    settings: CalibrationSettings | None = None,
+) -> tuple[F64, OdometrySync]:
+    """The odometry at each scan that agrees best with the laser (module docstring): ``written``
+    ``(N, 3)`` are the poses written with the scans at ``times``, ``stream`` the log's odometry
+    messages ``(times, poses)``, ``hits_of`` the scans' returns. Returns the chosen ``(N, 3)``
+    poses and the choice."""
+    settings = settings or CalibrationSettings()
+    n = len(times)
+    starts = np.unique(np.linspace(0, n - 2, min(settings.pairs, n - 1)).round().astype(np.int64))
+    pairs = np.c_[starts, starts + 1]
+    laser, kept = pair_motions(hits_of, written, pairs, config, settings)
+    pairs = pairs[kept]
+    if len(pairs) < 10:  # too little to judge by: keep what the log says
+        nan = float("nan")
+        return written, OdometrySync("scan", 0.0, nan, nan, nan, nan, len(pairs))
+    i, j = pairs[:, 0], pairs[:, 1]
+    at_scan = _disagreement(written[i], written[j], laser[:, 2], settings.trim)
+    steps = int(round(settings.max_lag / settings.lag_step))
+    best_lag, best = 0.0, np.inf
+    for lag in np.arange(-steps, steps + 1) * settings.lag_step:
+        first = stream_at(stream[0], stream[1], times[i] + lag)
+        second = stream_at(stream[0], stream[1], times[j] + lag)
+        value = _disagreement(first, second, laser[:, 2], settings.trim)
+        if value < best - 1e-12:
+            best_lag, best = float(lag), value
+    best_lag = round(best_lag, 6)
+    if best <= (1.0 - settings.min_gain) * at_scan:
+        poses = stream_at(stream[0], stream[1], times + best_lag)
+        return poses, OdometrySync("stream", best_lag, best, at_scan, best_lag, best, len(pairs))
+    return written, OdometrySync("scan", 0.0, at_scan, at_scan, best_lag, best, len(pairs))
+
+
+# --- where the laser sits --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MountEstimate:
+    """The laser's pose on the robot (relative to the odometry's reference point) as the data
+    shows it."""
+
+    x: float
+    """Forward offset (m)."""
+    y: float
+    """Leftward offset (m)."""
+    yaw: float
+    """Rotation of the laser relative to the robot's heading (rad)."""
+    std_x: float
+    """Bootstrap standard deviation of ``x`` (m)."""
+    std_y: float
+    """... of ``y`` (m)."""
+    std_yaw: float
+    """... of ``yaw`` (rad)."""
+    pairs: int
+    """Turning pairs that fitted and entered the estimate."""
+    residual_m: float
+    """Median residual of the kept pairs under the estimate (m)."""
+    residual_stated_m: float
+    """Median residual of the same pairs under the mount the log or configuration states (m)."""
+
+    def as_dict(self) -> dict[str, float | int]:
+        """The estimate as plain numbers (metres; the angles in degrees)."""
+        out = dataclasses.asdict(self)
+        out["yaw_deg"] = float(np.degrees(out.pop("yaw")))
+        out["std_yaw_deg"] = float(np.degrees(out.pop("std_yaw")))
+        return {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
+
+
+def turning_pairs(times: F64, odometry: F64, settings: CalibrationSettings) -> NDArray[np.int64]:
+    """``(K, 2)`` scan pairs ``(i, j)``: ``j`` is the first scan after ``i`` by which the odometry
+    has turned ``min_turn``, within ``max_dt`` and ``max_step``; the next pair starts at ``j``.
+    At most ``mount_pairs``, evenly spread."""
+    pairs = []
+    n, i = len(times), 0
+    while i < n - 1:
+        j = i + 1
+        while j < n and abs(times[j] - times[i]) <= settings.max_dt:
+            if abs(relative(odometry[i], odometry[j])[2]) >= settings.min_turn:
+                break
+            j += 1
+        if j < n and abs(times[j] - times[i]) <= settings.max_dt:
+            move = relative(odometry[i], odometry[j])
+            if np.hypot(move[0], move[1]) <= settings.max_step:
+                pairs.append((i, j))
+                i = j
+                continue
+        i += 1
+    out = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(out) > settings.mount_pairs:
+        out = out[np.linspace(0, len(out) - 1, settings.mount_pairs).round().astype(np.int64)]
+    return out
+
+
+def _hand_eye(laser: F64, odo: F64) -> F64:
+    """Least-squares ``(x, y, yaw)`` of ``laser = L⁻¹ ⊕ odo ⊕ L`` over the pairs: with
+    ``R(yaw)·t_A − (R_B − I)·(x, y) = t_B`` linear in ``(x, y, cos yaw, sin yaw)``."""
+    c, s = np.cos(odo[:, 2]), np.sin(odo[:, 2])
+    ax, ay = laser[:, 0], laser[:, 1]
+    m = np.zeros((2 * len(laser), 4))
+    m[0::2] = np.c_[1.0 - c, s, ax, -ay]
+    m[1::2] = np.c_[-s, 1.0 - c, ay, ax]
+    rhs = np.empty(2 * len(laser))
+    rhs[0::2], rhs[1::2] = odo[:, 0], odo[:, 1]
+    sol, *_ = np.linalg.lstsq(m, rhs, rcond=None)
+    return np.array([sol[0], sol[1], np.arctan2(sol[3], sol[2])])
+
+
+def _residuals(mount: F64, laser: F64, odo: F64) -> F64:
+    """Each pair's translation residual (m) of ``odo`` against ``mount ⊕ laser ⊕ mount⁻¹``."""
+    c, s = np.cos(odo[:, 2]), np.sin(odo[:, 2])
+    cy, sy = np.cos(mount[2]), np.sin(mount[2])
+    px = cy * laser[:, 0] - sy * laser[:, 1] - ((c - 1.0) * mount[0] - s * mount[1])
+    py = sy * laser[:, 0] + cy * laser[:, 1] - (s * mount[0] + (c - 1.0) * mount[1])
+    return np.hypot(px - odo[:, 0], py - odo[:, 1])
+
+
+def _trimmed_fit(laser: F64, odo: F64, trim: float) -> tuple[F64, NDArray[np.bool_]]:
+    keep = np.ones(len(laser), dtype=bool)
+    for _ in range(2):
+        residual = _residuals(_hand_eye(laser[keep], odo[keep]), laser, odo)
+        keep = residual <= np.quantile(residual, 1.0 - trim)
+    return _hand_eye(laser[keep], odo[keep]), keep
+
+
+def estimate_mount(
+    laser: F64, odo: F64, stated: F64, settings: CalibrationSettings
+) -> MountEstimate:
+    """The hand-eye estimate (module docstring) from the pairs' laser motions ``laser`` (laser
+    frame) and odometry motions ``odo``; ``stated`` is the mount the log or configuration
+    gives, for comparison. :class:`ValueError` with fewer than 10 pairs."""
+    if len(laser) < 10:
+        raise ValueError(f"{len(laser)} turning scan pairs fitted; at least 10 are needed")
+    mount, keep = _trimmed_fit(laser, odo, settings.mount_trim)
+    rng = np.random.default_rng(0)
+    picks = rng.integers(0, len(laser), size=(settings.bootstrap, len(laser)))
+    boots = np.array([_trimmed_fit(laser[p], odo[p], settings.mount_trim)[0] for p in picks])
+    boots[:, 2] = wrap_angle(boots[:, 2] - mount[2])
+    stated_residual = _residuals(np.asarray(stated, dtype=np.float64), laser, odo)
+    return MountEstimate(
+        x=float(mount[0]),
+        y=float(mount[1]),
+        yaw=float(wrap_angle(mount[2])),
+        std_x=float(boots[:, 0].std()),
+        std_y=float(boots[:, 1].std()),
+        std_yaw=float(boots[:, 2].std()),
+        pairs=int(keep.sum()),
+        residual_m=float(np.median(_residuals(mount, laser, odo)[keep])),
+        residual_stated_m=float(np.median(stated_residual[keep])),
+    )
+
+
+def calibrate_mount(
+    scans, config: Config, settings: CalibrationSettings | None = None
+) -> MountEstimate:
+    """The laser's mount measured from ``scans`` (a :class:`slam.scans.LogScans`, with the
+    odometry the run would use) against the mount they state (module docstring)."""
+    settings = settings or CalibrationSettings()
+    stated = np.asarray(scans.log.scans.laser_offset, dtype=np.float64)
+
+    def laser_frame(k: int) -> tuple[F64, F64]:  # the returns before the stated mount
+        ex, ey = scans.scan(k).hits()
+        c, s = np.cos(stated[2]), np.sin(stated[2])
+        dx, dy = ex - stated[0], ey - stated[1]
+        return c * dx + s * dy, -s * dx + c * dy
+
+    pairs = turning_pairs(scans.times, scans.odometry, settings)
+    laser, kept = pair_motions(laser_frame, scans.odometry, pairs, config, settings)
+    pairs = pairs[kept]
+    odo = relative(scans.odometry[pairs[:, 0]], scans.odometry[pairs[:, 1]])
+    return estimate_mount(laser, odo, stated, settings)

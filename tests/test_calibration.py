@@ -1,0 +1,161 @@
+"""slam.calibration: the odometry the laser agrees with, and the laser's mount, on synthetic logs
+whose answers are known (a robot turning in the box room of ``synthetic_logs``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from synthetic_logs import ray_cast, write_carmen
+
+from slam.calibration import (
+    CalibrationSettings,
+    estimate_mount,
+    pair_motions,
+    synchronise_odometry,
+    turning_pairs,
+)
+from slam.config import load_config
+from slam.geometry import compose, interpolate_poses, relative
+
+PERIOD = 0.1  # s between scans
+ANGLES = np.linspace(-np.pi / 2, np.pi / 2, 181)
+
+
+def truth(t: np.ndarray) -> np.ndarray:
+    """The robot's pose at times ``t``: wandering near the room's centre, turning back and forth
+    at a varying rate (so a lag between odometry and laser shows in the rotations)."""
+    x = 1.5 * np.sin(0.21 * t)
+    y = 1.0 * np.sin(0.33 * t) - 0.5
+    theta = 1.2 * np.sin(0.5 * t) + 0.3 * np.sin(1.7 * t)
+    return np.stack([x, y, theta], axis=1)
+
+
+def laser_hits(poses: np.ndarray, mount: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Laser-frame returns of scans taken from ``poses ⊕ mount``."""
+    out = []
+    for pose in poses:
+        r = ray_cast(compose(pose, mount), ANGLES)
+        ok = np.isfinite(r)
+        out.append((r[ok] * np.cos(ANGLES[ok]), r[ok] * np.sin(ANGLES[ok])))
+    return out
+
+
+@pytest.fixture(scope="module")
+def turning_robot():
+    times = np.arange(400) * PERIOD
+    hits = laser_hits(truth(times), np.zeros(3))
+    stream_times = np.arange(0.0, times[-1] + 1.0, 0.03)
+    return times, hits, stream_times
+
+
+def test_stale_written_poses_give_way_to_the_stream(turning_robot):
+    times, hits, stream_times = turning_robot
+    written = truth(times - 0.08)  # each scan got the odometry of 80 ms before it
+    stream = (stream_times, truth(stream_times))
+    poses, sync = synchronise_odometry(lambda k: hits[k], times, written, stream, load_config())
+    assert sync.source == "stream" and abs(sync.lag_s) <= 0.021
+    assert sync.disagreement_deg < 0.8 * sync.scan_disagreement_deg  # the matcher: 0.2° of noise
+    assert sync.pairs > 300
+    np.testing.assert_allclose(poses, interpolate_poses(*stream, times + sync.lag_s))
+
+
+def test_a_late_stream_is_read_at_its_lag(turning_robot):
+    times, hits, stream_times = turning_robot
+    written = truth(times - 0.1)
+    stream = (stream_times + 0.1, truth(stream_times))  # every message stamped 0.1 s late
+    _, sync = synchronise_odometry(lambda k: hits[k], times, written, stream, load_config())
+    assert sync.source == "stream" and sync.lag_s == pytest.approx(0.1, abs=0.021)
+
+
+def test_exact_written_poses_are_kept(turning_robot):
+    """The stream read at its lag is as good as the written poses, not 10 % better: the written
+    poses stay, to the bit."""
+    times, hits, stream_times = turning_robot
+    written = truth(times)
+    stream = (stream_times + 0.1, truth(stream_times))
+    poses, sync = synchronise_odometry(lambda k: hits[k], times, written, stream, load_config())
+    assert sync.source == "scan" and sync.lag_s == 0.0
+    assert sync.stream_lag_s == pytest.approx(0.1, abs=0.021)
+    assert poses is written
+
+
+def test_too_few_fitting_pairs_keep_the_written_poses():
+    times = np.arange(5) * PERIOD
+    written = truth(times)
+    empty = (np.zeros(0), np.zeros(0))
+    stream = (times, truth(times))
+    poses, sync = synchronise_odometry(lambda k: empty, times, written, stream, load_config())
+    assert poses is written and sync.source == "scan" and sync.pairs == 0
+
+
+def test_the_mount_is_found_from_the_turns():
+    mount = np.array([0.25, 0.03, 0.02])
+    times = np.arange(400) * PERIOD
+    robot = truth(times)
+    hits = laser_hits(robot, mount)
+    settings = CalibrationSettings()
+    pairs = turning_pairs(times, robot, settings)
+    assert len(pairs) > 50
+    laser, kept = pair_motions(lambda k: hits[k], robot, pairs, load_config(), settings)
+    pairs = pairs[kept]
+    odo = relative(robot[pairs[:, 0]], robot[pairs[:, 1]])
+    est = estimate_mount(laser, odo, np.zeros(3), settings)
+    assert est.x == pytest.approx(0.25, abs=0.01)
+    assert est.y == pytest.approx(0.03, abs=0.01)
+    assert est.yaw == pytest.approx(0.02, abs=0.005)
+    assert est.std_x < 0.01 and est.residual_m < 0.5 * est.residual_stated_m
+    with pytest.raises(ValueError, match="at least 10"):
+        estimate_mount(laser[:5], odo[:5], np.zeros(3), settings)
+
+
+def odom_line(pose: np.ndarray, t: float) -> str:
+    p = " ".join(f"{v:.6f}" for v in pose)
+    return f"ODOM {p} 0 0 0 {t:.6f} host {t:.6f}"
+
+
+def flaser(ranges: np.ndarray, pose: np.ndarray, t: float) -> str:
+    nums = " ".join(f"{r:.3f}" for r in np.where(np.isfinite(ranges), ranges, 81.91))
+    p = " ".join(f"{v:.6f}" for v in pose)
+    return f"FLASER {len(ranges)} {nums} {p} {p} {t:.6f} host {t:.6f}"
+
+
+def test_a_carmen_run_uses_and_reports_the_stream(tmp_path, capsys):
+    """A CARMEN log whose scan lines carry the last ODOM pose before them: ``slam run`` reads the
+    stream instead (``metrics.json``), ``slam data calibrate`` says so, and
+    ``robot.odometry_sync = "scan"`` keeps the written poses."""
+    from slam.cli import main
+
+    times = 100.0 + np.arange(300) * PERIOD
+    odom_times = 100.0 + np.arange(-2, 1000) * 0.03
+    lines = []
+    for t in odom_times[odom_times < times[0]]:
+        lines.append(odom_line(truth(np.array([t - 100.0]))[0], t))
+    for k, t in enumerate(times):
+        before = odom_times[odom_times < t][-1]
+        held = truth(np.array([before - 100.0]))[0]
+        pose = truth(np.array([t - 100.0]))[0]
+        lines.append(flaser(ray_cast(pose, ANGLES), held, t))
+        nxt = times[k + 1] if k + 1 < len(times) else t + PERIOD
+        for u in odom_times[(odom_times >= t) & (odom_times < nxt)]:
+            lines.append(odom_line(truth(np.array([u - 100.0]))[0], u))
+    log = write_carmen(tmp_path, lines)
+    out = tmp_path / "run"
+    assert main(["run", str(log), "--out", str(out), "--no-texture", "--no-record", "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["odometry_sync"]["source"] == "stream"
+    assert abs(metrics["odometry_sync"]["lag_s"]) <= 0.021
+    capsys.readouterr()
+    assert main(["data", "calibrate", str(log)]) == 0
+    text = capsys.readouterr().out
+    assert 'robot.odometry_sync = "auto": the messages at' in text
+    assert "laser     measured at x" in text
+    assert main(["data", "calibrate", str(log), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["odometry_sync"]["source"] == "stream" and report["scans"] == 300
+    assert abs(report["mount"]["x"]) < 0.03  # the laser sits on the odometry point here
+    kept = tmp_path / "kept"
+    args = ["run", str(log), "--out", str(kept), "--no-texture", "--no-record", "--quiet"]
+    assert main([*args, "--set", 'robot.odometry_sync="scan"']) == 0
+    assert "odometry_sync" not in json.loads((kept / "metrics.json").read_text())
