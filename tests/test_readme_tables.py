@@ -70,8 +70,9 @@ def test_readme_tables_show_the_json_figures():
 
 
 def test_prose_claims_hold_for_the_json():
-    """What the Accuracy section says of the figures: below GMapping (level with it on aces as
-    measured here), below Cartographer's published figures on every seed but on aces."""
+    """What the Accuracy section says of the figures: below GMapping (published, and as measured
+    here on intel and on every seed of aces), below Cartographer's published figures on every
+    seed but on aces."""
     benches = slam_benches()
     ours = {log: benches[f"slam.{log}"]["rbpf"]["trans_mean"] for log in ("intel", "aces", "fr079")}
     for log, error in ours.items():
@@ -79,12 +80,13 @@ def test_prose_claims_hold_for_the_json():
     measured = {log: tables.gmapping(benches[f"slam.{log}"])[0] for log in ours}
     assert ours["intel"] < float(measured["intel"].split(" ")[0])
     assert measured["fr079"] == "diverges"
-    assert float(measured["aces"].split(" ")[0]) == round(ours["aces"], 3)  # "the two are level"
+    aces_seeds = benches["slam.aces"]["rbpf"]["per_seed"]
+    assert max(s["trans_mean"] for s in aces_seeds) < float(measured["aces"].split(" ")[0])
     assert benches["slam.intel_classic"]["classic"]["trans_mean"] > 1.0  # "does not hold together"
     text = section("Accuracy")
     flat = " ".join(text.split())  # the claims, whatever the line wrapping
     assert "below GMapping's published figures on intel, aces and fr079" in flat
-    assert "on aces the two are level" in flat
+    assert "below GMapping as built and run here on intel, aces" in flat
     # Cartographer's published figures (Hess et al. 2016), as the README quotes them
     cartographer = {"intel": 0.0229, "fr079": 0.0452, "mit-csail": 0.0319, "aces": 0.0375}
     for log in ("intel", "fr079", "mit-csail"):
