@@ -159,3 +159,29 @@ def test_a_carmen_run_uses_and_reports_the_stream(tmp_path, capsys):
     args = ["run", str(log), "--out", str(kept), "--no-texture", "--no-record", "--quiet"]
     assert main([*args, "--set", 'robot.odometry_sync="scan"']) == 0
     assert "odometry_sync" not in json.loads((kept / "metrics.json").read_text())
+
+
+def test_calibrate_without_turns_is_one_line_and_exit_2(tmp_path, capsys):
+    """A log that never turns cannot show the laser's mount: one line naming the file, exit 2."""
+    from synthetic_logs import carmen_lines
+
+    from slam.cli import main
+
+    log = write_carmen(tmp_path, carmen_lines(40))  # a gentle curve, no turn of 0.1 rad
+    assert main(["data", "calibrate", str(log)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert str(log) in err[0] and "turning scan pairs fitted; at least 10 are needed" in err[0]
+
+
+def test_a_bad_odometry_sync_names_the_key(tmp_path, capsys):
+    from synthetic_logs import carmen_lines
+
+    from slam.cli import main
+
+    log = write_carmen(tmp_path, carmen_lines(40))
+    args = ["run", str(log), "--out", str(tmp_path / "r"), "--set", 'robot.odometry_sync="late"']
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "robot.odometry_sync" in err and "auto, scan, stream" in err
+    assert not (tmp_path / "r").exists()
