@@ -428,3 +428,51 @@ def test_a_beam_step_beyond_a_full_turn_is_one_clear_error(tmp_path):
     assert load_carmen(path, lidar=LidarConfig(beam_step_deg=2.0)).scans.angles[
         -1
     ] == pytest.approx(np.pi)
+
+
+def test_no_return_code_is_the_pile_at_the_top_of_the_histogram():
+    from slam.io.carmen import no_return_code
+
+    rng = np.random.default_rng(0)
+    genuine = rng.uniform(0.2, 26.37, 100_000)
+    genuine[0] = 26.37
+    # a SICK code far above every genuine reading (intel): halfway between the two
+    assert no_return_code(np.r_[genuine, np.full(3000, 81.83)]) == pytest.approx(54.1)
+    # a code just above the longest genuine reading (aces): 49.91 ... 50.00
+    aces = np.r_[rng.uniform(0.3, 49.91, 100_000), 49.91, np.full(800, 50.0)]
+    assert no_return_code(aces) == pytest.approx(49.955)
+    # a pile spread over a few values, with a stray reading beyond it (mit-killian)
+    spread = np.r_[genuine, 51.01, np.full(70, 51.05), np.full(1000, 51.06), np.full(120, 51.11)]
+    assert no_return_code(np.r_[spread, 51.22]) == pytest.approx(51.03)
+    # genuine readings up to the code itself (fr-clinic): 81.82 genuine, 81.83 and 81.91 codes
+    clinic = np.r_[
+        rng.uniform(0.5, 81.82, 100_000), 81.82, np.full(500, 81.83), np.full(9000, 81.91)
+    ]
+    assert no_return_code(clinic) == pytest.approx(81.825)
+    # no pile: nothing to read (the documented default applies)
+    assert no_return_code(genuine) is None
+    assert no_return_code(np.r_[genuine, 85.0]) is None  # one long reading is not a code
+    assert no_return_code(np.full(10, np.nan)) is None
+    assert no_return_code(np.full(500, 30.0)) is None  # nothing below the pile
+
+
+@pytest.mark.parametrize(
+    "name, file, no_return_beams",
+    [
+        ("intel", "intel", 68313),
+        ("aces", "aces", 11139),
+        ("fr079", "fr079", 36881),
+        ("mit-csail", "mit-csail", 23711),
+        ("fr-clinic", "fr-clinic", 5849 + 150066),
+        ("mit-killian", "mit-killian-synthtime", 39739),  # the spike and 14 longer readings
+    ],
+)
+def test_a_log_without_its_config_finds_its_no_echo_code(carmen_dir, name, file, no_return_beams):
+    """Loaded as a building we have never seen (no configs/<log>.toml), every benchmark log
+    tells its no-echo readings from its genuine ones as its hand-read configuration does."""
+    configured = load_carmen(carmen_dir / f"{file}.clf.gz", lidar=load_config(name).lidar)
+    unseen = load_carmen(carmen_dir / f"{file}.clf.gz")
+    assert unseen.summary()["scans"]["no_return_beams"] == no_return_beams
+    assert configured.summary()["scans"]["no_return_beams"] == no_return_beams
+    hits = lambda s: np.isfinite(s.ranges) & (s.ranges < s.range_max)  # noqa: E731
+    np.testing.assert_array_equal(hits(unseen.scans), hits(configured.scans))

@@ -60,6 +60,12 @@ DEFAULT_FOV_DEG = 180.0
 DEFAULT_NO_RETURN = 80.0
 """Readings at or beyond this mean "no return" when the config gives none: SICK scanners write
 their maximum codes (81.83 m, 81.91 m) for beams without an echo."""
+NO_RETURN_BAND_M = 0.5
+"""The no-echo code is looked for this close below the log's longest reading (m)."""
+NO_RETURN_MIN_SHARE = 1e-3
+"""A 1 cm bin of that band holds a no-echo code when it has at least this share of the readings
+(and :data:`NO_RETURN_MIN_COUNT` of them): genuine readings that far out are rare and spread."""
+NO_RETURN_MIN_COUNT = 100
 DEFAULT_RANGE_MIN = 0.05
 """Shortest valid reading when the config gives none (m): below every genuine reading of the
 benchmark logs (the shortest is 0.12 m, on fr079), so zero readings count as invalid beams."""
@@ -164,9 +170,10 @@ def load_carmen(
 
     ``lidar`` supplies what FLASER lines do not carry: ``fov_deg`` (default 180) or
     ``beam_step_deg``,
-    ``range_min`` (default :data:`DEFAULT_RANGE_MIN`), ``no_return`` (default
-    :data:`DEFAULT_NO_RETURN`, or the declared ``max_range`` for ROBOTLASER1-only logs) and
-    ``range_max`` (default ``no_return``). The laser offset in the robot frame is the median of
+    ``range_min`` (default :data:`DEFAULT_RANGE_MIN`), ``no_return`` (default: the declared
+    ``max_range`` for ROBOTLASER1-only logs, else the no-echo code read from the range histogram,
+    :func:`no_return_code`, else :data:`DEFAULT_NO_RETURN`) and ``range_max`` (default
+    ``no_return``). The laser offset in the robot frame is the median of
     ``relative(odometry pose, laser pose)`` over the log when ``lidar.use_log_laser_pose`` is true
     (the default), else ``(lidar.x, lidar.y, lidar.yaw)``; it is reported in ``log.meta``.
 
@@ -493,8 +500,40 @@ def _parse_robotlaser(path: Path, n: int, nrem: int, lines: _Lines) -> _ScanGrou
     )
 
 
+def no_return_code(ranges: F64) -> float | None:
+    """Where a log's "no echo" readings start, read from its range histogram, or None.
+
+    A laser writes a code for a beam without an echo: its maximum reading (SICK: 81.83 m,
+    81.91 m) or a value of its own (aces: 50.00 m; mit-killian: a spike over 51.05–51.12 m). Such
+    a code is a pile of equal readings at the top of the histogram; genuine readings that far out
+    are few and spread. Among the readings (to the millimetre) within :data:`NO_RETURN_BAND_M` of
+    the longest one, a value read at least :data:`NO_RETURN_MIN_SHARE` of all readings (and
+    :data:`NO_RETURN_MIN_COUNT`) is a pile; the lowest pile grows down through the next values
+    while they are read a tenth as often; the threshold is halfway between the pile and the
+    longest reading below it (aces 49.955 m, mit-killian 51.03 m, fr-clinic 81.825 m, intel
+    54.1 m). None when the top of the histogram holds no pile.
+    """
+    r = np.round(ranges[np.isfinite(ranges) & (ranges > 0.0)], 3)
+    if r.size == 0:
+        return None
+    values, counts = np.unique(r[r >= r.max() - NO_RETURN_BAND_M], return_counts=True)
+    need = max(NO_RETURN_MIN_COUNT, NO_RETURN_MIN_SHARE * r.size)
+    piles = np.flatnonzero(counts >= need)
+    if piles.size == 0:
+        return None
+    first = int(piles[0])
+    while first > 0 and counts[first - 1] >= 0.1 * need:
+        first -= 1
+    below = r[r < values[first]]
+    if below.size == 0:
+        return None
+    return round(0.5 * (float(below.max()) + float(values[first])), 4)
+
+
 def _lidar_limits(lidar: LidarConfig, groups: list[_ScanGroup]) -> tuple[float, float, float]:
-    """``(range_min, range_max, no_return)`` from the config, else the documented defaults."""
+    """``(range_min, range_max, no_return)`` from the config, else the log's declared range
+    limit (ROBOTLASER1), else its no-echo code (:func:`no_return_code`), else the documented
+    defaults."""
     if lidar.fov_deg is not None and not 0.0 < lidar.fov_deg <= 360.0:
         raise ConfigError(f"lidar.fov_deg: expected a value in (0, 360], found {lidar.fov_deg}")
     range_min = DEFAULT_RANGE_MIN if lidar.range_min is None else lidar.range_min
@@ -503,7 +542,10 @@ def _lidar_limits(lidar: LidarConfig, groups: list[_ScanGroup]) -> tuple[float, 
     elif all(g.max_range is not None for g in groups):
         no_return = min(float(np.min(g.max_range)) for g in groups if g.max_range is not None)
     else:
-        no_return = DEFAULT_NO_RETURN
+        code = no_return_code(np.concatenate([g.ranges.ravel() for g in groups]))
+        no_return = DEFAULT_NO_RETURN if code is None else code
+        if not range_min < no_return:
+            no_return = DEFAULT_NO_RETURN
     range_max = no_return if lidar.range_max is None else lidar.range_max
     if not range_min < range_max <= no_return:
         raise ConfigError(
