@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
-from slam.config import LidarConfig
+from slam.config import MAX_RANGE_M, LidarConfig
 from slam.errors import ConfigError, DataError
 from slam.geometry import relative, wrap_angle
 from slam.io.log import Log, OdometryStream, ScanStream, laser_offset_meta, valid_ranges
@@ -513,7 +513,8 @@ def no_return_code(ranges: F64) -> float | None:
     longest reading below it (aces 49.955 m, mit-killian 51.03 m, fr-clinic 81.825 m, intel
     54.1 m). None when the top of the histogram holds no pile.
     """
-    r = np.round(ranges[np.isfinite(ranges) & (ranges > 0.0)], 3)
+    plausible = (ranges > 0.0) & (ranges <= MAX_RANGE_M)  # NaN, 1e308: not readings
+    r = np.round(ranges[plausible], 3)
     if r.size == 0:
         return None
     values, counts = np.unique(r[r >= r.max() - NO_RETURN_BAND_M], return_counts=True)
