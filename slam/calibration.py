@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +40,7 @@ from slam.config import Config
 from slam.geometry import interpolate_poses, relative, wrap_angle
 from slam.kernels.field import match_one
 from slam.kernels.graph import fit_counts
+from slam.kernels.threads import in_threads, threads
 from slam.mapping import ParticleMaps, likelihood_tables
 
 F64 = NDArray[np.float64]
@@ -91,12 +93,37 @@ def pair_motions(
     """The motions ``(K', 3)`` from scan ``i`` to scan ``j`` of the ``pairs`` that fit, in the
     frame ``hits_of`` gives the returns in (scan ``j`` registered onto a one-scan distance field
     of scan ``i`` by the filter's matcher, from the odometry's motion), and which pairs those are
-    (rows of ``pairs``)."""
+    (rows of ``pairs``). Ranges of pairs are matched on the kernel threads
+    (:func:`slam.kernels.threads.in_threads`); the result does not depend on their number."""
+    cuts = np.linspace(0, len(pairs), 4 * threads() + 1).round().astype(np.int64)
+    parts = in_threads(
+        [
+            partial(_pair_range, hits_of, odometry, pairs, int(a), int(b), config, settings)
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+            if b > a
+        ]
+    )
+    motions = [m for part, _ in parts for m in part]
+    kept = [k for _, part in parts for k in part]
+    return np.array(motions).reshape(-1, 3), np.array(kept, dtype=np.int64)
+
+
+def _pair_range(
+    hits_of: HitsOf,
+    odometry: F64,
+    pairs: NDArray[np.int64],
+    first: int,
+    stop: int,
+    config: Config,
+    settings: CalibrationSettings,
+) -> tuple[list[F64], list[int]]:
+    """:func:`pair_motions` for rows ``first`` to ``stop - 1`` of ``pairs``."""
     rc, lc = config.rbpf, config.loops
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     iterations = rc.max_iterations * lc.match_iteration_factor
     motions, kept = [], []
-    for row, (i, j) in enumerate(pairs):
+    for row in range(first, stop):
+        i, j = pairs[row]
         hx, hy = _near(hits_of(int(i)), settings.max_range)
         ex, ey = _near(hits_of(int(j)), settings.max_range)
         if hx.size < lc.min_beams or ex.size < lc.min_beams:
@@ -116,7 +143,7 @@ def pair_motions(
         if close >= settings.min_fit * ex.size:
             motions.append(found)
             kept.append(row)
-    return np.array(motions).reshape(-1, 3), np.array(kept, dtype=np.int64)
+    return motions, kept
 
 
 def _near(hits: tuple[F64, F64], max_range: float) -> tuple[F64, F64]:

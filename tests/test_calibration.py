@@ -185,3 +185,24 @@ def test_a_bad_odometry_sync_names_the_key(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "robot.odometry_sync" in err and "auto, scan, stream" in err
     assert not (tmp_path / "r").exists()
+
+
+def test_the_pairs_do_not_depend_on_the_thread_count(turning_robot):
+    import numba
+
+    times, hits, stream_times = turning_robot
+    written = truth(times - 0.08)
+    stream = (stream_times, truth(stream_times))
+    before = numba.get_num_threads()
+    got = []
+    try:
+        for n in (1, 2):
+            numba.set_num_threads(n)
+            got.append(
+                synchronise_odometry(lambda k: hits[k], times, written, stream, load_config())
+            )
+    finally:
+        numba.set_num_threads(before)
+    (p1, s1), (p2, s2) = got
+    np.testing.assert_array_equal(p1, p2)
+    assert s1 == s2
