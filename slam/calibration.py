@@ -236,6 +236,36 @@ def synchronise_odometry(
     return written, OdometrySync("scan", 0.0, at_scan, at_scan, best_lag, best, len(pairs))
 
 
+def odometry_disagreement(
+    hits_of: HitsOf,
+    odometry: F64,
+    config: Config,
+    settings: CalibrationSettings | None = None,
+) -> tuple[float, float, int]:
+    """How far the odometry's motion between consecutive scans is from the matcher's: trimmed
+    RMS (``trim``) of the translation (m) and rotation (rad) differences over ``pairs`` evenly
+    spread pairs, and the pairs that fitted (0: nothing measured, the sizes are NaN). It holds
+    the matcher's own noise too, so it bounds the odometry's error from above."""
+    settings = settings or CalibrationSettings()
+    n = odometry.shape[0]
+    if n < 2:
+        return float("nan"), float("nan"), 0
+    starts = np.unique(np.linspace(0, n - 2, min(settings.pairs, n - 1)).round().astype(np.int64))
+    pairs = np.c_[starts, starts + 1]
+    laser, kept = pair_motions(hits_of, odometry, pairs, config, settings)
+    if len(kept) == 0:
+        return float("nan"), float("nan"), 0
+    pairs = pairs[kept]
+    odo = relative(odometry[pairs[:, 0]], odometry[pairs[:, 1]])
+
+    def trimmed(d: F64) -> float:
+        d = np.sort(d)[: max(1, int(round((1.0 - settings.trim) * d.size)))]
+        return float(np.sqrt(np.mean(d * d)))
+
+    xy = trimmed(np.hypot(laser[:, 0] - odo[:, 0], laser[:, 1] - odo[:, 1]))
+    return xy, trimmed(np.abs(wrap_angle(laser[:, 2] - odo[:, 2]))), len(kept)
+
+
 # --- where the laser sits --------------------------------------------------------------------
 
 

@@ -346,6 +346,47 @@ def gauss_newton(x: F64, graph: PoseGraph, lc: LoopConfig) -> F64:
     return x
 
 
+def smooth_with_odometry(
+    poses: F64, odometry: F64, reg: tuple[float, float], odo: tuple[float, float], lc: LoopConfig
+) -> F64:
+    """Every pose of ``poses`` ``(N, 3)`` pulled towards the odometry's shape between neighbours:
+    Gauss-Newton on ``Σ ‖x_k − p_k‖²`` (sigmas ``reg``: metres, radians) plus the chain of
+    odometry edges ``o_k⁻¹ ⊕ o_{k+1}`` (sigmas ``odo``), at most ``lc.iterations`` steps. The
+    chain's system is block-tridiagonal, which :func:`solve_system`'s preconditioner solves
+    exactly; the priors sit on its diagonal, so no node needs fixing."""
+    n = poses.shape[0]
+    if n < 2:
+        return poses.copy()
+    i = np.arange(n - 1, dtype=np.int64)
+    j = i + 1
+    z = np.ascontiguousarray(relative(odometry[:-1], odometry[1:]))
+    info = np.zeros((n - 1, 3, 3))
+    info[:, 0, 0] = info[:, 1, 1] = 1.0 / odo[0] ** 2
+    info[:, 2, 2] = 1.0 / odo[1] ** 2
+    prior = np.diag([1.0 / reg[0] ** 2, 1.0 / reg[0] ** 2, 1.0 / reg[1] ** 2])
+    robust = np.zeros(n - 1)
+    x = poses.copy()
+    diag, band = np.zeros((n, 3, 3)), np.zeros((n - 1, 3, 3))
+    far, grad = np.zeros((n - 1, 3, 3)), np.zeros((n, 3))
+    for _ in range(lc.iterations):
+        linearize(x, i, j, z, info, robust, diag, band, far, grad)
+        d = x - poses
+        d[:, 2] = wrap_angle(d[:, 2])
+        diag += prior
+        grad += d @ prior
+        delta, _ = solve_system(
+            diag, band, far, i, j, -grad, lc.solver_iterations, lc.solver_tolerance
+        )
+        x += delta
+        x[:, 2] = wrap_angle(x[:, 2])
+        if (
+            np.abs(delta[:, :2]).max() < lc.converged_xy
+            and np.abs(delta[:, 2]).max() < lc.converged_th
+        ):
+            break
+    return x
+
+
 def graph_keyframes(n: int, stride: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The pose graph's keyframes among ``n >= 1`` nodes, every ``stride``-th node and the last,
     and for every node the index (into the keyframes) of the keyframe at or after it."""

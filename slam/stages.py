@@ -12,9 +12,11 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
    found at each node spread along the way (:func:`interpolate_between_updates`);
 4. :class:`ScanRegistration` — every scan registered against the map of the node scans
    (:func:`register_every_scan`, ``rbpf.register_scans``);
-5. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
+5. :class:`OdometrySmoothing` — every scan's pose smoothed with the odometry between neighbours,
+   as far as the log's odometry deserves (``rbpf.smooth_odometry``; off by default);
+6. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
-``rbpf`` runs all five (:func:`default_stages`); ``classic`` none (its filter outputs every
+``rbpf`` runs all six (:func:`default_stages`); ``classic`` none (its filter outputs every
 scan's pose and its own map). A stage is anything with a ``name`` and a ``run(output, config)``
 method (:class:`Stage`), so a caller can drop, reorder or add stages.
 """
@@ -120,6 +122,38 @@ class ScanRegistration:
         return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps])
 
 
+class OdometrySmoothing:
+    """Smooth every scan's pose with the odometry between neighbours (``rbpf.smooth_odometry``;
+    after :class:`ScanRegistration`)."""
+
+    name = "odometry smoothing"
+
+    def run(self, output: FilterOutput, config: Config) -> FilterOutput:
+        """Every scan's pose pulled towards the odometry's shape
+        (:func:`slam.graph.smooth_with_odometry`), the odometry's sigmas measured on the log
+        (:func:`slam.calibration.odometry_disagreement`); the nodes' poses follow."""
+        rc = config.rbpf
+        if not rc.smooth_odometry or output.poses is None or len(output.poses) < 2:
+            return output
+        from slam.calibration import odometry_disagreement
+        from slam.graph import smooth_with_odometry
+
+        seq = output.scans
+        odometry = np.asarray(seq.odometry, dtype=np.float64)
+        sxy, sth, pairs = odometry_disagreement(seq.hits, odometry, config)
+        if pairs == 0:
+            return output
+        odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
+        reg = (rc.smooth_sigma_xy, rc.smooth_sigma_th)
+        poses = smooth_with_odometry(output.poses, odometry, reg, odo, config.loops)
+        stats = {
+            **output.stats,
+            "odometry_disagreement_m": round(sxy, 4),
+            "odometry_disagreement_deg": round(float(np.degrees(sth)), 3),
+        }
+        return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps], stats=stats)
+
+
 class FinalMap:
     """The occupancy grid of the node scans at their final poses (after :class:`BetweenUpdates`)."""
 
@@ -136,7 +170,14 @@ class FinalMap:
 def default_stages(config: Config) -> list[Stage]:
     """The stages a run of ``config.filter.method`` goes through after its filter."""
     if config.filter.method == "rbpf":
-        return [LoopClosing(), Reregistration(), BetweenUpdates(), ScanRegistration(), FinalMap()]
+        return [
+            LoopClosing(),
+            Reregistration(),
+            BetweenUpdates(),
+            ScanRegistration(),
+            OdometrySmoothing(),
+            FinalMap(),
+        ]
     return []
 
 

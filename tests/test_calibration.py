@@ -206,3 +206,34 @@ def test_the_pairs_do_not_depend_on_the_thread_count(turning_robot):
     (p1, s1), (p2, s2) = got
     np.testing.assert_array_equal(p1, p2)
     assert s1 == s2
+
+
+def test_odometry_disagreement_measures_the_odometry_noise(turning_robot):
+    from slam.calibration import odometry_disagreement
+
+    times, hits, _ = turning_robot
+    exact = truth(times)
+    xy0, th0, pairs = odometry_disagreement(lambda k: hits[k], exact, load_config())
+    assert pairs > 300 and xy0 < 0.01 and np.degrees(th0) < 0.4  # the matcher's own noise
+    noise = np.random.default_rng(1).normal(0.0, [0.0, 0.0, 0.01], exact.shape)
+    xy1, th1, _ = odometry_disagreement(lambda k: hits[k], exact + noise, load_config())
+    assert th1 > 2.0 * th0  # heading noise of 0.01 rad per scan: about 0.8° between two scans
+    empty = (np.zeros(0), np.zeros(0))
+    assert odometry_disagreement(lambda k: empty, exact, load_config())[2] == 0
+
+
+def test_the_smoothing_stage_runs_when_asked(tmp_path):
+    from synthetic_logs import carmen_lines
+
+    from slam.cli import main
+
+    log = write_carmen(tmp_path, carmen_lines(120))
+    base = ["run", str(log), "--no-texture", "--no-record", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "plain")]) == 0
+    assert (
+        main([*base, "--out", str(tmp_path / "smooth"), "--set", "rbpf.smooth_odometry=true"]) == 0
+    )
+    plain = json.loads((tmp_path / "plain" / "metrics.json").read_text())["filter"]
+    smooth = json.loads((tmp_path / "smooth" / "metrics.json").read_text())["filter"]
+    assert "odometry_disagreement_m" not in plain
+    assert smooth["odometry_disagreement_m"] < 0.02  # the synthetic odometry is exact

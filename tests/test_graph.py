@@ -276,3 +276,29 @@ def test_loop_search_does_not_depend_on_the_thread_count(small_log):
         assert a[:2] == b[:2]
         np.testing.assert_array_equal(a[2], b[2])
         np.testing.assert_array_equal(a[3], b[3])
+
+
+def test_smoothing_with_good_odometry_removes_the_registration_noise():
+    from slam.graph import smooth_with_odometry
+
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * 0.1
+    truth = np.stack([1.5 * np.sin(0.21 * t), np.sin(0.33 * t), 1.2 * np.sin(0.5 * t)], axis=1)
+    registered = truth + rng.normal(0.0, [0.02, 0.02, 0.005], truth.shape)
+    lc = LoopConfig()
+
+    def rmse(poses):
+        return float(np.sqrt(np.mean(np.sum((poses[:, :2] - truth[:, :2]) ** 2, axis=1))))
+
+    smoothed = smooth_with_odometry(registered, truth, (0.02, 0.005), (0.002, 0.001), lc)
+    assert rmse(smoothed) < 0.5 * rmse(registered)
+    # odometry trusted as little as it deserves (metres of noise): the registered poses stay
+    noisy = truth + rng.normal(0.0, [0.5, 0.5, 0.3], truth.shape)
+    kept = smooth_with_odometry(registered, noisy, (0.02, 0.005), (5.0, 3.0), lc)
+    assert np.abs(kept - registered).max() < 2e-3
+    assert smooth_with_odometry(
+        registered[:1], truth[:1], (0.02, 0.005), (0.01, 0.01), lc
+    ).shape == (
+        1,
+        3,
+    )
