@@ -297,14 +297,13 @@ class RbpfConfig(Validated):
     """At most this many beams (evenly spread) per scan in :attr:`register_scans`; 0: every
     beam. Twice what the filter matches (``match_beams``): on the demo's 1081-beam scans every
     beam gives the same ATE (0.0469 against 0.0470 m) for 0.65 s more (docs/slam.md)."""
-    smooth_odometry: bool = False
+    smooth_odometry: bool = True
     """After :attr:`register_scans`, smooth every scan's pose with the odometry between
     neighbouring scans (:class:`slam.stages.OdometrySmoothing`): each registered pose is a prior
     of sigma ``smooth_sigma_xy`` / ``smooth_sigma_th``, each odometry step an edge whose sigma
     is ``smooth_factor`` times the odometry's measured disagreement with the matcher
     (:func:`slam.calibration.odometry_disagreement`), so a log's odometry counts as far as its
-    own data show it deserves. Not the default yet: measured on the relations of five logs,
-    seeds 0–3, not yet on the demo, mit-killian and the benches (docs/slam.md)."""
+    own data show it deserves (docs/slam.md)."""
     smooth_factor: float = bounded(2.0, gt=0.0, le=1000.0)
     """See :attr:`smooth_odometry`."""
     smooth_sigma_xy: float = bounded(0.02, gt=0.0, le=10.0)

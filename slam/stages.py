@@ -13,7 +13,7 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
 4. :class:`ScanRegistration` — every scan registered against the map of the node scans
    (:func:`register_every_scan`, ``rbpf.register_scans``);
 5. :class:`OdometrySmoothing` — every scan's pose smoothed with the odometry between neighbours,
-   as far as the log's odometry deserves (``rbpf.smooth_odometry``; off by default);
+   as far as the log's odometry deserves (``rbpf.smooth_odometry``);
 6. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
 ``rbpf`` runs all six (:func:`default_stages`); ``classic`` none (its filter outputs every

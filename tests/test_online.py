@@ -23,7 +23,13 @@ from slam.odometry import (
 )
 from slam.pipeline import load_source
 from slam.scans import nominal_scan_period
-from slam.stages import BetweenUpdates, FinalMap, Reregistration, ScanRegistration
+from slam.stages import (
+    BetweenUpdates,
+    FinalMap,
+    OdometrySmoothing,
+    Reregistration,
+    ScanRegistration,
+)
 
 
 @pytest.fixture(scope="module")
@@ -152,7 +158,13 @@ def test_custom_stages_replace_the_default_ones(small):
     config = slam.load_config("", None, ["filter.particles=8", "filter.max_scans=200"])
     no_loops = slam.load_config("", None, ["filter.particles=8", "loops.enabled=false"])
     log = _log(str(small), config)
-    stages = [Reregistration(), BetweenUpdates(), ScanRegistration(), FinalMap()]
+    stages = [
+        Reregistration(),
+        BetweenUpdates(),
+        ScanRegistration(),
+        OdometrySmoothing(),
+        FinalMap(),
+    ]
     custom = replay(log, no_loops, 200, stages=stages)
     np.testing.assert_array_equal(custom.poses, replay(log, no_loops, 200).poses)
     assert "loop_candidates" not in custom.stats
