@@ -222,17 +222,16 @@ def test_odometry_disagreement_measures_the_odometry_noise(turning_robot):
     assert odometry_disagreement(lambda k: empty, exact, load_config())[2] == 0
 
 
-def test_the_smoothing_stage_runs_when_asked(tmp_path):
+def test_the_smoothing_stage_runs_by_default(tmp_path):
     from synthetic_logs import carmen_lines
 
     from slam.cli import main
 
     log = write_carmen(tmp_path, carmen_lines(120))
     base = ["run", str(log), "--no-texture", "--no-record", "--quiet"]
-    assert main([*base, "--out", str(tmp_path / "plain")]) == 0
-    assert (
-        main([*base, "--out", str(tmp_path / "smooth"), "--set", "rbpf.smooth_odometry=true"]) == 0
-    )
+    off = ["--set", "rbpf.smooth_odometry=false"]
+    assert main([*base, "--out", str(tmp_path / "plain"), *off]) == 0
+    assert main([*base, "--out", str(tmp_path / "smooth")]) == 0
     plain = json.loads((tmp_path / "plain" / "metrics.json").read_text())["filter"]
     smooth = json.loads((tmp_path / "smooth" / "metrics.json").read_text())["filter"]
     assert "odometry_disagreement_m" not in plain
