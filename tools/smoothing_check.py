@@ -1,17 +1,18 @@
 #!/usr/bin/env python3
-"""Would smoothing a run's trajectory with the odometry help? A measurement, not a stage (yet).
+"""What smoothing a run's trajectory with the odometry does to its relation error, per factor.
 
-After ``slam run``, every scan's pose is registered on the node map on its own (``trajectory.tum``);
-between neighbouring scans the odometry is often the better relative measurement (aces: dead
-reckoning with the synchronised odometry beats the filter on relations under 5 s). This solves,
-for every scan pose ``x_k``, ``Σ ‖x_k − p_k‖²_reg + Σ ‖(x_k⁻¹ ⊕ x_{k+1}) ⊖ (o_k⁻¹ ⊕ o_{k+1})‖²_odo``
-(``p``: the run's poses, ``o``: the odometry ``slam run`` used, ``robot.odometry_sync``) by
-Gauss-Newton on the pose-graph kernels of the loop closing (:func:`slam.graph.smooth_with_odometry`,
-what ``rbpf.smooth_odometry`` runs), and prints the relation error before and after. The registration's sigmas are fixed (``--reg-xy``,
-``--reg-th``); the odometry's are the disagreement between the odometry and the filter's matcher
-over 1000 pairs of consecutive scans (:func:`slam.calibration.odometry_disagreement`) times
-``--factor`` (``rbpf.smooth_factor``): the odometry is trusted as far as the log shows it deserves. docs/slam.md,
-"Smoothing with the odometry (measured, not yet the default)".
+Run it on a folder of ``slam run LOG --set rbpf.smooth_odometry=false``, whose every scan's pose
+is registered on the node map on its own (``trajectory.tum``): between neighbouring scans the
+odometry is often the better relative measurement (aces: dead reckoning with the synchronised
+odometry beats the filter on relations under 5 s). For every scan pose ``x_k`` it solves
+``Σ ‖x_k − p_k‖²_reg + Σ ‖(x_k⁻¹ ⊕ x_{k+1}) ⊖ (o_k⁻¹ ⊕ o_{k+1})‖²_odo`` (``p``: the run's poses,
+``o``: the odometry ``slam run`` used, ``robot.odometry_sync``) with what ``rbpf.smooth_odometry``
+runs (:func:`slam.graph.smooth_with_odometry`) and prints the relation error before and after.
+The registration's sigmas are fixed (``--reg-xy``, ``--reg-th``); the odometry's are its
+disagreement with the filter's matcher over 1000 pairs of consecutive scans
+(:func:`slam.calibration.odometry_disagreement`) times each ``--factor`` (``rbpf.smooth_factor``):
+the odometry is trusted as far as the log shows it deserves. docs/slam.md, "Smoothing with the
+odometry (default, measured)".
 
 Usage::
 
