@@ -321,10 +321,13 @@ def optimize(
     return gauss_newton(x, chain_graph(poses, edges, robust, lc), lc)
 
 
-def gauss_newton(x: F64, graph: PoseGraph, lc: LoopConfig) -> F64:
+def gauss_newton(
+    x: F64, graph: PoseGraph, lc: LoopConfig, priors: tuple[F64, F64] | None = None
+) -> F64:
     """Gauss-Newton on the pose ``graph`` from ``x`` (modified in place and returned): node 0
-    fixed, at most ``lc.iterations`` steps, until a step moves no node more than
-    ``lc.converged_xy`` / ``lc.converged_th``."""
+    fixed — or, with ``priors`` ``(poses, information)``, every node held to its pose in
+    ``poses`` with that ``(3, 3)`` information instead — at most ``lc.iterations`` steps, until a
+    step moves no node more than ``lc.converged_xy`` / ``lc.converged_th``."""
     n = x.shape[0]
     diag = np.zeros((n, 3, 3))
     band = np.zeros((max(n - 1, 1), 3, 3))
@@ -332,7 +335,13 @@ def gauss_newton(x: F64, graph: PoseGraph, lc: LoopConfig) -> F64:
     grad = np.zeros((n, 3))
     for _ in range(lc.iterations):
         linearize(x, graph.i, graph.j, graph.z, graph.info, graph.robust, diag, band, far, grad)
-        diag[0] += np.eye(3) * 1e9  # node 0 fixed
+        if priors is None:
+            diag[0] += np.eye(3) * 1e9  # node 0 fixed
+        else:
+            d = x - priors[0]
+            d[:, 2] = wrap_angle(d[:, 2])
+            diag += priors[1]
+            grad += d @ priors[1]
         delta, _ = solve_system(
             diag, band, far, graph.i, graph.j, -grad, lc.solver_iterations, lc.solver_tolerance
         )
@@ -350,41 +359,22 @@ def smooth_with_odometry(
     poses: F64, odometry: F64, reg: tuple[float, float], odo: tuple[float, float], lc: LoopConfig
 ) -> F64:
     """Every pose of ``poses`` ``(N, 3)`` pulled towards the odometry's shape between neighbours:
-    Gauss-Newton on ``Σ ‖x_k − p_k‖²`` (sigmas ``reg``: metres, radians) plus the chain of
-    odometry edges ``o_k⁻¹ ⊕ o_{k+1}`` (sigmas ``odo``), at most ``lc.iterations`` steps. The
-    chain's system is block-tridiagonal, which :func:`solve_system`'s preconditioner solves
-    exactly; the priors sit on its diagonal, so no node needs fixing."""
+    :func:`gauss_newton` on the chain of odometry edges ``o_k⁻¹ ⊕ o_{k+1}`` (sigmas ``odo``:
+    metres, radians) with every pose held to ``poses`` (sigmas ``reg``). The chain's system is
+    block-tridiagonal, which :func:`solve_system`'s preconditioner solves exactly; the priors sit
+    on its diagonal, so no node needs fixing."""
     n = poses.shape[0]
     if n < 2:
         return poses.copy()
     i = np.arange(n - 1, dtype=np.int64)
-    j = i + 1
-    z = np.ascontiguousarray(relative(odometry[:-1], odometry[1:]))
     info = np.zeros((n - 1, 3, 3))
     info[:, 0, 0] = info[:, 1, 1] = 1.0 / odo[0] ** 2
     info[:, 2, 2] = 1.0 / odo[1] ** 2
+    graph = PoseGraph(
+        i, i + 1, np.ascontiguousarray(relative(odometry[:-1], odometry[1:])), info, np.zeros(n - 1)
+    )
     prior = np.diag([1.0 / reg[0] ** 2, 1.0 / reg[0] ** 2, 1.0 / reg[1] ** 2])
-    robust = np.zeros(n - 1)
-    x = poses.copy()
-    diag, band = np.zeros((n, 3, 3)), np.zeros((n - 1, 3, 3))
-    far, grad = np.zeros((n - 1, 3, 3)), np.zeros((n, 3))
-    for _ in range(lc.iterations):
-        linearize(x, i, j, z, info, robust, diag, band, far, grad)
-        d = x - poses
-        d[:, 2] = wrap_angle(d[:, 2])
-        diag += prior
-        grad += d @ prior
-        delta, _ = solve_system(
-            diag, band, far, i, j, -grad, lc.solver_iterations, lc.solver_tolerance
-        )
-        x += delta
-        x[:, 2] = wrap_angle(x[:, 2])
-        if (
-            np.abs(delta[:, :2]).max() < lc.converged_xy
-            and np.abs(delta[:, 2]).max() < lc.converged_th
-        ):
-            break
-    return x
+    return gauss_newton(poses.copy(), graph, lc, priors=(poses, prior))
 
 
 def graph_keyframes(n: int, stride: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
