@@ -182,13 +182,24 @@ class OdometrySync:
         return {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
 
 
+def _trimmed_rms(d: F64, trim: float) -> float:
+    """RMS of ``|d|`` without its largest ``trim`` share (at least one value kept)."""
+    d = np.sort(np.abs(d))
+    d = d[: max(1, int(round((1.0 - trim) * d.size)))]
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def _consecutive_pairs(n: int, count: int) -> NDArray[np.int64]:
+    """``(K, 2)`` pairs ``(k, k + 1)`` of ``n >= 2`` scans, at most ``count``, evenly spread."""
+    starts = np.unique(np.linspace(0, n - 2, min(count, n - 1)).round().astype(np.int64))
+    return np.c_[starts, starts + 1]
+
+
 def _disagreement(first: F64, second: F64, laser_turn: F64, trim: float) -> float:
     """Trimmed RMS (degrees) of the rotation from poses ``first`` to ``second`` minus
     ``laser_turn``, pair by pair."""
     turn = relative(first, second)[:, 2]
-    d = np.sort(np.abs(wrap_angle(turn - laser_turn)))
-    d = d[: max(1, int(round((1.0 - trim) * d.size)))]
-    return float(np.degrees(np.sqrt(np.mean(d * d))))
+    return float(np.degrees(_trimmed_rms(wrap_angle(turn - laser_turn), trim)))
 
 
 def stream_at(stream_times: F64, stream_poses: F64, times: F64) -> F64:
@@ -212,8 +223,7 @@ def synchronise_odometry(
     poses and the choice."""
     settings = settings or CalibrationSettings()
     n = len(times)
-    starts = np.unique(np.linspace(0, n - 2, min(settings.pairs, n - 1)).round().astype(np.int64))
-    pairs = np.c_[starts, starts + 1]
+    pairs = _consecutive_pairs(n, settings.pairs)
     laser, kept = pair_motions(hits_of, written, pairs, config, settings)
     pairs = pairs[kept]
     if len(pairs) < 10:  # too little to judge by: keep what the log says
@@ -250,20 +260,14 @@ def odometry_disagreement(
     n = odometry.shape[0]
     if n < 2:
         return float("nan"), float("nan"), 0
-    starts = np.unique(np.linspace(0, n - 2, min(settings.pairs, n - 1)).round().astype(np.int64))
-    pairs = np.c_[starts, starts + 1]
+    pairs = _consecutive_pairs(n, settings.pairs)
     laser, kept = pair_motions(hits_of, odometry, pairs, config, settings)
     if len(kept) == 0:
         return float("nan"), float("nan"), 0
     pairs = pairs[kept]
     odo = relative(odometry[pairs[:, 0]], odometry[pairs[:, 1]])
-
-    def trimmed(d: F64) -> float:
-        d = np.sort(d)[: max(1, int(round((1.0 - settings.trim) * d.size)))]
-        return float(np.sqrt(np.mean(d * d)))
-
-    xy = trimmed(np.hypot(laser[:, 0] - odo[:, 0], laser[:, 1] - odo[:, 1]))
-    return xy, trimmed(np.abs(wrap_angle(laser[:, 2] - odo[:, 2]))), len(kept)
+    xy = _trimmed_rms(np.hypot(laser[:, 0] - odo[:, 0], laser[:, 1] - odo[:, 1]), settings.trim)
+    return xy, _trimmed_rms(wrap_angle(laser[:, 2] - odo[:, 2]), settings.trim), len(kept)
 
 
 # --- where the laser sits --------------------------------------------------------------------
