@@ -23,6 +23,7 @@ gives the odometry at each scan. docs/api.md describes the whole interface.
 from __future__ import annotations
 
 import bisect
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -101,6 +102,10 @@ class Result:
     """``(N,)`` largest normalised weight per processed scan."""
     stats: dict[str, Any] = field(default_factory=dict)
     """Filter and stage counters: updates, resamplings, particle-map memory, loop closures."""
+    seconds: dict[str, float] = field(default_factory=dict)
+    """Wall time (s) of the parts of the run: ``"filter"`` (every :meth:`Slam.update`'s filter
+    step), then each post-filter stage by its name, in order; numba compiling a kernel counts
+    in the part that first called it (nothing on a warm cache)."""
     metrics: dict[str, Any] = field(default_factory=dict)
     """What ``metrics.json`` holds (sizes, timings, ATE...), filled by :func:`slam.run`."""
     folder: Path | None = None
@@ -180,6 +185,7 @@ class Slam:
         self._odometry: Any = None
         self._live_map: OccupancyGrid | None = None
         self._finished = False
+        self._seconds: dict[str, float] = {"filter": 0.0}
 
     # -- inputs
     def add_observer(self, observer: Observer) -> None:
@@ -238,12 +244,14 @@ class Slam:
             odometry = self._odometry.pose_at(scan.time)
         k = self.scans.append(scan.resolved(self.config.lidar), odometry)
         self._running_period.add(scan.time)
+        start = time.perf_counter()
         if self._filter is None:
             self._filter = make_filter(self.scans, self.config, self._rng)
             outcome = self._filter.first
         else:
             period = self._scan_period
             outcome = self._filter.step(k, self._running_period.value if period is None else period)
+        self._seconds["filter"] += time.perf_counter() - start
         estimate = self._estimate(outcome)
         if self._observer is not None:
             self._notify(self._observer, outcome, estimate)
@@ -312,7 +320,10 @@ class Slam:
         if self._finished:
             raise UsageError("Slam.finish: the run is already finished")
         self._finished = True
-        output = run_stages(self._filter.finish(), self.stages, self.config)
+        start = time.perf_counter()
+        output = self._filter.finish()
+        self._seconds["filter"] += time.perf_counter() - start
+        output = run_stages(output, self.stages, self.config, self._seconds)
         if output.poses is None:
             raise UsageError("Slam.finish: the stages placed no scan (keep BetweenUpdates)")
         stats = dict(output.stats)
@@ -325,4 +336,5 @@ class Slam:
             n_eff=output.n_eff,
             max_weight=output.max_weight,
             stats=stats,
+            seconds=dict(self._seconds),
         )

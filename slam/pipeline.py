@@ -328,6 +328,7 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
         path_length_m=round(trajectory.path_length(), 3),
         estimate_wall_s=round(wall, 3),
         estimate_compile_s=round(compile_s, 3),
+        estimate_parts_s={name: round(s, 3) for name, s in result.seconds.items()},
         scans_per_s=round(len(scans) / wall, 1) if wall > 0 else None,
         real_time_factor=round(duration / wall, 2) if wall > 0 else None,
         n_eff_mean=round(float(result.n_eff.mean()), 2),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import warnings
@@ -29,6 +30,7 @@ from slam.stages import (
     OdometrySmoothing,
     Reregistration,
     ScanRegistration,
+    default_stages,
 )
 
 
@@ -170,6 +172,24 @@ def test_custom_stages_replace_the_default_ones(small):
     assert "loop_candidates" not in custom.stats
     raw = replay(log, config, 200, stages=[BetweenUpdates(), FinalMap()])
     assert 0 < np.abs(raw.poses - custom.poses).max() < 0.1  # without re-registration: jitter
+    # the time of each part: the filter, then every stage that ran, by its name, in order
+    assert list(custom.seconds) == ["filter"] + [stage.name for stage in stages]
+    assert list(raw.seconds) == ["filter", "between-update placement", "final map"]
+    assert all(v >= 0.0 for v in custom.seconds.values()) and custom.seconds["filter"] > 0.0
+
+
+def test_the_run_times_its_parts(small, tmp_path):
+    """``metrics.json``'s ``estimate_parts_s``: the filter and each default stage; their sum is
+    the estimate's time (compilation included, as each part counts what it compiled)."""
+    overrides = ["filter.particles=8", "texture.enabled=false", "viz.record=false"]
+    config = slam.load_config("", None, overrides)
+    result = slam.run(str(small), config, seed=0, max_scans=150, out=tmp_path / "run")
+    parts = result.metrics["estimate_parts_s"]
+    assert list(parts) == ["filter"] + [stage.name for stage in default_stages(config)]
+    assert parts == {k: round(v, 3) for k, v in result.seconds.items()}
+    total = result.metrics["estimate_wall_s"] + result.metrics["estimate_compile_s"]
+    assert 0.0 < sum(parts.values()) <= total + 0.01
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["estimate_parts_s"] == parts
 
 
 def _feed_ece276a(s: slam.Slam, log: Log, k: int, cursors: list[int], arguments: bool) -> None:
