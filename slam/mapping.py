@@ -32,14 +32,12 @@ from slam.kernels.field import (
     MatchOutput,
     MatchSettings,
     TilePool,
-    claim_tiles,
+    insert_particles,
     insert_scans,
     insert_serial,
     match_particles,
     match_scans,
     recount_tiles,
-    select_new_hits,
-    splat_hits,
 )
 from slam.kernels.grid import integrate_rays
 
@@ -366,9 +364,10 @@ class ParticleMaps:
     def insert(self, poses: F64, hx: F64, hy: F64, nx: F64, ny: F64, skip_below: float) -> None:
         """Insert hits ``(hx, hy)`` with unit normals ``(nx, ny)`` (robot frame) at ``poses``.
 
-        Three kernels: which hits add something (parallel), copy-on-write of the tiles they touch
-        (serial, cheap), then the distance updates (parallel: each particle writes only tiles it
-        owns alone). One pose (a scan placed into one map) takes one serial kernel instead,
+        One kernel call, :func:`~slam.kernels.field.insert_particles`, in three steps: which
+        hits add something (parallel), copy-on-write of the tiles they touch (serial, cheap),
+        then the distance updates (parallel: each particle writes only tiles it owns alone); a
+        pool that runs out of tiles on the way grows and the call resumes. One pose (a scan placed into one map) takes one serial kernel instead,
         :func:`~slam.kernels.field.insert_serial`, which gives the same maps.
         """
         if hx.shape[0] == 0:
@@ -385,15 +384,14 @@ class ParticleMaps:
                 if start < 0:
                     return
                 self._grow_pool()
-        select_new_hits(self._pool(), poses, hits[0], hits[1], skip_below, keep)
-        start = 0
-        while True:
-            stopped = claim_tiles(self._pool(), poses, hits[0], hits[1], keep, start)
-            if stopped < 0:
-                break
+        stopped = insert_particles(
+            self._pool(), poses, hits, skip_below, keep, self.signed, 0, True
+        )
+        while stopped >= 0:
             self._grow_pool()
-            start = stopped
-        splat_hits(self._pool(), poses, hits, keep, self.signed)
+            stopped = insert_particles(
+                self._pool(), poses, hits, skip_below, keep, self.signed, stopped, False
+            )
 
     def insert_scans(
         self, poses: F64, hits: F64, offsets: NDArray[np.int64], reach: F64, skip_below: float
@@ -493,16 +491,36 @@ class ParticleMaps:
 
         ``luts`` comes from :func:`likelihood_tables`.
         """
-        n = poses.shape[0]
-        out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
+        return self.match_and_probe(
+            poses, ex, ey, luts, max_iter, tolerance, min_inliers, coarse_stride, _NO_YAWS
+        )[0]
+
+    def match_and_probe(
+        self,
+        poses: F64,
+        ex: F64,
+        ey: F64,
+        luts: tuple[F64, float],
+        max_iter: int,
+        tolerance: float,
+        min_inliers: float,
+        coarse_stride: int,
+        yaws: F64,
+    ) -> tuple[MatchResult, MatchResult]:
+        """:meth:`match`, and the basin probe in the same kernel call: the predicted pose of the
+        particle whose match scores highest, turned by each of ``yaws`` (rad), matched against
+        that particle's map (one row per yaw; :func:`~slam.kernels.field.match_particles`)."""
+        out, probe = _match_result(poses.shape[0]), _match_result(yaws.shape[0])
         match_particles(
             self.field(),
             np.ascontiguousarray(poses),
             np.stack([ex, ey]).astype(np.float64, copy=False),
             _settings(luts, max_iter, tolerance, coarse_stride, min_inliers),
             MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
+            np.ascontiguousarray(yaws, dtype=np.float64),
+            MatchOutput(probe.poses, probe.loglik, probe.inliers, probe.hessian),
         )
-        return out
+        return out, probe
 
     def register(
         self,
@@ -532,6 +550,15 @@ class ParticleMaps:
             out,
         )
         return out
+
+
+_NO_YAWS = np.zeros(0)
+"""No basin probe (:meth:`ParticleMaps.match`)."""
+
+
+def _match_result(n: int) -> MatchResult:
+    """Room for ``n`` matches."""
+    return MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
 
 
 def _settings(

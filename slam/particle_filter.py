@@ -310,6 +310,13 @@ class RbpfFilter:
         self.first = StepOutcome(0, start, self.particles, self.weights, p, 1.0 / p, True, False)
         """The outcome of scan 0 (the initial map)."""
 
+    @property
+    def probe_yaws(self) -> F64:
+        """The basin probe's turns of the best particle's predicted pose (rad):
+        ``rbpf.probe_yaw``, then the same turns the other way."""
+        yaws = np.asarray(self.config.rbpf.probe_yaw, dtype=np.float64)
+        return np.concatenate([yaws, -yaws])
+
     def _make_room(self, k: int, poses: F64) -> None:
         """Grow the maps to hold scan ``k`` seen from any of ``poses`` (an update asks twice:
         for the proposal and for the insertion; the scan's reach is computed once)."""
@@ -365,12 +372,16 @@ class RbpfFilter:
         then draw each particle around its match (:func:`sample_around`)."""
         rc = self.config.rbpf
         self._make_room(k, predicted)
-        match = self.maps.match(
+        yaws = self.probe_yaws if rc.probe_gain > 0 else np.zeros(0)
+        match, probe = self.maps.match_and_probe(
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
-            rc.min_inliers, rc.coarse_stride,
+            rc.min_inliers, rc.coarse_stride, yaws,
         )  # fmt: skip
+        retries = self.retries
         match = self._retry(predicted, hits, match)
-        match = self._probe(predicted, hits, match)
+        # the kernel probed from the best particle of the first match: still the one to probe
+        # from unless a retry changed the matches
+        match = self._probe(predicted, hits, match, probe if self.retries == retries else None)
         self.particles = match.poses
         fused = rc.proposal_mean == "fused"
         motion_cov = None
@@ -408,7 +419,13 @@ class RbpfFilter:
             del recent[0]
         return match
 
-    def _probe(self, predicted: F64, hits: tuple[F64, F64], match: MatchResult) -> MatchResult:
+    def _probe(
+        self,
+        predicted: F64,
+        hits: tuple[F64, F64],
+        match: MatchResult,
+        probe: MatchResult | None = None,
+    ) -> MatchResult:
         """``match``, or, when the best particle's match is in the wrong basin of rotation, the
         best per particle of it and of the matches from the predicted poses rotated the way that
         found the better basin.
@@ -424,16 +441,20 @@ class RbpfFilter:
         particle is matched again from its predicted pose rotated by that start's angle, each
         keeping the better match. No random draw: a run whose probes never fire is the run
         without them.
+
+        ``probe``: the rotated starts' matches when already made (by the proposal's kernel call,
+        :meth:`ParticleMaps.match_and_probe`, in the order of :attr:`probe_yaws`).
         """
         rc = self.config.rbpf
         if rc.probe_gain <= 0:
             return match
         beams = max(hits[0].size, 1)
         b = int(np.argmax(match.loglik))
-        yaws = np.concatenate([np.asarray(rc.probe_yaw), -np.asarray(rc.probe_yaw)])
-        starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
-        starts[:, 2] = wrap_angle(starts[:, 2] + yaws)
-        probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+        yaws = self.probe_yaws
+        if probe is None:
+            starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
+            starts[:, 2] = wrap_angle(starts[:, 2] + yaws)
+            probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
         score = np.where(probe.inliers >= rc.min_inliers, probe.loglik, -np.inf)
         j = int(np.argmax(score))
         first = float(match.loglik[b]) / beams
@@ -662,6 +683,8 @@ def match_from_starts(
         np.stack([hits[0], hits[1]]).astype(np.float64, copy=False),
         settings,
         MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
+        np.zeros(0),
+        MatchOutput(np.empty((0, 3)), np.empty(0), np.empty(0), np.empty((0, 3, 3))),
     )
     return out
 

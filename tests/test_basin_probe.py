@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from slam.config import Config
+from slam.geometry import wrap_angle
 from slam.mapping import ParticleMaps, likelihood_tables
 from slam.particle_filter import RbpfFilter, match_from_starts
 
@@ -112,3 +113,33 @@ def test_match_from_starts_matches_one_particles_map(particle):
         direct = _match(f, predicted, hits)
         np.testing.assert_allclose(one.poses[s], direct.poses[particle])
         np.testing.assert_allclose(one.loglik[s], direct.loglik[particle])
+
+
+@pytest.mark.parametrize("off", [OFF, OFF[[2, 0, 1]]])
+def test_the_proposals_kernel_call_probes_as_the_probe_does(off):
+    """One kernel call matches the particles and the best one's rotated starts
+    (``ParticleMaps.match_and_probe``): the same bits as the match, then the probe's own
+    ``match_from_starts`` from the best particle's predicted pose; ``_probe`` given them decides
+    as it does alone."""
+    hits = _cast(ROOM)
+    rc = _filter(hits).config.rbpf
+    f = _filter(hits)
+    args = (f.luts, rc.max_iterations, rc.tolerance, rc.min_inliers, rc.coarse_stride)
+    both, probe = f.maps.match_and_probe(off, *hits, *args, f.probe_yaws)
+    alone = _match(f, off, hits)
+    for name in ("poses", "loglik", "inliers", "hessian"):
+        np.testing.assert_array_equal(getattr(both, name), getattr(alone, name))
+    b = int(np.argmax(alone.loglik))
+    starts = np.repeat(off[b : b + 1], 6, axis=0)
+    starts[:, 2] = wrap_angle(starts[:, 2] + f.probe_yaws)
+    separate = match_from_starts(f.maps, b, starts, hits, f.luts, rc)
+    assert probe.poses.shape == (6, 3)
+    for name in ("poses", "loglik", "inliers", "hessian"):
+        np.testing.assert_array_equal(getattr(probe, name), getattr(separate, name))
+    g = _filter(hits)
+    fired_with = f._probe(off, hits, both, probe)
+    fired_alone = g._probe(off, hits, _match(g, off, hits))
+    assert f.probes == g.probes == 1
+    np.testing.assert_array_equal(fired_with.poses, fired_alone.poses)
+    empty = f.maps.match_and_probe(off, *hits, *args, np.zeros(0))[1]
+    assert empty.poses.shape == (0, 3)

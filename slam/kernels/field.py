@@ -482,8 +482,11 @@ def match_particles(
     ends: np.ndarray,
     settings: MatchSettings,
     out: MatchOutput,
+    yaws: np.ndarray,
+    probe: MatchOutput,
 ) -> None:
-    """Scan-match every particle against its own map (the proposal), then score it.
+    """Scan-match every particle against its own map (the proposal), then score it; then the
+    basin probe's matches, in the same call.
 
     ``ends`` is ``(2, B)``: the scan's endpoints ``(ex, ey)`` in the robot frame; ``view.table``
     holds every particle's tile table. For each particle: refine its predicted pose with
@@ -493,22 +496,43 @@ def match_particles(
     ``out.inliers`` the fraction of beams on known cells; ``out.hessian`` the Gauss-Newton
     Hessian of the negative log-likelihood there (its inverse is the covariance of the match,
     the spread of the proposal).
+
+    Then, for the particle ``b`` with the highest ``out.loglik`` (the first of equals), its
+    predicted pose turned by each of ``yaws`` (heading wrapped to ``[-π, π)``) is matched the
+    same way against its map into row ``s`` of ``probe`` (``rbpf.probe_yaw``, the basin probe
+    of :class:`slam.particle_filter.RbpfFilter`: one kernel call instead of two). Empty
+    ``yaws``: no probe.
     """
     for p in prange(poses.shape[0]):
-        _match_particle(view, np.int64(p), poses, ends, settings, out)
+        _match_particle(view, np.int64(p), poses[p], ends, settings, out, np.int64(p))
+    if yaws.shape[0] == 0 or poses.shape[0] == 0:
+        return
+    b = 0
+    for p in range(1, poses.shape[0]):
+        if out.loglik[p] > out.loglik[b]:
+            b = p
+    starts = np.empty((yaws.shape[0], 3))
+    for s in range(yaws.shape[0]):
+        starts[s, 0] = poses[b, 0]
+        starts[s, 1] = poses[b, 1]
+        starts[s, 2] = (poses[b, 2] + yaws[s] + np.pi) % (2.0 * np.pi) - np.pi
+    for s in prange(yaws.shape[0]):
+        _match_particle(view, np.int64(b), starts[s], ends, settings, probe, np.int64(s))
 
 
 @njit(cache=True)
 def _match_particle(
     view: FieldView,
     p: int,
-    poses: np.ndarray,
+    pose: np.ndarray,
     ends: np.ndarray,
     settings: MatchSettings,
     out: MatchOutput,
+    row: int,
 ) -> None:
-    """:func:`match_particles` for particle ``p`` (a serial function: the parallel loop only
-    calls it, which keeps numba's parallel region, slow to compile, tiny).
+    """:func:`match_particles` for ``pose`` against particle ``p``'s map, into row ``row`` of
+    ``out`` (a serial function: the parallel loops only call it, which keeps numba's parallel
+    regions, slow to compile, tiny).
 
     The score and Hessian at the refined pose are those of the matcher's last evaluation when
     that was at the very pose reported (the wrapped heading has the same bits); else (a heading
@@ -519,11 +543,11 @@ def _match_particle(
     nbeams = max(ex.shape[0], 1)
     own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
     h = np.zeros((3, 3))
-    x, y, th, cost, inliers = refine(own, poses[p], ex, ey, settings, h)
+    x, y, th, cost, inliers = refine(own, pose, ex, ey, settings, h)
     frac = inliers / nbeams
     wrapped = (th + np.pi) % (2.0 * np.pi) - np.pi
     if frac < settings.min_inliers:
-        x, y, wrapped = poses[p, 0], poses[p, 1], poses[p, 2]
+        x, y, wrapped = pose[0], pose[1], pose[2]
     if frac < settings.min_inliers or wrapped != th or th == 0.0:  # (-0.0 wraps to 0.0)
         fine = luts[luts.shape[0] - 1]
         cost, _ = normal_equations(
@@ -532,31 +556,51 @@ def _match_particle(
         )  # fmt: skip
     for a in range(3):
         for b in range(3):
-            out.hessian[p, a, b] = h[a, b]
-    out.poses[p, 0] = x
-    out.poses[p, 1] = y
-    out.poses[p, 2] = wrapped
-    out.inliers[p] = frac
-    out.loglik[p] = -cost
+            out.hessian[row, a, b] = h[a, b]
+    out.poses[row, 0] = x
+    out.poses[row, 1] = y
+    out.poses[row, 2] = wrapped
+    out.inliers[row] = frac
+    out.loglik[row] = -cost
 
 
 @njit(cache=True, parallel=True)
-def select_new_hits(
+def insert_particles(
     pool: TilePool,
     poses: np.ndarray,
-    hx: np.ndarray,
-    hy: np.ndarray,
+    hits: np.ndarray,
     skip_below: float,
     keep: np.ndarray,
-) -> None:
-    """Mark in ``keep[p, k]`` the hits that add something to particle ``p``'s map.
+    signed: bool,
+    start: int,
+    select: bool,
+) -> int:
+    """Insert the hits ``hits`` ``(4, K)`` — robot-frame ``(hx, hy)`` and unit normals
+    ``(nx, ny)`` — into every particle's map at ``poses``, in three steps (one kernel call):
 
-    A hit adds nothing, and is not kept, when the cell it falls in already knows a hit about as
-    close (within ``skip_below``) as this one, or when the previous hit of the same scan fell in
-    the same cell: re-observed walls then neither copy tiles nor move the field.
+    1. (when ``select``) mark in ``keep[p, k]`` the hits that add something to particle ``p``'s
+       map, in parallel (:func:`_select_particle`): a hit adds nothing when the cell it falls in
+       already knows a hit about as close (within ``skip_below``) as this one, or when the
+       previous hit of the same scan fell in the same cell, so re-observed walls neither copy
+       tiles nor move the field;
+    2. give each particle, from ``start`` on, exclusive tiles under the footprint of its kept
+       hits, serially (:func:`_claim_particle`: a missing tile is allocated, a shared one copied
+       — copy on write);
+    3. write the kept hits into those tiles, in parallel (:func:`_splat_particle`: each particle
+       writes only tiles it owns alone).
+
+    Returns -1 when done, or the particle that ran out of free tiles in step 2 (step 3 not
+    done): the caller grows the pool and calls again from it with ``select`` false.
     """
+    if select:
+        for p in prange(poses.shape[0]):
+            _select_particle(pool, poses, np.int64(p), hits[0], hits[1], skip_below, keep)
+    for p in range(start, poses.shape[0]):
+        if not _claim_particle(pool, poses, p, hits[0], hits[1], keep):
+            return p
     for p in prange(poses.shape[0]):
-        _select_particle(pool, poses, np.int64(p), hx, hy, skip_below, keep)
+        _splat_particle(pool, poses, np.int64(p), hits, keep, signed)
+    return -1
 
 
 @njit(cache=True, _nrt=False)
@@ -569,7 +613,7 @@ def _select_particle(
     skip_below: float,
     keep: np.ndarray,
 ) -> None:
-    """:func:`select_new_hits` for particle ``p``. The hit's distance to its cell's centre (a
+    """Step 1 of :func:`insert_particles` for particle ``p``. The hit's distance to its cell's centre (a
     ``hypot``) is computed only where the cell's stored distance does not decide alone: at most
     ``skip_below`` (no hit adds anything), beyond ``res + skip_below`` (any hit in the cell is
     closer) — the same decisions, bit for bit."""
@@ -601,28 +645,6 @@ def _select_particle(
             keep[p, k] = known > own + skip_below
 
 
-@njit(cache=True)
-def claim_tiles(
-    pool: TilePool,
-    poses: np.ndarray,
-    hx: np.ndarray,
-    hy: np.ndarray,
-    keep: np.ndarray,
-    start: int,
-) -> int:
-    """Give each particle exclusive tiles under the footprint of its kept hits (serial).
-
-    A missing tile is allocated (distance ``dmax``, surface unknown); a shared one is copied and
-    the particle's reference moved to the copy (copy on write). Particles from ``start`` on are
-    processed. Returns -1 when done, or the index of the particle that ran out of free tiles (the
-    caller grows the pool and calls again from there).
-    """
-    for p in range(start, poses.shape[0]):
-        if not _claim_particle(pool, poses, p, hx, hy, keep):
-            return p
-    return -1
-
-
 @njit(cache=True, _nrt=False)
 def _claim_particle(
     pool: TilePool,
@@ -632,7 +654,7 @@ def _claim_particle(
     hy: np.ndarray,
     keep: np.ndarray,
 ) -> bool:
-    """:func:`claim_tiles` for particle ``p``; ``False`` when the pool ran out of free tiles
+    """Step 2 of :func:`insert_particles` for particle ``p``; ``False`` when the pool ran out of free tiles
     (the tiles claimed so far stay claimed: claiming again from ``p`` skips them)."""
     dist, surface, refcount = pool.dist, pool.surface, pool.refcount
     free_stack, free_top, shift = pool.free_stack, pool.free_top, pool.shift
@@ -694,30 +716,14 @@ def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int) -> Non
             surface[dst, r, c] = surface[src, r, c]
 
 
-@njit(cache=True, parallel=True)
-def splat_hits(
-    pool: TilePool,
-    poses: np.ndarray,
-    hits: np.ndarray,
-    keep: np.ndarray,
-    signed: bool,
-) -> None:
-    """Write the kept hits into the particles' (exclusively owned) tiles, in parallel.
-
-    ``hits`` is ``(4, K)``: the robot-frame hits ``(hx, hy)`` and their unit normals ``(nx, ny)``.
-    Every cell within ``dmax`` of a hit for which this hit is the nearest so far takes its
-    Euclidean distance (``dist``) and, in ``surface``, its signed plane distance when ``signed``
-    (else the Euclidean distance again: the unsigned field). Must follow :func:`claim_tiles`.
-    """
-    for p in prange(poses.shape[0]):
-        _splat_particle(pool, poses, np.int64(p), hits, keep, signed)
-
-
 @njit(cache=True, _nrt=False)
 def _splat_particle(
     pool: TilePool, poses: np.ndarray, p: int, hits: np.ndarray, keep: np.ndarray, signed: bool
 ) -> None:
-    """:func:`splat_hits` for particle ``p``."""
+    """Step 3 of :func:`insert_particles` for particle ``p``: every cell within ``dmax`` of a
+    kept hit for which this hit is the nearest so far takes its Euclidean distance (``dist``)
+    and, in ``surface``, its signed plane distance when ``signed`` (else the Euclidean distance
+    again: the unsigned field)."""
     dist, surface, shift = pool.dist, pool.surface, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     radius = int(np.ceil(dmax / res))
@@ -770,11 +776,10 @@ def insert_serial(
     keep: np.ndarray,
     start: int,
 ) -> int:
-    """:func:`select_new_hits`, :func:`claim_tiles` and :func:`splat_hits` particle by particle
-    in one serial call, for few poses (one scan placed into one map): a parallel region's start
-    costs more than the work of one pose. ``hits`` as for :func:`splat_hits`. The same result as
-    the three kernels (each particle writes only tiles it owns alone, and claims in the same
-    order). Returns -1 when done, or the particle that ran out of free tiles (grow the pool and
+    """The three steps of :func:`insert_particles` particle by particle in one serial call, for
+    few poses (one scan placed into one map): a parallel region's start costs more than the work
+    of one pose. ``hits`` as for :func:`insert_particles`. The same result as it (each particle
+    writes only tiles it owns alone, and claims in the same order). Returns -1 when done, or the particle that ran out of free tiles (grow the pool and
     call again from there)."""
     for p in range(start, poses.shape[0]):
         _select_particle(pool, poses, p, hits[0], hits[1], skip_below, keep)
@@ -797,7 +802,7 @@ def insert_scans(
 ) -> int:
     """Scans ``start`` to ``stop - 1`` one after another into a one-particle map, each by
     :func:`insert_serial`: scan ``k``'s hits are ``hits[:, offsets[k]:offsets[k + 1]]``
-    (``hits`` as for :func:`splat_hits`, every scan's side by side, or only its first two rows:
+    (``hits`` as for :func:`insert_particles`, every scan's side by side, or only its first two rows:
     the unsigned field ignores the normals, which then are the hits again) at ``poses[k]``.
 
     One call for a whole stretch of scans instead of one per scan (the back end builds its
