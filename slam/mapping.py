@@ -223,6 +223,9 @@ class MatchResult:
     """``(P,)`` fraction of beams within the distance cap of a known surface."""
     hessian: F64
     """``(P, 3, 3)`` Gauss-Newton Hessian of the negative log-likelihood at each refined pose."""
+    probe: MatchResult | None = None
+    """The basin probe's matches when :meth:`ParticleMaps.match` was given ``probe_yaws``: one
+    row per yaw."""
 
 
 def likelihood_tables(
@@ -486,30 +489,16 @@ class ParticleMaps:
         tolerance: float,
         min_inliers: float,
         coarse_stride: int = 1,
+        probe_yaws: F64 | None = None,
     ) -> MatchResult:
         """Scan-match every particle's predicted pose against its own map and score it.
 
-        ``luts`` comes from :func:`likelihood_tables`.
+        ``luts`` comes from :func:`likelihood_tables`. With ``probe_yaws`` (rad), the basin probe
+        in the same kernel call (:func:`~slam.kernels.field.match_particles`): the predicted
+        pose of the particle whose match scores highest, turned by each yaw, matched against
+        that particle's map, into the result's ``probe``.
         """
-        return self.match_and_probe(
-            poses, ex, ey, luts, max_iter, tolerance, min_inliers, coarse_stride, _NO_YAWS
-        )[0]
-
-    def match_and_probe(
-        self,
-        poses: F64,
-        ex: F64,
-        ey: F64,
-        luts: tuple[F64, float],
-        max_iter: int,
-        tolerance: float,
-        min_inliers: float,
-        coarse_stride: int,
-        yaws: F64,
-    ) -> tuple[MatchResult, MatchResult]:
-        """:meth:`match`, and the basin probe in the same kernel call: the predicted pose of the
-        particle whose match scores highest, turned by each of ``yaws`` (rad), matched against
-        that particle's map (one row per yaw; :func:`~slam.kernels.field.match_particles`)."""
+        yaws = _NO_YAWS if probe_yaws is None else np.ascontiguousarray(probe_yaws, np.float64)
         out, probe = _match_result(poses.shape[0]), _match_result(yaws.shape[0])
         match_particles(
             self.field(),
@@ -517,10 +506,12 @@ class ParticleMaps:
             np.stack([ex, ey]).astype(np.float64, copy=False),
             _settings(luts, max_iter, tolerance, coarse_stride, min_inliers),
             MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
-            np.ascontiguousarray(yaws, dtype=np.float64),
+            yaws,
             MatchOutput(probe.poses, probe.loglik, probe.inliers, probe.hessian),
         )
-        return out, probe
+        if probe_yaws is not None:
+            out.probe = probe
+        return out
 
     def register(
         self,

@@ -372,11 +372,11 @@ class RbpfFilter:
         then draw each particle around its match (:func:`sample_around`)."""
         rc = self.config.rbpf
         self._make_room(k, predicted)
-        yaws = self.probe_yaws if rc.probe_gain > 0 else np.zeros(0)
-        match, probe = self.maps.match_and_probe(
+        match = self.maps.match(
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
-            rc.min_inliers, rc.coarse_stride, yaws,
+            rc.min_inliers, rc.coarse_stride, self.probe_yaws if rc.probe_gain > 0 else None,
         )  # fmt: skip
+        probe, match.probe = match.probe, None
         retries = self.retries
         match = self._retry(predicted, hits, match)
         # the kernel probed from the best particle of the first match: still the one to probe
@@ -443,7 +443,7 @@ class RbpfFilter:
         without them.
 
         ``probe``: the rotated starts' matches when already made (by the proposal's kernel call,
-        :meth:`ParticleMaps.match_and_probe`, in the order of :attr:`probe_yaws`).
+        :meth:`ParticleMaps.match` given :attr:`probe_yaws`, in their order).
         """
         rc = self.config.rbpf
         if rc.probe_gain <= 0:

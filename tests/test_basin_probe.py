@@ -118,14 +118,15 @@ def test_match_from_starts_matches_one_particles_map(particle):
 @pytest.mark.parametrize("off", [OFF, OFF[[2, 0, 1]]])
 def test_the_proposals_kernel_call_probes_as_the_probe_does(off):
     """One kernel call matches the particles and the best one's rotated starts
-    (``ParticleMaps.match_and_probe``): the same bits as the match, then the probe's own
+    (``ParticleMaps.match`` with ``probe_yaws``): the same bits as the match, then the probe's own
     ``match_from_starts`` from the best particle's predicted pose; ``_probe`` given them decides
     as it does alone."""
     hits = _cast(ROOM)
     rc = _filter(hits).config.rbpf
     f = _filter(hits)
     args = (f.luts, rc.max_iterations, rc.tolerance, rc.min_inliers, rc.coarse_stride)
-    both, probe = f.maps.match_and_probe(off, *hits, *args, f.probe_yaws)
+    both = f.maps.match(off, *hits, *args, f.probe_yaws)
+    probe = both.probe
     alone = _match(f, off, hits)
     for name in ("poses", "loglik", "inliers", "hessian"):
         np.testing.assert_array_equal(getattr(both, name), getattr(alone, name))
@@ -141,5 +142,5 @@ def test_the_proposals_kernel_call_probes_as_the_probe_does(off):
     fired_alone = g._probe(off, hits, _match(g, off, hits))
     assert f.probes == g.probes == 1
     np.testing.assert_array_equal(fired_with.poses, fired_alone.poses)
-    empty = f.maps.match_and_probe(off, *hits, *args, np.zeros(0))[1]
-    assert empty.poses.shape == (0, 3)
+    assert f.maps.match(off, *hits, *args, np.zeros(0)).probe.poses.shape == (0, 3)
+    assert alone.probe is None
