@@ -69,6 +69,24 @@ def test_readme_tables_show_the_json_figures():
     assert "| fr079 (4 934 scans), rbpf, 30 particles |" in performance  # its FLASER lines
 
 
+def test_the_parts_table_shows_each_runs_parts_and_their_sum():
+    """The Performance section's time by part: the JSON's ``estimate_parts_s`` of seed 0, one
+    column per part (the filter first), the sum last; a bench without them is named."""
+    benches = slam_benches()
+    performance = section("Performance")
+    intel = benches["slam.intel"]["rbpf"]["estimate_parts_s"]
+    assert list(intel)[0] == "filter"
+    cells = " | ".join(tables.fixed(v, 2) for v in intel.values())
+    assert f"| intel | {cells} | {tables.fixed(sum(intel.values()), 1)} |" in performance
+    assert "| run | filter | loop closing |" in performance
+    killian = benches["slam.mit-killian"]["quality"]["rbpf"]["estimate_parts_s"]
+    assert f"| mit-killian | {tables.fixed(killian['filter'], 2)} |" in performance
+    broken = json.loads(json.dumps(benches))
+    del broken["slam.aces"]["rbpf"]["estimate_parts_s"]
+    with pytest.raises(tables.BenchError, match=r"slam\.aces\.rbpf\.estimate_parts_s"):
+        tables.parts_table(broken)
+
+
 def test_prose_claims_hold_for_the_json():
     """What the Accuracy section says of the figures: below GMapping (published, and as measured
     here on intel and on every seed of aces), below Cartographer's published figures on every

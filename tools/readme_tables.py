@@ -217,6 +217,37 @@ def performance_table(benches: Benches) -> str:
     return table(header, rows)
 
 
+def parts_table(benches: Benches) -> str:
+    """Where the estimate's time goes, seed 0: the filter and each post-filter stage
+    (``estimate_parts_s``), the demo at 100 particles and the default filter on every log."""
+    runs: list[tuple[str, dict, str]] = []
+    if "slam.demo_100" in benches:
+        runs.append(("demo, 100 particles", get(benches, "slam.demo_100"), "slam.demo_100"))
+    for log, entries in accuracy_benches(benches).items():
+        for name, bench in entries:
+            if name == f"slam.{log}":
+                method = bench.get("method", "rbpf")
+                runs.append((log, get(benches, name, method), f"{name}.{method}"))
+    runs += [
+        (name.removeprefix("slam."), b["quality"]["rbpf"], f"{name}.quality.rbpf")
+        for name, b in benches.items()
+        if b.get("metric") == "quality" and "rbpf" in b.get("quality", {})
+    ]
+    parts: list[str] = []
+    for _, b, where in runs:
+        if "estimate_parts_s" not in b:
+            raise BenchError(f"bench JSON: {where}.estimate_parts_s is missing")
+        parts += [k for k in b["estimate_parts_s"] if k not in parts]
+    rows = []
+    for label, b, _ in runs:
+        seconds = b["estimate_parts_s"]
+        rows.append(
+            [label, *(fixed(seconds[k], 2) if k in seconds else "" for k in parts),
+             fixed(sum(seconds.values()), 1)]
+        )  # fmt: skip
+    return table(["run", *parts, "sum (s)"], rows)
+
+
 def _speed(b: dict, where: str) -> list[str]:
     try:
         keys = (("wall_s", 1), ("scans_per_s", 0), ("real_time_factor", 1), ("peak_rss_mb", 0))
@@ -430,6 +461,7 @@ def slam_quality_table(benches: Benches) -> str:
 TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
     "slam": ("slam", slam_table),
     "performance": ("slam", performance_table),
+    "performance.parts": ("slam", parts_table),
     "slam.quality": ("slam", slam_quality_table),
     "localize.tracking": ("localize", tracking_table),
     "localize.global": ("localize", global_table),
