@@ -32,6 +32,9 @@ What the generators read from ``docs/bench/slam.json`` (``benches`` of ``tools/b
   and ``gmapping_measured`` ("MEAN ± STD m in SECONDS s" or a word such as "diverges") give the
   GMapping row. Every log present gets its rows (known logs in ``LOG_ORDER`` first).
 * ``slam.demo_*`` with ``ate_rmse``: a performance row of the simulated demo.
+* ``estimate_parts_s`` (seconds by part: the filter, then each post-filter stage) of
+  ``slam.demo_100``, of every accuracy bench's method block and of ``quality.rbpf``: the
+  ``performance.parts`` table, one column per part.
 * Optional keys of a method block, shown as extra accuracy columns only when some log has them
   (a sweep over seeds writes them; see ``OPTIONAL_COLUMNS``): ``per_seed`` (a list of blocks
   with ``seed`` and ``trans_mean``), ``trans_median``, ``share_over_0.2m`` (fraction of
