@@ -38,6 +38,7 @@ from slam.kernels.field import (
     match_particles,
     match_scans,
     recount_tiles,
+    resample_tables,
 )
 from slam.kernels.grid import integrate_rays
 
@@ -466,9 +467,16 @@ class ParticleMaps:
         self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
 
     def resample(self, indices: NDArray[np.int64]) -> None:
-        """Children share their parents' tiles; tiles nobody uses go back to the free stack."""
-        self.tables = np.ascontiguousarray(self.tables[indices])
-        self.free_top[0] = recount_tiles(self.tables, self.refcount, self.free_stack)
+        """Children share their parents' tiles; tiles nobody uses go back to the free stack.
+        One kernel (:func:`~slam.kernels.field.resample_tables`): the tables copied in
+        parallel, each surviving parent's tiles counted once, times its children."""
+        parents = np.ascontiguousarray(indices, dtype=np.int64)
+        children = np.bincount(parents, minlength=self.tables.shape[0]).astype(np.int64)
+        out = np.empty((parents.shape[0], *self.tables.shape[1:]), dtype=self.tables.dtype)
+        self.free_top[0] = resample_tables(
+            self.tables, parents, children, out, self.refcount, self.free_stack
+        )
+        self.tables = out
 
     def field(self, particle: int | None = None) -> FieldView:
         """The map as the matching kernels read it (:class:`~slam.kernels.field.FieldView`).

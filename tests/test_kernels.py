@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from slam.kernels.field import recount_tiles, surface_at
+from slam.kernels.field import recount_tiles, resample_tables, surface_at
 from slam.kernels.grid import bresenham, integrate_rays
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
@@ -211,6 +211,27 @@ def test_tiles_are_shared_until_written():
     stack = np.zeros_like(maps.free_stack)
     free = recount_tiles(maps.tables, refcount, stack)
     assert maps.capacity - free == len(np.unique(maps.tables[maps.tables >= 0]))
+
+
+@pytest.mark.parametrize("parents", [[3, 3, 0, 1, 1, 1], [5, 4, 3, 2, 1, 0], [2, 2, 2, 2]])
+def test_resampled_tables_count_their_tiles_as_a_recount_does(parents):
+    """``resample_tables`` (each surviving parent's table counted once, times its children)
+    gives the copied tables, reference counts and free stack of indexing plus
+    ``recount_tiles``."""
+    rng = np.random.default_rng(7)
+    tables = rng.integers(-1, 40, size=(6, 5, 7)).astype(np.int32)
+    tables[rng.random(tables.shape) < 0.6] = -1  # mostly unknown, as a big building's
+    parents = np.array(parents, dtype=np.int64)
+    children = np.bincount(parents, minlength=6).astype(np.int64)
+    want = np.ascontiguousarray(tables[parents])
+    want_count, want_stack = np.zeros(48, np.int32), np.zeros(48, np.int32)
+    want_top = recount_tiles(want, want_count, want_stack)
+    out = np.empty_like(want)
+    count, stack = np.full(48, 99, np.int32), np.full(48, -5, np.int32)
+    top = resample_tables(tables, parents, children, out, count, stack)
+    assert np.array_equal(out, want) and np.array_equal(count, want_count)
+    assert top == want_top and np.array_equal(stack[:top], want_stack[:top])
+    assert count.sum() == (want >= 0).sum() and top == 48 - len(np.unique(want[want >= 0]))
 
 
 @pytest.mark.parametrize("signed, tolerance", [(True, 1e-3), (False, 0.025)])

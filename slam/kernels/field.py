@@ -851,6 +851,49 @@ def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarr
 
 
 @njit(cache=True, parallel=True)
+def resample_tables(
+    tables: np.ndarray,
+    parents: np.ndarray,
+    children: np.ndarray,
+    out: np.ndarray,
+    refcount: np.ndarray,
+    free_stack: np.ndarray,
+) -> int:
+    """The tile tables after a resampling: ``out[p] = tables[parents[p]]``, copied in parallel
+    (``children[q]``: how many times ``q`` is in ``parents``);
+    the reference counts and the free stack as :func:`recount_tiles` of ``out`` gives them,
+    counted from each surviving parent's table once, times its ``children[q]`` (the same
+    integers, so the same stack). Returns the number of free tiles (the new stack top).
+
+    A big building's tables are mostly unknown (fr-clinic: 30 × 439 × 713 entries, 8 % of them
+    tiles): the copy and the count are the resampling's whole cost.
+    """
+    n, rows, cols = tables.shape
+    for p in prange(out.shape[0]):
+        src = parents[p]
+        for r in range(rows):
+            for c in range(cols):
+                out[p, r, c] = tables[src, r, c]
+    for t in range(refcount.shape[0]):
+        refcount[t] = 0
+    for q in range(n):
+        m = children[q]
+        if m == 0:
+            continue
+        for r in range(rows):
+            for c in range(cols):
+                t = tables[q, r, c]
+                if t >= 0:
+                    refcount[t] += m
+    top = 0
+    for t in range(refcount.shape[0] - 1, -1, -1):
+        if refcount[t] == 0:
+            free_stack[top] = t
+            top += 1
+    return top
+
+
+@njit(cache=True, parallel=True)
 def match_scans(
     view: FieldView,
     poses: np.ndarray,
