@@ -315,13 +315,15 @@ class Slam:
 
     def finish(self) -> Result:
         """End the run: the filter's output through the post-filter stages."""
-        if self._filter is None:
-            raise UsageError("Slam.finish: no scan was processed (call update() first)")
         if self._finished:
             raise UsageError("Slam.finish: the run is already finished")
+        if self._filter is None:
+            raise UsageError("Slam.finish: no scan was processed (call update() first)")
         self._finished = True
         start = time.perf_counter()
         output = self._filter.finish()
+        # the particles' maps are not needed after the filter: the stages build their own
+        self._filter = None
         self._seconds["filter"] += time.perf_counter() - start
         output = run_stages(output, self.stages, self.config, self._seconds)
         if output.poses is None:

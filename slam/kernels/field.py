@@ -842,6 +842,12 @@ def recount_tiles(tables: np.ndarray, refcount: np.ndarray, free_stack: np.ndarr
         t = flat[i]
         if t >= 0:
             refcount[t] += 1
+    return _rebuild_free_stack(refcount, free_stack)
+
+
+@njit(cache=True, _nrt=False)
+def _rebuild_free_stack(refcount: np.ndarray, free_stack: np.ndarray) -> int:
+    """Stack every tile no table references (highest index at the bottom); returns how many."""
     top = 0
     for t in range(refcount.shape[0] - 1, -1, -1):
         if refcount[t] == 0:
@@ -885,12 +891,7 @@ def resample_tables(
                 t = tables[q, r, c]
                 if t >= 0:
                     refcount[t] += m
-    top = 0
-    for t in range(refcount.shape[0] - 1, -1, -1):
-        if refcount[t] == 0:
-            free_stack[top] = t
-            top += 1
-    return top
+    return _rebuild_free_stack(refcount, free_stack)
 
 
 @njit(cache=True, parallel=True)
