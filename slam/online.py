@@ -26,6 +26,7 @@ import bisect
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -76,10 +77,17 @@ class Estimate:
     """Whether the filter weighed this scan (``rbpf`` updates only after enough motion)."""
     resampled: bool
     """Whether the particles were resampled on this scan."""
-    particles: F64
-    """``(P, 3)`` particle poses (between ``rbpf`` updates moved on by odometry)."""
     weights: F64
     """``(P,)`` normalised particle weights (uniform right after a resampling)."""
+    _cloud: tuple[F64, F64 | None] = field(repr=False)
+    """The particles as the filter holds them (a copy) and the odometry motion since (None:
+    none): :attr:`particles` is made from them when first read."""
+
+    @cached_property
+    def particles(self) -> F64:
+        """``(P, 3)`` particle poses (between ``rbpf`` updates moved on by odometry)."""
+        base, motion = self._cloud
+        return base if motion is None else compose(base, motion)
 
     @property
     def covariance(self) -> F64:
@@ -259,12 +267,10 @@ class Slam:
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:
         k = outcome.step
-        particles = outcome.particles
-        if outcome.motion is not None:
-            particles = compose(particles, outcome.motion)
         weights = outcome.weights
         if outcome.resampled:
-            weights = np.full(particles.shape[0], 1.0 / particles.shape[0])
+            n = outcome.particles.shape[0]
+            weights = np.full(n, 1.0 / n)
         return Estimate(
             step=k,
             scan_index=int(self.scans.indices[k]),
@@ -274,8 +280,8 @@ class Slam:
             max_weight=float(outcome.max_weight),
             updated=outcome.updated,
             resampled=outcome.resampled,
-            particles=np.array(particles, dtype=np.float64),
             weights=np.array(weights, dtype=np.float64),
+            _cloud=(np.array(outcome.particles, dtype=np.float64), outcome.motion),
         )
 
     def _notify(self, observer: CompositeObserver, outcome: StepOutcome, est: Estimate) -> None:
