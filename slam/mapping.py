@@ -371,7 +371,8 @@ class ParticleMaps:
         One kernel call, :func:`~slam.kernels.field.insert_particles`, in three steps: which
         hits add something (parallel), copy-on-write of the tiles they touch (serial, cheap),
         then the distance updates (parallel: each particle writes only tiles it owns alone); a
-        pool that runs out of tiles on the way grows and the call resumes. One pose (a scan placed into one map) takes one serial kernel instead,
+        pool that runs out of tiles on the way grows and the call resumes. One pose (a scan
+        placed into one map) takes one serial kernel instead,
         :func:`~slam.kernels.field.insert_serial`, which gives the same maps.
         """
         if hx.shape[0] == 0:
@@ -498,8 +499,10 @@ class ParticleMaps:
         min_inliers: float,
         coarse_stride: int = 1,
         probe_yaws: F64 | None = None,
+        particle: int | None = None,
     ) -> MatchResult:
-        """Scan-match every particle's predicted pose against its own map and score it.
+        """Scan-match every particle's predicted pose against its own map and score it — or,
+        with ``particle``, every pose of ``poses`` against that particle's map.
 
         ``luts`` comes from :func:`likelihood_tables`. With ``probe_yaws`` (rad), the basin probe
         in the same kernel call (:func:`~slam.kernels.field.match_particles`): the predicted
@@ -508,8 +511,12 @@ class ParticleMaps:
         """
         yaws = _NO_YAWS if probe_yaws is None else np.ascontiguousarray(probe_yaws, np.float64)
         out, probe = _match_result(poses.shape[0]), _match_result(yaws.shape[0])
+        view = self.field()
+        if particle is not None:  # the kernel reads row p's table for pose p
+            one = self.tables[particle : particle + 1]
+            view = view._replace(table=np.ascontiguousarray(np.repeat(one, len(poses), axis=0)))
         match_particles(
-            self.field(),
+            view,
             np.ascontiguousarray(poses),
             np.stack([ex, ey]).astype(np.float64, copy=False),
             _settings(luts, max_iter, tolerance, coarse_stride, min_inliers),

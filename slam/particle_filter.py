@@ -41,7 +41,6 @@ from numpy.typing import NDArray
 
 from slam.config import Config, RbpfConfig
 from slam.geometry import compose, relative, transform_points, wrap_angle
-from slam.kernels.field import MatchOutput, MatchSettings, match_particles
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
@@ -669,24 +668,10 @@ def match_from_starts(
 ) -> MatchResult:
     """Match one scan (robot-frame ``hits``) from several ``starts`` ``(S, 3)`` against the map
     of one ``particle``, with the proposal's matcher and settings (``rc``)."""
-    n = starts.shape[0]
-    tables = np.ascontiguousarray(np.repeat(maps.tables[particle : particle + 1], n, axis=0))
-    view = maps.field()._replace(table=tables)
-    out = MatchResult(np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3, 3)))
-    settings = MatchSettings(
-        luts[0], float(luts[1]), int(rc.max_iterations), float(rc.tolerance),
-        int(rc.coarse_stride), float(rc.min_inliers),
+    return maps.match(
+        starts, hits[0], hits[1], luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
+        rc.coarse_stride, particle=particle,
     )  # fmt: skip
-    match_particles(
-        view,
-        np.ascontiguousarray(starts),
-        np.stack([hits[0], hits[1]]).astype(np.float64, copy=False),
-        settings,
-        MatchOutput(out.poses, out.loglik, out.inliers, out.hessian),
-        np.zeros(0),
-        MatchOutput(np.empty((0, 3)), np.empty(0), np.empty(0), np.empty((0, 3, 3))),
-    )
-    return out
 
 
 def motion_covariance(poses: F64, increment: F64, alphas: F64, floor: F64) -> F64:

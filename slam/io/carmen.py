@@ -66,6 +66,7 @@ NO_RETURN_MIN_SHARE = 1e-3
 """A 1 cm bin of that band holds a no-echo code when it has at least this share of the readings
 (and :data:`NO_RETURN_MIN_COUNT` of them): genuine readings that far out are rare and spread."""
 NO_RETURN_MIN_COUNT = 100
+"""... and at least this many readings (see :data:`NO_RETURN_MIN_SHARE`)."""
 DEFAULT_RANGE_MIN = 0.05
 """Shortest valid reading when the config gives none (m): below every genuine reading of the
 benchmark logs (the shortest is 0.12 m, on fr079), so zero readings count as invalid beams."""
