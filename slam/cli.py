@@ -17,7 +17,9 @@ What the user's environment does to a command is also one line, not a traceback:
 * Ctrl-C (SIGINT) exits 130; SIGTERM and SIGHUP are raised like Ctrl-C (as
   :class:`~slam.errors.Terminated`) so outputs being assembled are removed the same way, exit
   ``128 + signum`` (143 for SIGTERM). An interrupt that numba's dispatcher wraps into a
-  ``SystemError`` counts as the interrupt;
+  ``SystemError`` counts as the interrupt; a termination whose exception Python swallowed (it
+  arrived in a weakref's or the import system's callback) is raised again before an output is
+  committed and when the command returns (:func:`slam.errors.raise_pending_termination`);
 * a closed standard output (``slam grid run X --json | head``) ends the command quietly, exit 141
   (``128 + SIGPIPE``, what a shell reports for a program killed by SIGPIPE).
 
@@ -41,7 +43,12 @@ from typing import NamedTuple
 
 from slam import __version__
 from slam.commands._common import add_actions, add_command
-from slam.errors import SlamError, Terminated
+from slam.errors import (
+    SlamError,
+    clear_pending_termination,
+    note_termination,
+    raise_pending_termination,
+)
 
 
 class Command(NamedTuple):
@@ -149,7 +156,7 @@ EXIT_BROKEN_PIPE = 128 + 13
 
 
 def _raise_terminated(signum: int, frame: object) -> None:
-    raise Terminated(signum)
+    raise note_termination(signum)
 
 
 @contextlib.contextmanager
@@ -157,6 +164,7 @@ def _termination_as_interrupt() -> Iterator[None]:
     """Turn SIGTERM and SIGHUP into :class:`~slam.errors.Terminated` (main thread only; a
     signal the parent told us to ignore, as ``nohup`` does for SIGHUP, stays ignored)."""
     previous: dict[int, object] = {}
+    clear_pending_termination()
     if threading.current_thread() is threading.main_thread():
         for name in TERMINATING_SIGNALS:
             signum = getattr(signal, name, None)
@@ -219,11 +227,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with _termination_as_interrupt():
             code = args.func(args)
+            raise_pending_termination()  # a signal whose exception a callback swallowed
             sys.stdout.flush()
     except SlamError as exc:
         print(f"slam: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt as exc:
+        clear_pending_termination()
         return _interrupted(exc)
     except BrokenPipeError:
         _silence_stdout()
@@ -232,6 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         interrupt = _interrupt_in(exc)
         if interrupt is None:
             raise
+        clear_pending_termination()
         return _interrupted(interrupt)
     except OSError as exc:
         named = exc.filename is not None or exc.errno in NO_SPACE_ERRNOS

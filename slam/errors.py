@@ -34,3 +34,30 @@ class Terminated(KeyboardInterrupt):
     def __init__(self, signum: int) -> None:
         super().__init__(signum)
         self.signum = signum
+
+
+_PENDING: list[int] = []
+"""Termination signals raised as :class:`Terminated` and not yet seen ending a command."""
+
+
+def note_termination(signum: int) -> Terminated:
+    """The :class:`Terminated` a signal handler raises, remembered until
+    :func:`raise_pending_termination` or :func:`clear_pending_termination`: Python swallows an
+    exception raised in some callbacks (a weakref's, the import system's lock release: "Exception
+    ignored in ..."), and the signal must not be lost with it."""
+    _PENDING.append(signum)
+    return Terminated(signum)
+
+
+def raise_pending_termination() -> None:
+    """Raise the remembered :class:`Terminated`, if a termination signal came and was swallowed
+    (called before an output is committed and when a command returns)."""
+    if _PENDING:
+        signum = _PENDING[0]
+        _PENDING.clear()
+        raise Terminated(signum)
+
+
+def clear_pending_termination() -> None:
+    """Forget remembered signals (a command starting, or one that ended by its Terminated)."""
+    _PENDING.clear()

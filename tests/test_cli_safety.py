@@ -7,6 +7,7 @@ against ``main`` at 19f712c), except the guard that bugs keep their traceback. R
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -22,8 +23,9 @@ from pathlib import Path
 import pytest
 from cli_process import cli_env, finished_run, slam_cmd
 
+from slam import cli
 from slam.cli import main
-from slam.errors import UsageError
+from slam.errors import Terminated, UsageError
 from slam.io import atomic
 from slam.io.atomic import atomic_dir
 
@@ -252,6 +254,22 @@ def test_two_concurrent_runs_into_one_out_give_one_result_and_one_exit_2(small, 
 
 
 # --- item 3: SIGTERM, SIGKILL and stale partial folders -------------------------------------
+
+
+def test_a_sigterm_whose_exception_a_callback_swallowed_still_ends_the_command(tmp_path):
+    """Python swallows an exception raised in some callbacks (a weakref's, the import system's
+    lock release: "Exception ignored in ..."); a SIGTERM arriving there must still end the
+    command: no output committed, Terminated, and no stale signal for the next command."""
+    with cli._termination_as_interrupt():
+        with contextlib.suppress(Terminated):  # what Python does with it in such a callback
+            cli._raise_terminated(signal.SIGTERM, None)
+        with pytest.raises(Terminated) as caught, atomic_dir(tmp_path / "out") as folder:
+            (folder / "trajectory.tum").write_text("0 0 0 0 0 0 0 1\n")
+    assert caught.value.signum == signal.SIGTERM
+    assert list(tmp_path.iterdir()) == []
+    with cli._termination_as_interrupt(), atomic_dir(tmp_path / "next") as folder:
+        (folder / "trajectory.tum").write_text("0 0 0 0 0 0 0 1\n")
+    assert (tmp_path / "next" / "trajectory.tum").is_file()
 
 
 def test_sigterm_exits_143_and_sigkill_leftovers_go_with_the_next_run(small, tmp_path, capsys):

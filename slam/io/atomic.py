@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from slam.errors import Terminated, UsageError
+from slam.errors import Terminated, UsageError, raise_pending_termination
 from slam.io.runfolder import (
     OWNER_FILE,
     OutputKind,
@@ -476,6 +476,7 @@ def atomic_dir(
         with _signals_deferred():  # no signal between the folder and the cleanup that owns it
             staging = _Staging(make_partial(parent, path.name))
         yield staging.path
+        raise_pending_termination()  # a signal whose exception a callback swallowed: no commit
         write_marker(staging.path, plan.kind)
         if plan.existing == "own":
             _commit_replacing(staging, plan)
