@@ -129,20 +129,30 @@ def spread_corrections(
     new_anchors = np.asarray(new_anchors, dtype=np.float64)
     progress = np.asarray(progress, dtype=np.float64)
     n = old.shape[0]
-    out = np.empty_like(old)
-    for k, a in enumerate(anchors):
-        b = int(anchors[k + 1]) if k + 1 < len(anchors) else n
-        idx = np.arange(a, b)
-        forward = compose(new_anchors[k], relative(old[a], old[idx]))
-        if b == n:
-            out[idx] = forward
-            continue
-        backward = compose(new_anchors[k + 1], relative(old[b], old[idx]))
-        span = progress[b] - progress[a]
-        f = ((progress[idx] - progress[a]) / span if span > 0 else (idx - a) / (b - a))[:, None]
-        blend = forward + f * (backward - forward)
-        blend[:, 2] = forward[:, 2] + f[:, 0] * wrap_angle(backward[:, 2] - forward[:, 2])
-        out[idx] = blend
+    # every pose at once (the same arithmetic per pose as anchor by anchor): its anchor ``a``
+    # (the last at or before it, number ``k``) and the next one ``b``
+    idx = np.arange(n)
+    k = np.searchsorted(anchors, idx, side="right") - 1
+    last = k == anchors.size - 1  # after the last anchor: follow it rigidly
+    k_next = np.minimum(k + 1, anchors.size - 1)
+    a = anchors[k]
+    b = np.where(last, n, anchors[k_next])
+    forward = compose(new_anchors[k], relative(old[a], old))
+    inner = ~last
+    ii, ai, bi = idx[inner], a[inner], b[inner]
+    backward = compose(new_anchors[k_next[inner]], relative(old[bi], old[ii]))
+    span = progress[bi] - progress[ai]
+    moved = span > 0
+    f = np.where(
+        moved,
+        (progress[ii] - progress[ai]) / np.where(moved, span, 1.0),
+        (ii - ai) / (bi - ai),
+    )[:, None]
+    near = forward[inner]
+    blend = near + f * (backward - near)
+    blend[:, 2] = near[:, 2] + f[:, 0] * wrap_angle(backward[:, 2] - near[:, 2])
+    out = forward
+    out[inner] = blend
     out[:, 2] = wrap_angle(out[:, 2])
     return out
 

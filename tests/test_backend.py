@@ -117,3 +117,53 @@ def test_backend_config_bounds_name_the_key():
 
     with pytest.raises(ConfigError, match="window_xy_min <= window_xy_max"):
         load_config("demo", None, ["backend.window_xy_min=5", "backend.window_xy_max=1"])
+
+
+class _SlowScans:
+    """Scans as the submap cache reads them (``hits``), each read taking a while so that threads
+    asking for the same submap overlap."""
+
+    def __init__(self, points: np.ndarray):
+        self.points = points
+
+    def hits(self, step: int, beams: int = 0):
+        import time
+
+        time.sleep(0.002)
+        rng = np.random.default_rng(step)
+        sel = self.points[rng.choice(len(self.points), 120, replace=False)]
+        return sel[:, 0].copy(), sel[:, 1].copy()
+
+
+def test_submap_cache_shared_by_threads_builds_each_submap_once():
+    # the global search's threads share one cache: a submap asked for by several threads at once
+    # is built by one of them (the others wait for it), and is the one a serial cache builds
+    from concurrent.futures import ThreadPoolExecutor
+
+    from slam.backend.submaps import SubmapCache
+
+    config = Config()
+    poses = np.zeros((60, 3))
+    steps = np.arange(60)
+    keys = [(0, 10), (10, 20), (20, 30), (30, 40), (40, 50), (50, 60)]
+    asks = [keys[(i * 7) % len(keys)] for i in range(48)]
+    shared = SubmapCache(_SlowScans(_room()), steps, poses, config, keep=32)
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        got = list(pool.map(lambda key: shared.pyramid(*key), asks))
+    assert shared.builds == len(keys)
+    serial = SubmapCache(_SlowScans(_room()), steps, poses, config, keep=32)
+    for key, pyr in zip(asks, got, strict=True):
+        assert pyr is shared.pyramid(*key)  # still cached: the very same object
+        alone = serial.pyramid(*key)
+        assert np.array_equal(pyr.levels, alone.levels) and pyr.origin == alone.origin
+    assert shared.builds == len(keys) and serial.builds == len(keys)
+
+
+def test_submap_cache_keeps_the_most_recently_used():
+    from slam.backend.submaps import SubmapCache
+
+    cache = SubmapCache(_SlowScans(_room()), np.arange(30), np.zeros((30, 3)), Config(), keep=2)
+    for key in [(0, 10), (10, 20), (0, 10), (20, 30), (0, 10), (10, 20)]:
+        cache.pyramid(*key)
+    # (10, 20) was evicted by (20, 30) ((0, 10) was used since): built again at the end
+    assert cache.builds == 4

@@ -60,6 +60,11 @@ from slam.scans import ScanHits
 F64 = NDArray[np.float64]
 
 
+SUBMAPS_KEPT = 32
+"""Submaps of each kind (pyramid, field map) the global search keeps at a time, shared by its
+threads."""
+
+
 def keyframes(path: F64, spacing: float) -> NDArray[np.int64]:
     """Node indices about ``spacing`` metres of path apart (the first node included)."""
     return np.unique(np.searchsorted(path, np.arange(0.0, path[-1] + 1e-9, spacing)))
@@ -126,8 +131,9 @@ def detect_global(
     the nodes' hits (:func:`slam.graph.node_hits`; computed here when not given).
 
     Keyframes are independent: ranges of them are searched on the kernel threads
-    (:func:`slam.kernels.threads.in_threads`), each with its own :class:`SubmapCache`, and the
-    closures are joined in keyframe order, so the result does not depend on the thread count.
+    (:func:`slam.kernels.threads.in_threads`), which share one :class:`SubmapCache` (a submap
+    is built once however many ranges search it), and the closures are joined in keyframe
+    order, so the result does not depend on the thread count.
     """
     bc = config.backend
     if table is None:
@@ -135,9 +141,10 @@ def detect_global(
     frames = keyframes(path, bc.keyframe_path)
     st = _Stretches.of(x, path, bc.submap_length, list(local))
     cuts = np.linspace(0, frames.size, 4 * threads() + 1).round().astype(np.int64)
+    cache = SubmapCache(seq, steps, x, config, keep=SUBMAPS_KEPT, table=table)
     parts = in_threads(
         [
-            partial(_search_keyframes, seq, steps, x, path, config, table, st, frames[a:b])
+            partial(_search_keyframes, seq, steps, x, path, config, cache, st, frames[a:b])
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
             if b > a
         ]
@@ -152,14 +159,13 @@ def _search_keyframes(
     x: F64,
     path: F64,
     config: Config,
-    table: ScanHits,
+    cache: SubmapCache,
     st: _Stretches,
     frames: NDArray[np.int64],
 ) -> tuple[list, int]:
-    """:func:`detect_global`'s search from the keyframes ``frames``: their verified closures
-    and the searches made."""
+    """:func:`detect_global`'s search from the keyframes ``frames`` (submaps from ``cache``):
+    their verified closures and the searches made."""
     bc, lc, rc = config.backend, config.loops, config.rbpf
-    cache = SubmapCache(seq, steps, x, config, table=table)
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     edges, searched = [], 0
     for i in frames:

@@ -5,14 +5,18 @@ current poses. It is built twice, on demand: as a branch-and-bound pyramid
 (:func:`slam.kernels.bnb.max_pyramid` of the hits' likelihood at ``backend.resolution``) for the
 global search, and as a one-particle distance-field map (:class:`slam.mapping.ParticleMaps`) for
 the Levenberg-Marquardt refinement and the fit check of :mod:`slam.graph`. Both are kept in a
-small cache (a few submaps at a time: a keyframe's candidates are neighbours of the previous
-keyframe's).
+cache that the search's threads share (:class:`SubmapCache`): a submap is built once per round
+however many keyframes, on whichever thread, ask for it, as long as it stays among the
+``keep`` most recently used.
 """
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +27,7 @@ from slam.mapping import ParticleMaps
 from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
+V = TypeVar("V")
 
 
 @dataclass
@@ -51,7 +56,13 @@ def world_hits(seq, step: int, pose: F64, max_range: float, beams: int = 0) -> t
 
 
 class SubmapCache:
-    """The submaps of one round (poses fixed), built when first asked for, a few kept."""
+    """The submaps of one round (poses fixed), built when first asked for, the ``keep`` most
+    recently used of each kind kept.
+
+    Thread-safe: the global search's threads share one cache. A submap asked for while another
+    thread builds it is waited for, not built again; building is deterministic, so what a
+    caller gets never depends on which thread built it or on what was evicted (only the time).
+    """
 
     def __init__(
         self,
@@ -65,8 +76,44 @@ class SubmapCache:
         self.seq, self.steps, self.poses, self.config = seq, steps, poses, config
         self.table = table  # the nodes' hits for the field maps (slam.graph.node_hits)
         self.keep = keep
-        self._pyramids: OrderedDict[tuple[int, int], Pyramid] = OrderedDict()
+        self._pyramids: OrderedDict[tuple[int, int], Pyramid | None] = OrderedDict()
         self._maps: OrderedDict[tuple[int, int], ParticleMaps] = OrderedDict()
+        self._lock = threading.Lock()
+        self._building: dict[tuple[str, int, int], threading.Event] = {}
+        self.builds = 0
+        """Submaps built so far (pyramids and field maps)."""
+
+    def _cached(
+        self, kind: str, store: OrderedDict, key: tuple[int, int], build: Callable[[], V]
+    ) -> V:
+        """``store[key]``, built by ``build`` (outside the lock, by one thread at a time)."""
+        while True:
+            with self._lock:
+                if key in store:
+                    store.move_to_end(key)
+                    return store[key]
+                if self.table is None and kind == "map":
+                    from slam.graph import node_hits
+
+                    self.table = node_hits(self.seq, self.steps, self.config)
+                pending = self._building.get((kind, *key))
+                if pending is None:
+                    done = self._building[(kind, *key)] = threading.Event()
+            if pending is not None:  # another thread builds it: wait, then look again
+                pending.wait()
+                continue
+            try:
+                value = build()
+                with self._lock:
+                    self.builds += 1
+                    store[key] = value
+                    if len(store) > self.keep:
+                        store.popitem(last=False)
+                return value
+            finally:
+                with self._lock:
+                    del self._building[(kind, *key)]
+                done.set()
 
     def _node_hits(self, lo: int, hi: int) -> tuple[F64, F64]:
         bc, lc = self.config.backend, self.config.loops
@@ -84,10 +131,9 @@ class SubmapCache:
 
     def pyramid(self, lo: int, hi: int) -> Pyramid | None:
         """The branch-and-bound grid of nodes ``[lo, hi)`` (None without hits)."""
-        key = (lo, hi)
-        if key in self._pyramids:
-            self._pyramids.move_to_end(key)
-            return self._pyramids[key]
+        return self._cached("pyramid", self._pyramids, (lo, hi), lambda: self._pyramid(lo, hi))
+
+    def _pyramid(self, lo: int, hi: int) -> Pyramid | None:
         bc = self.config.backend
         hx, hy = self._node_hits(lo, hi)
         if hx.size == 0:
@@ -99,26 +145,16 @@ class SubmapCache:
         h = int(np.ceil((hy.max() + margin - oy) / res)) + 1
         grid = np.zeros((h, w), dtype=np.float32)
         splat_likelihood(hx, hy, ox, oy, res, bc.sigma, grid)
-        pyr = Pyramid(max_pyramid(grid, bc.levels), (ox, oy), res)
-        self._pyramids[key] = pyr
-        if len(self._pyramids) > self.keep:
-            self._pyramids.popitem(last=False)
-        return pyr
+        return Pyramid(max_pyramid(grid, bc.levels), (ox, oy), res)
 
     def field_map(self, lo: int, hi: int) -> ParticleMaps:
         """The distance-field map of nodes ``[lo, hi)`` (as :mod:`slam.graph` builds its own)."""
-        from slam.graph import _empty_map, insert_nodes, node_hits
+        return self._cached("map", self._maps, (lo, hi), lambda: self._field_map(lo, hi))
 
-        key = (lo, hi)
-        if key in self._maps:
-            self._maps.move_to_end(key)
-            return self._maps[key]
-        if self.table is None:
-            self.table = node_hits(self.seq, self.steps, self.config)
+    def _field_map(self, lo: int, hi: int) -> ParticleMaps:
+        from slam.graph import _empty_map, insert_nodes
+
         maps = _empty_map(self.poses[lo], self.config)
         nodes = np.arange(lo, hi, self.config.loops.submap_stride)
         insert_nodes(maps, self.table, nodes, self.poses, self.config)
-        self._maps[key] = maps
-        if len(self._maps) > self.keep:
-            self._maps.popitem(last=False)
         return maps
