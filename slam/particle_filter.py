@@ -33,6 +33,8 @@ whatever the number of threads.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import statistics
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -309,7 +311,7 @@ class RbpfFilter:
         self.first = StepOutcome(0, start, self.particles, self.weights, p, 1.0 / p, True, False)
         """The outcome of scan 0 (the initial map)."""
 
-    @property
+    @functools.cached_property
     def probe_yaws(self) -> F64:
         """The basin probe's turns of the best particle's predicted pose (rad):
         ``rbpf.probe_yaw``, then the same turns the other way."""
@@ -407,7 +409,11 @@ class RbpfFilter:
         beams = max(hits[0].size, 1)
         best = float(match.loglik.max()) / beams
         recent = self.recent_loglik
-        if rc.retry_ratio > 0 and len(recent) >= 5 and best < rc.retry_ratio * np.median(recent):
+        if (
+            rc.retry_ratio > 0
+            and len(recent) >= 5
+            and best < rc.retry_ratio * statistics.median(recent)
+        ):
             self.retries += 1
             for yaw in rc.retry_yaw:
                 for sign in (1.0, -1.0):
@@ -459,7 +465,7 @@ class RbpfFilter:
         first = float(match.loglik[b]) / beams
         gain = float(score[j]) / beams - first
         recent = self.recent_best
-        typical = float(np.median(recent)) if len(recent) >= 5 else first
+        typical = statistics.median(recent) if len(recent) >= 5 else first
         recent.append(first)
         if len(recent) > rc.retry_window:
             del recent[0]
