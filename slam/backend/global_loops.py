@@ -60,9 +60,11 @@ from slam.scans import ScanHits
 F64 = NDArray[np.float64]
 
 
-SUBMAPS_KEPT = 32
+SUBMAPS_KEPT = 16
 """Submaps of each kind (pyramid, field map) the global search keeps at a time, shared by its
-threads."""
+threads: ~2 MB each on mit-killian, so ~64 MB at most, what the threads' own caches of 8 held
+before they were shared (with 32 each, intel builds 147 instead of 222 but mit-killian's peak
+grows by 25-38 MB, close to its 800 MB bound)."""
 
 
 def keyframes(path: F64, spacing: float) -> NDArray[np.int64]:
