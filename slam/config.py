@@ -54,6 +54,18 @@ def _unset_or_at_most(a: float | None, b: float | None) -> bool:
     return a is None or b is None or a <= b
 
 
+def _cell_or_zero(zero_means: str) -> Any:
+    """A cell size field (m), default 0: 0 means ``zero_means`` (another cell size), else a
+    finite number in [0.001, 10]."""
+    return bounded(
+        0.0,
+        ge=0.0,
+        le=10.0,
+        test=lambda v: v == 0.0 or v >= 0.001,
+        expected=f"0 (use {zero_means}) or a finite number in [0.001, 10]",
+    )
+
+
 @dataclass(frozen=True)
 class RobotConfig(Validated):
     """Differential-drive robot geometry and odometry settings."""
@@ -204,13 +216,7 @@ class RbpfConfig(Validated):
     """At most this many beams are inserted into the particle maps per update."""
     tile: int = bounded(16, ge=2, le=128, power_of_two=True)
     """Tile side (cells, a power of two) of the copy-on-write particle maps."""
-    resolution: float = bounded(
-        0.0,
-        ge=0.0,
-        le=10.0,
-        test=lambda v: v == 0.0 or v >= 0.001,
-        expected="0 (use map.resolution) or a finite number in [0.001, 10]",
-    )
+    resolution: float = _cell_or_zero("map.resolution")
     """Cell size of the particle maps (m); 0 uses ``map.resolution``."""
     field: str = bounded("distance", choices=("distance", "plane"))
     """Particle-map field: ``"distance"`` (Euclidean distance to the nearest hit) or ``"plane"``
@@ -277,13 +283,7 @@ class RbpfConfig(Validated):
     default): every beam. After the filter there is time for all of them: with every beam
     instead of ``match_beams``, fr079's and mit-csail's (360 beams) relation errors fall on
     seeds 0–3 on average (docs/slam.md); logs of at most ``match_beams`` beams are unchanged."""
-    refine_resolution: float = bounded(
-        0.0,
-        ge=0.0,
-        le=10.0,
-        test=lambda v: v == 0.0 or v >= 0.001,
-        expected="0 (use the particle maps' cell) or a finite number in [0.001, 10]",
-    )
+    refine_resolution: float = _cell_or_zero("the particle maps' cell")
     """Cell size (m) of the distance field the stages after the filter register scans against
     (re-registration and :attr:`register_scans`); 0 (the default): the particle maps' own.
     A coarser field (0.1 m) scores better on the benchmark's relations but worse against the

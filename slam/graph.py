@@ -406,25 +406,32 @@ def keyframe_edges(
     return edges
 
 
-LoopRound = Callable[[F64, NDArray[np.int64], NDArray[np.int64]], tuple[list, F64 | None, int]]
-"""One round of loop closing, given the current node poses ``x`` and :func:`graph_keyframes`:
-``(keyframe edges, optimised keyframe poses or None when no closure was found, candidates
-examined)``."""
+LoopRound = Callable[
+    [F64, NDArray[np.int64], NDArray[np.int64], list], tuple[list, F64 | None, int]
+]
+"""One round of loop closing, given the current node poses ``x``, :func:`graph_keyframes` and
+the round's local closures (:func:`_detect` along ``x``): ``(keyframe edges, optimised keyframe
+poses or None when no closure was found, further candidates examined)``."""
 
 
-def loop_rounds(poses: F64, path: F64, lc: LoopConfig, one_round: LoopRound) -> LoopResult:
-    """Run up to ``lc.rounds`` rounds of ``one_round`` over the nodes ``poses`` (``path``: each
-    node's distance along the trajectory), spreading each round's keyframe corrections to the
-    nodes in between, until a round finds nothing; then the do-no-harm rule (module docstring,
-    step 5). The frame of :func:`close_loops` and
-    :func:`slam.backend.global_loops.close_loops_global`."""
+def loop_rounds(
+    seq, steps, poses: F64, path: F64, table: ScanHits, config: Config, one_round: LoopRound
+) -> LoopResult:
+    """Run up to ``loops.rounds`` rounds over the nodes ``poses`` (at scans ``steps``; ``path``:
+    each node's distance along the trajectory, ``table``: their hits, :func:`node_hits`), each
+    detecting the local closures along the current estimate (:func:`_detect`) and handing them
+    to ``one_round``, spreading each round's keyframe corrections to the nodes in between, until
+    a round finds nothing; then the do-no-harm rule (module docstring, step 5). The frame of
+    :func:`close_loops` and :func:`slam.backend.global_loops.close_loops_global`."""
+    lc = config.loops
     keys, key_of = graph_keyframes(poses.shape[0], lc.stride)
     x = poses.copy()
     examined = 0
     edges: list = []
     for _ in range(lc.rounds):
-        found, new_keys, count = one_round(x, keys, key_of)
-        examined += count
+        local, count = _detect(seq, steps, x, path, config, table)
+        found, new_keys, more = one_round(x, keys, key_of, local)
+        examined += count + more
         if new_keys is None:
             break
         edges = found
@@ -443,16 +450,14 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
     for, plus the last; the nodes in between follow their keyframes' corrections.
     """
     lc = config.loops
-    path = path_along(poses)
-    table = node_hits(seq, steps, config)
 
     def one_round(
-        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
+        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64], found: list
     ) -> tuple[list, F64 | None, int]:
-        found, count = _detect(seq, steps, x, path, config, table)
         if not found:
-            return [], None, count
+            return [], None, 0
         edges = keyframe_edges(found, x, keys, key_of)
-        return edges, optimize(poses[keys], edges, lc), count
+        return edges, optimize(poses[keys], edges, lc), 0
 
-    return loop_rounds(poses, path, lc, one_round)
+    path, table = path_along(poses), node_hits(seq, steps, config)
+    return loop_rounds(seq, steps, poses, path, table, config, one_round)

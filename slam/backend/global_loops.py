@@ -43,7 +43,6 @@ from slam.config import Config
 from slam.geometry import compose, inverse, path_along, relative, wrap_angle
 from slam.graph import (
     LoopResult,
-    _detect,
     _edge_information,
     keyframe_edges,
     loop_rounds,
@@ -289,13 +288,12 @@ def close_loops_global(
     table = node_hits(seq, steps, config)
 
     def one_round(
-        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64]
+        x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64], local: list
     ) -> tuple[list, F64 | None, int]:
-        local, count = _detect(seq, steps, x, path, config, table)
         glob, searched = detect_global(seq, steps, x, path, config, local, table)
         glob = consistent(glob, x, path, config)
         if not local and not glob:
-            return [], None, count + searched
+            return [], None, searched
         local_edges = keyframe_edges(local, x, keys, key_of)
         global_edges = keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
@@ -308,9 +306,9 @@ def close_loops_global(
             passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
             edges = local_edges + passed
             if len(passed) == len(global_edges):
-                return edges, pulled, count + searched  # every closure agrees: nothing to redo
+                return edges, pulled, searched  # every closure agrees: nothing to redo
             start = pulled if passed else None
         new_keys = optimize(poses[keys], edges, lc, start=start)
-        return edges, new_keys, count + searched
+        return edges, new_keys, searched
 
-    return loop_rounds(poses, path, lc, one_round)
+    return loop_rounds(seq, steps, poses, path, table, config, one_round)

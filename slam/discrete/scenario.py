@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -415,8 +416,20 @@ def check_world_memory(rows: int, cols: int, headings: int, source: str) -> None
     )
 
 
-def _parse_world(t: _WorldTable, source: str) -> GridWorld:
+@contextmanager
+def _naming(source: str) -> Iterator[None]:
+    """A :class:`~slam.errors.ConfigError` raised inside names ``source`` (the scenario file)
+    first, unless it already does."""
     try:
+        yield
+    except ConfigError as exc:
+        if str(exc).startswith(source):
+            raise
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def _parse_world(t: _WorldTable, source: str) -> GridWorld:
+    with _naming(source):
         if t.map is not None:
             check_world_memory(
                 len(t.map), max((len(r) for r in t.map), default=0), t.headings, source
@@ -430,29 +443,21 @@ def _parse_world(t: _WorldTable, source: str) -> GridWorld:
         return random_colour_world(
             r.rows, r.cols, list(r.colours), rng, counts, t.cyclic, t.headings
         )
-    except ConfigError as exc:
-        if str(exc).startswith(source):
-            raise
-        raise ConfigError(f"{source}: {exc}") from None
 
 
 def _parse_sensor(table: Mapping[str, Any], source: str) -> SensorModel:
     t = _typed(table, source, "sensor", _SENSOR_TABLES)
-    try:
+    with _naming(source):
         if isinstance(t, _ColourTable):
             return ColourSensor(t.p_correct)
         if isinstance(t, _WnesTable):
             return WnesSensor(t.p_obstacle_given_obstacle, t.p_open_given_open)
         return ConfusionSensor(_matrix(t.matrix, source, "sensor.matrix"), t.observations)
-    except ConfigError as exc:
-        if str(exc).startswith(source):
-            raise
-        raise ConfigError(f"{source}: {exc}") from None
 
 
 def _parse_motion(table: Mapping[str, Any], source: str) -> MotionModel:
     t = _typed(table, source, "motion", _MOTION_TABLES)
-    try:
+    with _naming(source):
         if isinstance(t, _ShiftTable):
             return ShiftMotion(t.p_exact, t.p_undershoot, t.p_overshoot)
         if isinstance(t, _MoveOrStayTable):
@@ -462,10 +467,6 @@ def _parse_motion(table: Mapping[str, Any], source: str) -> MotionModel:
         if isinstance(t, _UnknownHeadingTable):
             return UnknownHeading()
         return HeadingMotion(t.p_move, t.p_turn)
-    except ConfigError as exc:
-        if str(exc).startswith(source):
-            raise
-        raise ConfigError(f"{source}: {exc}") from None
 
 
 def parse_steps(
