@@ -167,3 +167,32 @@ def test_submap_cache_keeps_the_most_recently_used():
         cache.pyramid(*key)
     # (10, 20) was evicted by (20, 30) ((0, 10) was used since): built again at the end
     assert cache.builds == 4
+
+
+def test_compact_view_keeps_the_field_and_drops_unused_tiles():
+    # the submap cache keeps a field map's used tiles only; the kernels read the same values
+    from slam.backend.submaps import compact_view
+    from slam.kernels.field import match_one, surface_at
+    from slam.mapping import ParticleMaps, likelihood_tables
+
+    points = _room()
+    maps = ParticleMaps(1, RES, 0.3, center=(5.0, 3.0), size_m=20.0, capacity=1024)
+    reach = np.array([15.0])
+    maps.insert_scans(
+        np.zeros((1, 3)), np.vstack([points[:, 0], points[:, 1]]), np.array([0, len(points)]),
+        reach, 0.0,
+    )  # fmt: skip
+    full = maps.field(0)
+    small = compact_view(full)
+    used = int((full.table >= 0).sum())
+    assert small.surface.shape[0] == used < maps.capacity
+    rng = np.random.default_rng(0)
+    for x, y in rng.uniform([-1.0, -1.0], [11.0, 7.0], size=(500, 2)):
+        a, b = surface_at(full, x, y), surface_at(small, x, y)
+        assert np.array_equal(np.array(a), np.array(b), equal_nan=True)
+    luts, step_inv = likelihood_tables(np.array([0.2, 0.075, 0.04]), 1.0, 0.05, 0.3)
+    ex, ey = _scan(points, np.array([4.0, 2.5, 0.3]), 150)
+    start = np.array([4.1, 2.45, 0.33])
+    one = match_one(full, start, ex, ey, luts, step_inv, 10, 1e-3, 1)
+    two = match_one(small, start, ex, ey, luts, step_inv, 10, 1e-3, 1)
+    assert np.array_equal(one[0], two[0]) and one[1] == two[1] and one[2] == two[2]

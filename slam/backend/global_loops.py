@@ -204,7 +204,7 @@ def _search_keyframes(
             )  # fmt: skip
             if found[3] < 0:
                 continue
-            view = cache.field_map(lo, hi).field(0)
+            view = cache.field_view(lo, hi)
             iterations = rc.max_iterations * lc.match_iteration_factor
             refined, _, _ = match_one(
                 view, found[:3].copy(), ex, ey, luts, step_inv, iterations, rc.tolerance, 1

@@ -3,9 +3,9 @@
 A submap is the set of node scans whose path position lies in one stretch, taken at the nodes'
 current poses. It is built twice, on demand: as a branch-and-bound pyramid
 (:func:`slam.kernels.bnb.max_pyramid` of the hits' likelihood at ``backend.resolution``) for the
-global search, and as a one-particle distance-field map (:class:`slam.mapping.ParticleMaps`) for
-the Levenberg-Marquardt refinement and the fit check of :mod:`slam.graph`. Both are kept in a
-cache that the search's threads share (:class:`SubmapCache`): a submap is built once per round
+global search, and as a one-particle distance-field map (:class:`slam.mapping.ParticleMaps`,
+kept as the field alone: :func:`compact_view`) for the Levenberg-Marquardt refinement and the
+fit check of :mod:`slam.graph`. Both are kept in a cache that the search's threads share (:class:`SubmapCache`): a submap is built once per round
 however many keyframes, on whichever thread, ask for it, as long as it stays among the
 ``keep`` most recently used.
 """
@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config
 from slam.kernels.bnb import max_pyramid, splat_likelihood
-from slam.mapping import ParticleMaps
+from slam.kernels.field import FieldView
 from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
@@ -77,7 +77,7 @@ class SubmapCache:
         self.table = table  # the nodes' hits for the field maps (slam.graph.node_hits)
         self.keep = keep
         self._pyramids: OrderedDict[tuple[int, int], Pyramid | None] = OrderedDict()
-        self._maps: OrderedDict[tuple[int, int], ParticleMaps] = OrderedDict()
+        self._maps: OrderedDict[tuple[int, int], FieldView] = OrderedDict()
         self._lock = threading.Lock()
         self._building: dict[tuple[str, int, int], threading.Event] = {}
         self.builds = 0
@@ -147,14 +147,28 @@ class SubmapCache:
         splat_likelihood(hx, hy, ox, oy, res, bc.sigma, grid)
         return Pyramid(max_pyramid(grid, bc.levels), (ox, oy), res)
 
-    def field_map(self, lo: int, hi: int) -> ParticleMaps:
-        """The distance-field map of nodes ``[lo, hi)`` (as :mod:`slam.graph` builds its own)."""
-        return self._cached("map", self._maps, (lo, hi), lambda: self._field_map(lo, hi))
+    def field_view(self, lo: int, hi: int) -> FieldView:
+        """The distance field of nodes ``[lo, hi)`` as the matching kernels read it (the map
+        :mod:`slam.graph` builds, :func:`compact_view`)."""
+        return self._cached("map", self._maps, (lo, hi), lambda: self._field_view(lo, hi))
 
-    def _field_map(self, lo: int, hi: int) -> ParticleMaps:
+    def _field_view(self, lo: int, hi: int) -> FieldView:
         from slam.graph import _empty_map, insert_nodes
 
         maps = _empty_map(self.poses[lo], self.config)
         nodes = np.arange(lo, hi, self.config.loops.submap_stride)
         insert_nodes(maps, self.table, nodes, self.poses, self.config)
-        return maps
+        return compact_view(maps.field(0))
+
+
+def compact_view(view: FieldView) -> FieldView:
+    """``view`` (one particle's) holding only the tiles its table uses, renumbered in order:
+    the same field values at every point, the same bits from the kernels. A submap's pool is
+    allocated for ``loops.submap_tiles`` tiles (2 MB) and uses a fraction of them, so the cache
+    keeps the field alone."""
+    table = view.table
+    used = np.unique(table[table >= 0])
+    compact = np.full(table.shape, -1, dtype=table.dtype)
+    known = table >= 0
+    compact[known] = np.searchsorted(used, table[known]).astype(table.dtype)
+    return view._replace(surface=np.ascontiguousarray(view.surface[used]), table=compact)
