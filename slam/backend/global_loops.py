@@ -60,10 +60,10 @@ F64 = NDArray[np.float64]
 
 
 SUBMAPS_KEPT = 16
-"""Submaps of each kind (pyramid, field map) the global search keeps at a time, shared by its
-threads: ~2 MB each on mit-killian, so ~64 MB at most, what the threads' own caches of 8 held
-before they were shared (with 32 each, intel builds 147 instead of 222 but mit-killian's peak
-grows by 25-38 MB, close to its 800 MB bound)."""
+"""Submaps of each kind (pyramid, field view) the global search keeps at a time, shared by its
+threads: on mit-killian a pyramid is ~1 MB (2 MB at most) and a field view ~0.3 MB. With 32
+intel builds 147 submaps instead of 222 in its two rounds, but 32 full field maps (2.1 MB each,
+before :func:`~slam.backend.submaps.compact_view`) raised mit-killian's peak to 764-810 MB."""
 
 
 def keyframes(path: F64, spacing: float) -> NDArray[np.int64]:
