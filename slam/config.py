@@ -297,6 +297,11 @@ class RbpfConfig(Validated):
     """At most this many beams (evenly spread) per scan in :attr:`register_scans`; 0: every
     beam. Twice what the filter matches (``match_beams``): on the demo's 1081-beam scans every
     beam gives the same ATE (0.0469 against 0.0470 m) for 0.65 s more (docs/slam.md)."""
+    register_rounds: int = bounded(2, ge=1, le=10)
+    """Rounds of :attr:`register_scans` and :attr:`smooth_odometry`: each round registers every
+    scan again, from the pose the previous round smoothed, against the map of the node scans at
+    those poses, then smooths. The second round improves every seed of intel, aces, fr079 and
+    mit-csail (docs/slam.md); a third changes nothing measurable."""
     smooth_odometry: bool = True
     """After :attr:`register_scans`, smooth every scan's pose with the odometry between
     neighbouring scans (:class:`slam.stages.OdometrySmoothing`): each registered pose is a prior

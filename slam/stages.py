@@ -13,7 +13,9 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
 4. :class:`ScanRegistration` — every scan registered against the map of the node scans
    (:func:`register_every_scan`, ``rbpf.register_scans``);
 5. :class:`OdometrySmoothing` — every scan's pose smoothed with the odometry between neighbours,
-   as far as the log's odometry deserves (``rbpf.smooth_odometry``);
+   as far as the log's odometry deserves (``rbpf.smooth_odometry``); 4 and 5 run
+   ``rbpf.register_rounds`` times, each round's map built from the node scans at the poses the
+   previous round smoothed;
 6. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
 ``rbpf`` runs all six (:func:`default_stages`); ``classic`` none (its filter outputs every
@@ -125,9 +127,17 @@ class ScanRegistration:
 
 class OdometrySmoothing:
     """Smooth every scan's pose with the odometry between neighbours (``rbpf.smooth_odometry``;
-    after :class:`ScanRegistration`)."""
+    after :class:`ScanRegistration`).
+
+    ``measured``: a dict that instances of one run share, so that the odometry's disagreement
+    with the matcher — a property of the log, not of the poses — is measured once however many
+    rounds of registration and smoothing the run makes (``rbpf.register_rounds``).
+    """
 
     name = "odometry smoothing"
+
+    def __init__(self, measured: dict | None = None) -> None:
+        self.measured = {} if measured is None else measured
 
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """Every scan's pose pulled towards the odometry's shape
@@ -141,7 +151,10 @@ class OdometrySmoothing:
 
         seq = output.scans
         odometry = np.asarray(seq.odometry, dtype=np.float64)
-        sxy, sth, pairs = odometry_disagreement(seq.hits, odometry, config)
+        key = (id(seq), len(seq))
+        if key not in self.measured:
+            self.measured[key] = odometry_disagreement(seq.hits, odometry, config)
+        sxy, sth, pairs = self.measured[key]
         if pairs == 0:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
@@ -171,14 +184,13 @@ class FinalMap:
 def default_stages(config: Config) -> list[Stage]:
     """The stages a run of ``config.filter.method`` goes through after its filter."""
     if config.filter.method == "rbpf":
-        return [
-            LoopClosing(),
-            Reregistration(),
-            BetweenUpdates(),
-            ScanRegistration(),
-            OdometrySmoothing(),
-            FinalMap(),
+        measured: dict = {}  # the odometry's disagreement, measured once for every round
+        rounds = [
+            stage
+            for _ in range(config.rbpf.register_rounds)
+            for stage in (ScanRegistration(), OdometrySmoothing(measured))
         ]
+        return [LoopClosing(), Reregistration(), BetweenUpdates(), *rounds, FinalMap()]
     return []
 
 
