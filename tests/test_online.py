@@ -326,3 +326,29 @@ def test_causal_odometry_warns_once_when_it_uses_the_wheels():
         odo.add_encoders(np.arange(5) * 0.025, np.ones((4, 5)))
     assert odo.wheel_yaw_intervals == 4
     assert len([w for w in caught if "wheels" in str(w.message)]) == 1
+
+
+def test_registration_rounds_measure_the_odometry_once(small, monkeypatch):
+    """``rbpf.register_rounds``: the registration and the smoothing run that many times, the
+    odometry's disagreement (a property of the log) is measured once, and each round moves the
+    poses (the second starts from the first's smoothed poses and map)."""
+    import slam.calibration as calibration
+
+    calls = []
+    real = calibration.odometry_disagreement
+
+    def spy(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(calibration, "odometry_disagreement", spy)
+    three = slam.load_config("", None, ["filter.particles=8", "rbpf.register_rounds=3"])
+    names = [stage.name for stage in default_stages(three)]
+    assert names.count("scan registration") == 3 and names.count("odometry smoothing") == 3
+    log = _log(str(small), three)
+    result = replay(log, three, 200)
+    assert len(calls) == 1
+    one = slam.load_config("", None, ["filter.particles=8", "rbpf.register_rounds=1"])
+    single = replay(log, one, 200)
+    assert len(calls) == 2  # a run of its own measures again
+    assert 0 < np.abs(result.poses - single.poses).max() < 0.05
