@@ -528,6 +528,7 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "coldstart.nobg_load": _figure(NOBG, "cold", "load_average_at_start", digits=0),
     "coldstart.warm_wall_s": _figure(COLD, "warm", "wall_s", digits=0),
     "coldstart.warm_cpu_s": _figure(COLD, "warm", "cpu_s", digits=0),
+    "coldstart.warm_ate": _figure(COLD, "warm", "ate_rmse", digits=3),
     "coldstart.load": _figure(COLD, "cold", "load_average_at_start", digits=0),
     "coldstart.warmup_wall_s": _figure(WARMUP, "warmup", "wall_s", digits=0),
     "coldstart.warmup_cpu_s": _figure(WARMUP, "warmup", "cpu_s", digits=0),
