@@ -151,10 +151,10 @@ class OdometrySmoothing:
 
         seq = output.scans
         odometry = np.asarray(seq.odometry, dtype=np.float64)
-        key = (id(seq), len(seq))
-        if key not in self.measured:
-            self.measured[key] = odometry_disagreement(seq.hits, odometry, config)
-        sxy, sth, pairs = self.measured[key]
+        if self.measured.get("scans") is not seq:  # another run's scans (stages reused): anew
+            self.measured["scans"] = seq
+            self.measured["value"] = odometry_disagreement(seq.hits, odometry, config)
+        sxy, sth, pairs = self.measured["value"]
         if pairs == 0:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)

@@ -352,3 +352,9 @@ def test_registration_rounds_measure_the_odometry_once(small, monkeypatch):
     single = replay(log, one, 200)
     assert len(calls) == 2  # a run of its own measures again
     assert 0 < np.abs(result.poses - single.poses).max() < 0.05
+    # stage objects given to a second run measure that run's log, not the first one's
+    measured: dict = {}
+    stages = [BetweenUpdates(), ScanRegistration(), OdometrySmoothing(measured), FinalMap()]
+    first = replay(log, one, 200, stages=stages)
+    again = replay(log, one, 150, stages=stages)
+    assert len(calls) == 4 and len(first.poses) == 200 and len(again.poses) == 150
