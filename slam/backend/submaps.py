@@ -92,10 +92,6 @@ class SubmapCache:
                 if key in store:
                     store.move_to_end(key)
                     return store[key]
-                if self.table is None and kind == "map":
-                    from slam.graph import node_hits
-
-                    self.table = node_hits(self.seq, self.steps, self.config)
                 pending = self._building.get((kind, *key))
                 if pending is None:
                     done = self._building[(kind, *key)] = threading.Event()
@@ -157,8 +153,18 @@ class SubmapCache:
 
         maps = _empty_map(self.poses[lo], self.config)
         nodes = np.arange(lo, hi, self.config.loops.submap_stride)
-        insert_nodes(maps, self.table, nodes, self.poses, self.config)
+        insert_nodes(maps, self._hits_table(), nodes, self.poses, self.config)
         return compact_view(maps.field(0))
+
+    def _hits_table(self) -> ScanHits:
+        """The nodes' hits the field maps are built from (:func:`slam.graph.node_hits`; made
+        once, by the first thread that needs them, when the cache was not given them)."""
+        from slam.graph import node_hits
+
+        with self._lock:
+            if self.table is None:
+                self.table = node_hits(self.seq, self.steps, self.config)
+            return self.table
 
 
 def compact_view(view: FieldView) -> FieldView:
