@@ -252,7 +252,8 @@ class ParticleMaps:
 
     Two layers per tile (:mod:`slam.kernels.field`): ``dist``, the Euclidean distance to the
     nearest hit, and ``surface``, what the matcher reads: the signed point-to-plane distance with
-    ``signed``, else the Euclidean distance again.
+    ``signed``, else the Euclidean distance again — then one array is both (``dist is
+    surface``), NaN where no hit is near.
     """
 
     def __init__(
@@ -282,8 +283,9 @@ class ParticleMaps:
         )
         self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
         self.tables = np.full((particles, n, n), -1, dtype=np.int32)
-        self.dist = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
         self.surface = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
+        # the unsigned field's two layers hold the same values: one array serves as both
+        self.dist = self.surface if not self.signed else np.empty_like(self.surface)
         self.refcount = np.zeros(capacity, dtype=np.int32)
         self.free_stack = np.arange(capacity - 1, -1, -1, dtype=np.int32)
         self.free_top = np.array([capacity], dtype=np.int64)
@@ -300,6 +302,11 @@ class ParticleMaps:
         return int(self.dist.shape[0])
 
     @property
+    def one_layer(self) -> bool:
+        """Whether one array holds both layers (the unsigned field: ``dist is surface``)."""
+        return self.dist is self.surface
+
+    @property
     def tiles_in_use(self) -> int:
         """Tiles referenced by at least one particle."""
         return self.capacity - int(self.free_top[0])
@@ -307,7 +314,7 @@ class ParticleMaps:
     def memory_bytes(self) -> int:
         """Bytes held by the pool, the tables and the bookkeeping arrays."""
         return int(
-            self.dist.nbytes
+            (0 if self.one_layer else self.dist.nbytes)
             + self.surface.nbytes
             + self.tables.nbytes
             + self.refcount.nbytes
@@ -319,16 +326,20 @@ class ParticleMaps:
         new = old * 2
         tile_m = self.tile * self.resolution
         _, nty, ntx = self.tables.shape
+        layers = 1 if self.one_layer else 2
         _check_growth(
-            (new + old) * 8.0 * self.tile * self.tile,  # two layers, while the old ones are copied
+            (new + old) * 4.0 * layers * self.tile * self.tile,  # while the old ones are copied
             f"a pool of {new} particle-map tiles",
             ntx * tile_m,
             nty * tile_m,
         )
-        for name in ("dist", "surface"):
+        one_layer = self.one_layer
+        for name in ("surface",) if one_layer else ("dist", "surface"):
             layer = np.empty((new, self.tile, self.tile), dtype=np.float32)
             layer[:old] = getattr(self, name)
             setattr(self, name, layer)
+        if one_layer:
+            self.dist = self.surface
         self.refcount = np.concatenate([self.refcount, np.zeros(new - old, np.int32)])
         top = int(self.free_top[0])
         stack = np.empty(new, dtype=np.int32)
@@ -460,6 +471,7 @@ class ParticleMaps:
             oy,
             res,
             self.dmax,
+            self.one_layer,
         )
 
     def share_from(self, particle: int) -> None:

@@ -285,6 +285,33 @@ def test_one_pose_insert_equals_the_parallel_kernels(signed):
             assert np.array_equal(a, b, equal_nan=True)
 
 
+def test_the_unsigned_fields_one_layer_holds_what_two_layers_do():
+    """The unsigned field keeps one array for both layers (NaN where no hit is near, read as
+    ``dmax``): its maps equal, bit for bit, those of a pool that keeps the ``dist`` layer apart,
+    through insertions that keep or skip hits, copy shared tiles and grow the pool."""
+    hy = np.linspace(-1.5, 1.5, 301)
+    hx = np.full_like(hy, 2.0) + 0.3 * np.sin(3.0 * hy)
+    nx, ny = np.full_like(hx, -1.0), np.zeros_like(hy)
+    one = ParticleMaps(3, 0.05, 0.3, tile=8, size_m=8.0, capacity=4, signed=False)
+    two = ParticleMaps(3, 0.05, 0.3, tile=8, size_m=8.0, capacity=4, signed=False)
+    two.dist = np.empty_like(two.surface)  # the two-layer storage (what the signed field keeps)
+    assert one.one_layer and not two.one_layer
+    rng = np.random.default_rng(5)
+    for step in range(6):
+        poses = np.array([[0.1 * step, 0.0, 0.05 * step]]) + 0.03 * rng.standard_normal((3, 3))
+        for maps in (one, two):
+            maps.insert(poses, hx, hy, nx, ny, 0.01)
+            if step == 2:
+                maps.resample(np.array([1, 1, 0]))  # shared tiles, copied on the next write
+    assert one.capacity > 4 and one.one_layer and not two.one_layer
+    assert np.array_equal(one.tables, two.tables)
+    used = np.unique(one.tables[one.tables >= 0])
+    a, b = one.surface[used], two.surface[used]
+    assert np.array_equal(a, b, equal_nan=True) and np.isnan(a).any() and not np.isnan(a).all()
+    assert np.array_equal(two.dist[used], np.where(np.isnan(a), np.float32(0.3), a))
+    assert one.memory_bytes() < two.memory_bytes()
+
+
 @pytest.mark.parametrize("signed", [True, False])
 def test_inserting_scans_in_one_call_equals_inserting_them_one_by_one(signed):
     """ParticleMaps.insert_scans (one kernel call per stretch that needs no growth) gives the

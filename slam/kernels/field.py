@@ -24,7 +24,10 @@ ICP.
 Storage (the layout GMapping uses for its particle maps, made flat for numba):
 
 * ``dist[t]`` and ``surface[t]`` are the two ``T × T`` layers of tile ``t``; ``refcount[t]``
-  counts the particles using it; free tiles are on the stack ``free_stack[:free_top[0]]``;
+  counts the particles using it. The unsigned field keeps one layer (``TilePool.one_layer``:
+  ``dist`` is ``surface``, which holds the same values where a hit is near, and NaN is read as
+  ``dmax``): the same map in half the memory, and half the bytes every insertion and copy
+  moves; free tiles are on the stack ``free_stack[:free_top[0]]``;
 * ``tables[p, ty, tx]`` is the tile of particle ``p`` at tile coordinates ``(tx, ty)``, or -1
   for unknown space;
 * resampling copies only the small tables (children share their parent's tiles); a particle that
@@ -93,6 +96,9 @@ class TilePool(NamedTuple):
     """Cell size (m)."""
     dmax: float
     """Distance cap (m): cells farther from every hit are unknown."""
+    one_layer: bool
+    """``dist`` is ``surface`` (the unsigned field): a NaN there reads as ``float32(dmax)``,
+    what the ``dist`` layer would hold."""
 
 
 class MatchSettings(NamedTuple):
@@ -130,7 +136,9 @@ class MatchOutput(NamedTuple):
 def cell_distance(
     pool: np.ndarray, table: np.ndarray, shift: int, ix: int, iy: int, dmax: float
 ) -> float:
-    """Distance stored at cell ``(ix, iy)`` of one particle's map (``dmax`` where unknown).
+    """Distance stored at cell ``(ix, iy)`` of one particle's map (``dmax`` where no tile
+    covers it; a NaN stored, a one-layer pool's cell with no hit near, reads as the
+    ``float32(dmax)`` the ``dist`` layer holds there).
 
     Tiles are ``2**shift`` cells wide (shifts and masks are much cheaper than divisions here).
     """
@@ -144,7 +152,10 @@ def cell_distance(
     if t < 0:
         return dmax
     mask = (1 << shift) - 1
-    return pool[t, iy & mask, ix & mask]
+    d = pool[t, iy & mask, ix & mask]
+    if d != d:
+        return np.float32(dmax)
+    return d
 
 
 @njit(cache=True, inline="always")
@@ -685,9 +696,9 @@ def _claim_particle(
                     free_top[0] -= 1
                     new = free_stack[free_top[0]]
                     if t < 0:
-                        _fill_tile(dist, surface, new, dmax)
+                        _fill_tile(dist, surface, new, dmax, pool.one_layer)
                     else:
-                        _copy_tile(dist, surface, t, new)
+                        _copy_tile(dist, surface, t, new, pool.one_layer)
                         refcount[t] -= 1
                     refcount[new] = 1
                     table[ty, tx] = new
@@ -695,24 +706,29 @@ def _claim_particle(
 
 
 @njit(cache=True, _nrt=False)
-def _fill_tile(dist: np.ndarray, surface: np.ndarray, tile: int, dmax: float) -> None:
-    """Make ``tile`` an empty tile: distance ``dmax``, surface unknown (NaN).
+def _fill_tile(
+    dist: np.ndarray, surface: np.ndarray, tile: int, dmax: float, one_layer: bool
+) -> None:
+    """Make ``tile`` an empty tile: distance ``dmax``, surface unknown (NaN; only that with
+    ``one_layer``).
 
     Loops rather than ``dist[tile, :, :] = dmax``-style slice assignments: those compile numba's
     shape-mismatch error path (string formatting), seconds of compilation each.
     """
     for r in range(dist.shape[1]):
         for c in range(dist.shape[2]):
-            dist[tile, r, c] = dmax
+            if not one_layer:
+                dist[tile, r, c] = dmax
             surface[tile, r, c] = np.nan
 
 
 @njit(cache=True, _nrt=False)
-def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int) -> None:
-    """Copy tile ``src`` (both layers) into tile ``dst``."""
+def _copy_tile(dist: np.ndarray, surface: np.ndarray, src: int, dst: int, one_layer: bool) -> None:
+    """Copy tile ``src`` (both layers, or the one) into tile ``dst``."""
     for r in range(dist.shape[1]):
         for c in range(dist.shape[2]):
-            dist[dst, r, c] = dist[src, r, c]
+            if not one_layer:
+                dist[dst, r, c] = dist[src, r, c]
             surface[dst, r, c] = surface[src, r, c]
 
 
@@ -723,9 +739,12 @@ def _splat_particle(
     """Step 3 of :func:`insert_particles` for particle ``p``: every cell within ``dmax`` of a
     kept hit for which this hit is the nearest so far takes its Euclidean distance (``dist``)
     and, in ``surface``, its signed plane distance when ``signed`` (else the Euclidean distance
-    again: the unsigned field)."""
+    again: the unsigned field, written once when ``pool.one_layer``, where a NaN stands for the
+    ``float32(dmax)`` of a cell no hit is near)."""
     dist, surface, shift = pool.dist, pool.surface, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
+    empty = np.float32(dmax)  # what ``dist`` holds where no hit is near
+    one_layer = pool.one_layer
     radius = int(np.ceil(dmax / res))
     mask = (1 << shift) - 1
     ny_cells = pool.tables.shape[1] << shift
@@ -754,10 +773,12 @@ def _splat_particle(
                     continue
                 t = table[ty, ix >> shift]
                 lx = ix & mask
-                if d < dist[t, ly, lx]:
+                known = dist[t, ly, lx]
+                if d < known or (known != known and d < empty):
                     dist[t, ly, lx] = d
                     if not signed:
-                        surface[t, ly, lx] = d
+                        if not one_layer:
+                            surface[t, ly, lx] = d
                         continue
                     normal = ccx * wnx + ccy * wny
                     beyond = abs(ccy * wnx - ccx * wny) - res
