@@ -3,6 +3,7 @@ background compiler instead of compiling the same kernel, and the compiler is of
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -171,3 +172,43 @@ def test_the_child_reports_each_stage_as_json_lines(fresh_cache) -> None:
     assert [line.get("stage") for line in lines[:2]] == ["texture", "quality"]
     assert lines[0]["kernels"] == 1 and lines[1]["kernels"] == 0 and lines[0]["cpu_s"] > 0.0
     assert lines[2]["end"] is True
+
+
+def _njit_kind(fn: ast.FunctionDef) -> str | None:
+    """``"njit"`` for a function decorated ``@njit(...)``, ``"inline"`` with
+    ``inline="always"``, else None."""
+    for decorator in fn.decorator_list:
+        call = decorator if isinstance(decorator, ast.Call) else None
+        target = call.func if call else decorator
+        name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+        if name == "njit":
+            keywords = call.keywords if call else []
+            inline = any(k.arg == "inline" and getattr(k.value, "value", None) == "always"
+                         for k in keywords)  # fmt: skip
+            return "inline" if inline else "njit"
+    return None
+
+
+def test_no_kernel_passes_an_int_literal_to_another_kernel() -> None:
+    """A kernel that calls another (not inlined) with an integer literal compiles the callee
+    for ``Literal[int]``: a second machine code the foreground never asks for, and a second key
+    in the callee's cache index, which the background compiler and this process then write at
+    once (one write lost: ``insert_scans`` calling ``insert_serial(..., 0)`` made a run after
+    ``slam warmup`` compile ``insert_serial`` again). Pass ``np.int64(...)`` instead."""
+    kernels: set[str] = set()
+    bodies: list[tuple[Path, ast.FunctionDef]] = []
+    for path in sorted((ROOT / "slam").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and (kind := _njit_kind(node)):
+                bodies.append((path, node))
+                if kind == "njit":
+                    kernels.add(node.name)
+    assert {"insert_serial", "insert_scans", "refine"} <= kernels
+    found = []
+    for path, fn in bodies:
+        for node in ast.walk(fn):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) in kernels:
+                for arg in [*node.args, *(k.value for k in node.keywords)]:
+                    if isinstance(arg, ast.Constant) and type(arg.value) is int:
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno} {fn.name}")
+    assert not found, f"integer literals passed to kernels (use np.int64): {found}"

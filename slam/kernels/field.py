@@ -846,7 +846,7 @@ def insert_scans(
             for j in range(n):
                 own[r, j] = hits[row, a + j]
         keep = np.empty((1, n), dtype=np.bool_)
-        if insert_serial(pool, pose, own, skip_below, signed, keep, 0) >= 0:
+        if insert_serial(pool, pose, own, skip_below, signed, keep, np.int64(0)) >= 0:
             return k
     return -1
 

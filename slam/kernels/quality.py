@@ -275,8 +275,9 @@ def touched_tiles(
 def _touch(tiles_y, tiles_x, ox, oy, res, rays, k0, k1, mask):
     """Mark in ``mask`` the tiles the rays of scans ``k0 .. k1 − 1`` pass through or end in."""
     no_patch = np.zeros((2, 0, 0), dtype=np.int32)
+    zero = np.int64(0)  # not a literal: one specialisation of _walk_scan
     for k in range(k0, k1):
-        _walk_scan(rays, k, ox, oy, res, tiles_x * TILE, tiles_y * TILE, no_patch, 0, 0, mask)
+        _walk_scan(rays, k, ox, oy, res, tiles_x * TILE, tiles_y * TILE, no_patch, zero, zero, mask)
 
 
 def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) -> None:
