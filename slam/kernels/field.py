@@ -327,24 +327,28 @@ def accumulate(
     g: np.ndarray,
 ) -> tuple[float, int]:
     """Cost, Gauss-Newton system and inliers of :func:`normal_equations` from the beams'
-    :func:`beam_geometry` ``geo``: :func:`table_lookup` is written out so that the two table
-    lookups share their index (the same operations in the same order, so the same bits)."""
+    :func:`beam_geometry` ``geo``: :func:`scan_cost`, then :func:`gauss_newton_system` (two
+    loops over ``geo``, which sits in the first-level cache; each sum is the same operations in
+    the same order as in one loop, so the same bits)."""
+    cost, inliers = scan_cost(geo, cost_row, step_inv)
+    gauss_newton_system(geo, weight_row, step_inv, h, g)
+    return cost, inliers
+
+
+@njit(cache=True, _nrt=False)
+def scan_cost(geo: np.ndarray, cost_row: np.ndarray, step_inv: float) -> tuple[float, int]:
+    """The cost and inliers of :func:`accumulate` alone: what :func:`refine` needs to accept or
+    reject a step (about half its steps are rejected, and a rejected step's system is never
+    used). :func:`table_lookup` written out, as in :func:`gauss_newton_system`."""
     last_c = cost_row.shape[0] - 1
-    last_w = weight_row.shape[0] - 1
     unknown = cost_row[last_c]
     cost = 0.0
     inliers = 0
-    # accumulate in scalars (kept in registers), write the arrays once at the end
-    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
-    g0 = g1 = g2 = 0.0
     for j in range(geo.shape[0]):
         d = geo[j, 0]
         if np.isnan(d):
             cost += unknown
             continue
-        gx = geo[j, 1]
-        gy = geo[j, 2]
-        j2 = geo[j, 3]
         u = abs(d) * step_inv
         i = int(u)
         f = u - i
@@ -354,6 +358,30 @@ def accumulate(
         else:
             cost += cost_row[ui] + f * (cost_row[ui + np.uint64(1)] - cost_row[ui])
         inliers += 1
+    return cost, inliers
+
+
+@njit(cache=True, _nrt=False)
+def gauss_newton_system(
+    geo: np.ndarray, weight_row: np.ndarray, step_inv: float, h: np.ndarray, g: np.ndarray
+) -> None:
+    """The Gauss-Newton system of :func:`accumulate` into ``h`` and ``g``: each known beam
+    weighted by its responsibility (``weight_row`` at ``|d|``)."""
+    last_w = weight_row.shape[0] - 1
+    # accumulate in scalars (kept in registers), write the arrays once at the end
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    g0 = g1 = g2 = 0.0
+    for j in range(geo.shape[0]):
+        d = geo[j, 0]
+        if np.isnan(d):
+            continue
+        gx = geo[j, 1]
+        gy = geo[j, 2]
+        j2 = geo[j, 3]
+        u = abs(d) * step_inv
+        i = int(u)
+        f = u - i
+        ui = np.uint64(i)
         if u >= last_w:
             wgt = weight_row[last_w]
         else:
@@ -382,7 +410,6 @@ def accumulate(
     g[0] = g0
     g[1] = g1
     g[2] = g2
-    return cost, inliers
 
 
 @njit(cache=True, nogil=True)
@@ -428,7 +455,8 @@ def refine(
     (the last level uses every beam, so it is :func:`normal_equations`' at that pose).
 
     Each iteration costs one pass over the beams: a step that does not lower the cost is undone
-    and the damping raised; a level ends when a step moves less than ``settings.tolerance``. A
+    and the damping raised (its cost alone was computed, :func:`scan_cost`; the Gauss-Newton
+    system only for a step taken); a level ends when a step moves less than ``settings.tolerance``. A
     level that uses the beams of the previous one starts from that level's field values at the
     pose it ended at (:func:`beam_geometry`), so only its tables are read again.
     """
@@ -436,8 +464,6 @@ def refine(
     tolerance, coarse_stride = settings.tolerance, settings.coarse_stride
     x, y, th = pose[0], pose[1], pose[2]
     g = np.zeros(3)
-    hc = np.zeros((3, 3))
-    gc = np.zeros(3)
     hd = np.zeros((3, 3))
     cost = 0.0
     inliers = 0
@@ -468,14 +494,11 @@ def refine(
             ny = y - s1
             nth = th - s2
             beam_geometry(trial[:n], view, nx, ny, nth, stride, ex, ey)
-            new_cost, new_inliers = accumulate(trial[:n], cost_row, weight_row, step_inv, hc, gc)
-            if new_cost < cost:
+            new_cost, new_inliers = scan_cost(trial[:n], cost_row, step_inv)
+            if new_cost < cost:  # the step is taken: its system too
+                gauss_newton_system(trial[:n], weight_row, step_inv, h, g)
                 x, y, th, cost, inliers = nx, ny, nth, new_cost, new_inliers
                 geo, trial = trial, geo
-                for a in range(3):
-                    g[a] = gc[a]
-                    for b in range(3):
-                        h[a, b] = hc[a, b]
                 lam = max(lam * 0.3, 1e-7)
                 if abs(s0) < tolerance and abs(s1) < tolerance and abs(s2) < tolerance:
                     break
