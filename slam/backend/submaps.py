@@ -5,9 +5,9 @@ current poses. It is built twice, on demand: as a branch-and-bound pyramid
 (:func:`slam.kernels.bnb.max_pyramid` of the hits' likelihood at ``backend.resolution``) for the
 global search, and as a one-particle distance-field map (:class:`slam.mapping.ParticleMaps`,
 kept as the field alone: :func:`compact_view`) for the Levenberg-Marquardt refinement and the
-fit check of :mod:`slam.graph`. Both are kept in a cache that the search's threads share (:class:`SubmapCache`): a submap is built once per round
-however many keyframes, on whichever thread, ask for it, as long as it stays among the
-``keep`` most recently used.
+fit check of :mod:`slam.graph`. Both are kept in a cache that the search's threads share
+(:class:`SubmapCache`): a submap is built once per round however many keyframes, on whichever
+thread, ask for it, as long as it stays among the ``keep`` most recently used.
 """
 
 from __future__ import annotations

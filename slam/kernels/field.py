@@ -456,9 +456,10 @@ def refine(
 
     Each iteration costs one pass over the beams: a step that does not lower the cost is undone
     and the damping raised (its cost alone was computed, :func:`scan_cost`; the Gauss-Newton
-    system only for a step taken); a level ends when a step moves less than ``settings.tolerance``. A
-    level that uses the beams of the previous one starts from that level's field values at the
-    pose it ended at (:func:`beam_geometry`), so only its tables are read again.
+    system only for a step taken); a level ends when a step moves less than
+    ``settings.tolerance``. A level that uses the beams of the previous one starts from that
+    level's field values at the pose it ended at (:func:`beam_geometry`), so only its tables are
+    read again.
     """
     luts, step_inv, max_iter = settings.luts, settings.step_inv, settings.max_iter
     tolerance, coarse_stride = settings.tolerance, settings.coarse_stride
