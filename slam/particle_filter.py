@@ -301,6 +301,11 @@ class RbpfFilter:
         self.fallbacks = 0
         self.retries = 0
         self.probes = 0
+        self.matched_updates = 0
+        """Updates whose scan has been matched (the share ``probe_evidence`` is taken of)."""
+        self.gross_turns = 0
+        """Updates whose best first match turned the predicted heading by at least the basin
+        probe's smallest rotation (the evidence that opens the probe, ``rbpf.probe_evidence``)."""
         self.recent_best: list[float] = []
         """Best per-beam log-likelihood of the first match of the last ``rbpf.retry_window``
         updates (the basin probe's reference)."""
@@ -317,6 +322,21 @@ class RbpfFilter:
         ``rbpf.probe_yaw``, then the same turns the other way."""
         yaws = np.asarray(self.config.rbpf.probe_yaw, dtype=np.float64)
         return np.concatenate([yaws, -yaws])
+
+    @property
+    def probe_open(self) -> bool:
+        """Whether the basin probe may fire at the next update: ``rbpf.probe_gain`` is set and
+        the updates so far show an odometry that errs by the probe's rotations
+        (``rbpf.probe_evidence``, ``rbpf.probe_evidence_count``)."""
+        rc = self.config.rbpf
+        if rc.probe_gain <= 0:
+            return False
+        if rc.probe_evidence <= 0:
+            return True
+        return (
+            self.gross_turns >= rc.probe_evidence_count
+            and self.gross_turns >= rc.probe_evidence * self.matched_updates
+        )
 
     def _make_room(self, k: int, poses: F64) -> None:
         """Grow the maps to hold scan ``k`` seen from any of ``poses`` (an update asks twice:
@@ -373,16 +393,22 @@ class RbpfFilter:
         then draw each particle around its match (:func:`sample_around`)."""
         rc = self.config.rbpf
         self._make_room(k, predicted)
+        probe_open = self.probe_open
         match = self.maps.match(
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
-            rc.min_inliers, rc.coarse_stride, self.probe_yaws if rc.probe_gain > 0 else None,
+            rc.min_inliers, rc.coarse_stride, self.probe_yaws if probe_open else None,
         )  # fmt: skip
         probe, match.probe = match.probe, None
+        b = int(np.argmax(match.loglik))
+        turn = abs(float(wrap_angle(match.poses[b, 2] - predicted[b, 2])))
         retries = self.retries
         match = self._retry(predicted, hits, match)
         # the kernel probed from the best particle of the first match: still the one to probe
         # from unless a retry changed the matches
-        match = self._probe(predicted, hits, match, probe if self.retries == retries else None)
+        probe = probe if self.retries == retries else None
+        match = self._probe(predicted, hits, match, probe, probe_open)
+        self.matched_updates += 1
+        self.gross_turns += int(turn >= min(rc.probe_yaw))
         self.particles = match.poses
         fused = rc.proposal_mean == "fused"
         motion_cov = None
@@ -430,6 +456,7 @@ class RbpfFilter:
         hits: tuple[F64, F64],
         match: MatchResult,
         probe: MatchResult | None = None,
+        probe_open: bool = True,
     ) -> MatchResult:
         """``match``, or, when the best particle's match is in the wrong basin of rotation, the
         best per particle of it and of the matches from the predicted poses rotated the way that
@@ -448,13 +475,22 @@ class RbpfFilter:
         without them.
 
         ``probe``: the rotated starts' matches when already made (by the proposal's kernel call,
-        :meth:`ParticleMaps.match` given :attr:`probe_yaws`, in their order).
+        :meth:`ParticleMaps.match` given :attr:`probe_yaws`, in their order). ``probe_open``:
+        :attr:`probe_open` before this update (closed, the probe only keeps its reference).
         """
         rc = self.config.rbpf
         if rc.probe_gain <= 0:
             return match
         beams = max(hits[0].size, 1)
         b = int(np.argmax(match.loglik))
+        first = float(match.loglik[b]) / beams
+        recent = self.recent_best
+        typical = statistics.median(recent) if len(recent) >= 5 else first
+        recent.append(first)
+        if len(recent) > rc.retry_window:
+            del recent[0]
+        if not probe_open:
+            return match
         yaws = self.probe_yaws
         if probe is None:
             starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
@@ -462,13 +498,7 @@ class RbpfFilter:
             probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
         score = np.where(probe.inliers >= rc.min_inliers, probe.loglik, -np.inf)
         j = int(np.argmax(score))
-        first = float(match.loglik[b]) / beams
         gain = float(score[j]) / beams - first
-        recent = self.recent_best
-        typical = statistics.median(recent) if len(recent) >= 5 else first
-        recent.append(first)
-        if len(recent) > rc.retry_window:
-            del recent[0]
         if gain < rc.probe_gain or gain < 0.5 * (typical - first):
             return match
         self.probes += 1
@@ -547,6 +577,7 @@ class RbpfFilter:
                 "match_fallbacks": self.fallbacks,
                 "match_retries": self.retries,
                 "basin_probes": self.probes,
+                "gross_turns": self.gross_turns,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
             },

@@ -144,3 +144,38 @@ def test_the_proposals_kernel_call_probes_as_the_probe_does(off):
     np.testing.assert_array_equal(fired_with.poses, fired_alone.poses)
     assert f.maps.match(off, *hits, *args, np.zeros(0)).probe.poses.shape == (0, 3)
     assert alone.probe is None
+
+
+def test_a_closed_probe_keeps_its_reference_and_does_not_fire():
+    """Closed (no evidence yet of an odometry that errs by the probe's rotations), the probe
+    leaves mit-csail's glitch alone but still records the first match's score."""
+    hits = _cast(ROOM)
+    f = _filter(hits)
+    first = _match(f, OFF, hits)
+    kept = first.poses.copy()
+    got = f._probe(OFF, hits, first, None, probe_open=False)
+    assert f.probes == 0
+    np.testing.assert_array_equal(got.poses, kept)
+    assert len(f.recent_best) == 11
+    assert f.recent_best[-1] == pytest.approx(float(first.loglik.max()) / hits[0].size)
+
+
+@pytest.mark.parametrize(
+    ("share", "count", "gross", "updates", "open_"),
+    [
+        (0.02, 3, 0, 0, False),  # nothing seen yet
+        (0.02, 3, 2, 10, False),  # 20 % of the updates, but fewer than 3
+        (0.02, 3, 3, 100, True),  # 3 %: mit-csail's odometry shows 8-9 %
+        (0.02, 3, 3, 151, False),  # 1.99 %
+        (0.02, 3, 1, 6916, False),  # fr-clinic: 1 of 6916
+        (0.0, 3, 0, 0, True),  # 0: always open
+    ],
+)
+def test_the_probe_opens_on_evidence_of_gross_odometry_turns(share, count, gross, updates, open_):
+    f = _filter(_cast(ROOM))
+    rc = dataclasses.replace(f.config.rbpf, probe_evidence=share, probe_evidence_count=count)
+    f.config = dataclasses.replace(f.config, rbpf=rc)
+    f.gross_turns, f.matched_updates = gross, updates
+    assert f.probe_open is open_
+    f.config = dataclasses.replace(f.config, rbpf=dataclasses.replace(rc, probe_gain=0.0))
+    assert f.probe_open is False
