@@ -52,3 +52,48 @@ def test_icp_residual_is_least_for_the_true_beam_geometry():
     # the same ranges read at angles stretched by 0.56 % (the 180/179 spread) fit worse
     stretched = tool._points(ranges, angles * (180 / 179 / 1.0), 15.0)
     assert tool.icp_residual(stretched, dst, np.zeros(3)) > 0.005
+
+
+def _ranges_in_room(pose: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Ranges of beams at ``angles`` (robot frame) from ``pose`` inside an L-shaped hall."""
+    room = 2.0 * np.array([[-4, -2.5], [5, -2.5], [5, 1], [2, 1], [2, 3], [-4, 3]], dtype=float)
+    d = np.c_[np.cos(pose[2] + angles), np.sin(pose[2] + angles)]
+    a, e = room - pose[:2], np.roll(room, -1, axis=0) - room
+    best = np.full(angles.size, np.inf)
+    for k in range(len(room)):
+        den = d[:, 0] * -e[k, 1] + d[:, 1] * e[k, 0]
+        ok = np.abs(den) > 1e-12
+        safe = np.where(ok, den, 1.0)
+        t = (a[k, 0] * -e[k, 1] + a[k, 1] * e[k, 0]) / safe
+        s = (d[:, 0] * a[k, 1] - d[:, 1] * a[k, 0]) / safe
+        best = np.where(ok & (t > 0) & (s >= 0) & (s <= 1) & (t < best), t, best)
+    return best
+
+
+def test_the_matcher_check_finds_the_geometry_the_scans_were_taken_with():
+    """Scans alternating between 181 readings (−90°..+90°) and 180 (−89.5°..+89.5°), taken
+    along a turning path with exact odometry: the centred 1° hypothesis agrees with the
+    odometry within the matcher's noise; 1° from −90° or to +90° turn the mixed pairs half a
+    degree, opposite ways."""
+    from slam.config import Config
+
+    tool = load_tool("beam_step_check")
+    n = 24
+    odometry = np.c_[np.linspace(-4.0, 2.0, n), np.linspace(-1.0, 0.5, n), 0.04 * np.arange(n)]
+    counts = np.where(np.arange(n) % 2 == 0, 181, 180)
+    ranges = np.full((n, 181), np.nan)
+    centred = tool.HYPOTHESES["1 deg, centred"]
+    for k in range(n):
+        angles = tool.ANGLES_181 if counts[k] == 181 else centred
+        ranges[k, : angles.size] = _ranges_in_room(odometry[k], angles)
+    rows = tool.matcher_rotations(ranges, counts, odometry, Config(), tool.HYPOTHESES, every=1)
+    right = rows["1 deg, centred"]
+    assert right["pairs_fitted"] == n - 1
+    assert right["rotation_rms_deg"] < 0.15  # the matcher's own noise on 5 cm cells: 0.1°
+    assert abs(right["median_180_to_181_deg"]) < 0.1
+    assert abs(right["median_181_to_180_deg"]) < 0.1
+    for wrong in ("1 deg, from -90", "1 deg, to +90"):
+        row = rows[wrong]
+        assert row["rotation_rms_deg"] > 0.4  # half a degree off on every mixed pair
+        assert abs(row["median_180_to_181_deg"]) > 0.4
+        assert row["median_180_to_181_deg"] * row["median_181_to_180_deg"] < 0

@@ -7,9 +7,18 @@ each count) this registers the 180-reading scan onto the 181-reading one by ICP 
 odometry's relative pose) under each hypothesis for the 180-reading beams, and compares the
 median point-to-segment residual per pair (docs/slam.md, "The beam step of the 180-reading logs").
 
+A second check uses the filter's own matcher (``--matcher``): every other pair of consecutive
+scans is registered as ``slam data calibrate`` registers them (:func:`slam.calibration.pair_motions`,
+scan ``j`` onto a one-scan distance field of scan ``i``), under each hypothesis, and the rotation
+it finds is compared with the odometry's: the trimmed RMS difference (the odometry's disagreement
+of docs/slam.md), the pairs that fit, and the median difference by the pair's reading counts. A
+wrong geometry for one count turns a 180-reading scan against a 181-reading one: the two mixed
+kinds of pair then show opposite biases.
+
 Usage::
 
     uv run python tools/beam_step_check.py fr-clinic [--max-range 15] [--pairs 800] [--json]
+    uv run python tools/beam_step_check.py fr-clinic --matcher [--json]
 """
 
 from __future__ import annotations
@@ -20,7 +29,8 @@ import sys
 
 import numpy as np
 
-from slam.config import load_config
+from slam.calibration import CalibrationSettings, pair_motions
+from slam.config import Config, load_config
 from slam.io.carmen import load_carmen
 from slam.io.datadir import resolve_data_dir
 from slam.io.registry import get_dataset
@@ -89,6 +99,49 @@ def icp_residual(
     return float(np.median(best[np.isfinite(best)]))
 
 
+def matcher_rotations(
+    ranges: np.ndarray,
+    counts: np.ndarray,
+    odometry: np.ndarray,
+    config: Config,
+    hypotheses: dict[str, np.ndarray],
+    every: int = 2,
+) -> dict[str, dict]:
+    """Per hypothesis (angles of the 180-reading scans; the 181-reading ones are
+    :data:`ANGLES_181`): the matcher's rotation between consecutive scans ``(k, k + 1)``, ``k`` a
+    multiple of ``every``, against the odometry's (module docstring). ``ranges`` ``(N, 181)``,
+    ``counts`` ``(N,)`` readings per scan, ``odometry`` ``(N, 3)``."""
+    lidar = config.lidar
+    low = lidar.range_min or 0.0
+    high = min(lidar.range_max or np.inf, lidar.no_return or np.inf)
+    pairs = np.array([(k, k + 1) for k in range(0, len(counts) - 1, every)], dtype=np.int64)
+    kinds = counts[pairs[:, 0]] * 1000 + counts[pairs[:, 1]]
+    out: dict[str, dict] = {}
+    for name, angles in hypotheses.items():
+
+        def hits_of(k: int, angles: np.ndarray = angles) -> tuple[np.ndarray, np.ndarray]:
+            a = angles if counts[k] == 180 else ANGLES_181
+            r = ranges[k, : a.size]
+            ok = np.isfinite(r) & (r >= low) & (r < high)
+            return r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])
+
+        motions, kept = pair_motions(hits_of, odometry, pairs, config, CalibrationSettings())
+        i, j = pairs[kept, 0], pairs[kept, 1]
+        turn = np.array([_relative(odometry[a], odometry[b])[2] for a, b in zip(i, j, strict=True)])
+        d = np.degrees(np.angle(np.exp(1j * (motions[:, 2] - turn))))
+        trimmed = np.sort(np.abs(d))[: max(1, int(round(0.95 * d.size)))]
+        row: dict = {
+            "pairs_fitted": int(kept.size),
+            "rotation_rms_deg": round(float(np.sqrt(np.mean(trimmed**2))), 4),
+        }
+        for kind, label in ((180181, "180_to_181"), (181180, "181_to_180"), (180180, "180_to_180")):
+            sel = kinds[kept] == kind
+            if sel.any():
+                row[f"median_{label}_deg"] = round(float(np.median(d[sel])), 4)
+        out[name] = row
+    return out
+
+
 def main() -> int:
     """Print (or emit as JSON) the residuals per hypothesis and the paired comparison."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -96,6 +149,9 @@ def main() -> int:
     parser.add_argument("--max-range", type=float, default=15.0, help="readings used (m)")
     parser.add_argument("--pairs", type=int, default=800, help="pairs sampled (seed 0)")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument(
+        "--matcher", action="store_true", help="the filter's matcher against the odometry instead"
+    )
     args = parser.parse_args()
     config = load_config(args.log)
     path = resolve_data_dir(None) / get_dataset(args.log).log_file().path
@@ -105,6 +161,19 @@ def main() -> int:
         return 2
     ranges = np.asarray(scans.ranges, dtype=np.float64)
     counts = np.where(np.isnan(scans.angles[:, -1]), 180, 181)
+    if args.matcher:
+        rows = matcher_rotations(ranges, counts, scans.odometry, config, HYPOTHESES)
+        if args.json:
+            print(json.dumps({"log": args.log, **rows}, indent=2))
+        else:
+            for name, row in rows.items():
+                mixed = (row.get("median_180_to_181_deg"), row.get("median_181_to_180_deg"))
+                print(
+                    f"{name:30s} rotation vs odometry {row['rotation_rms_deg']:.3f} deg RMS over "
+                    f"{row['pairs_fitted']} pairs; median 180->181 {mixed[0]:+.3f}, "
+                    f"181->180 {mixed[1]:+.3f} deg"
+                )
+        return 0
     change = np.flatnonzero(counts[1:] != counts[:-1])
     change = change[change > 0]
     rng = np.random.default_rng(0)
