@@ -474,7 +474,13 @@ class BackendConfig(Validated):
     window_th_max: float = bounded(0.5, gt=0.0, le=math.pi)
     """... at most (rad)."""
     candidates: int = bounded(3, ge=1, le=1000)
-    """Submaps searched per keyframe: those nearest relative to their window."""
+    """Submaps searched per keyframe: those nearest relative to their window (see
+    ``candidate_choice``)."""
+    candidate_choice: str = bounded("per_pass", choices=("nearest", "per_pass"))
+    """How the ``candidates`` are chosen among the submaps whose window holds the keyframe:
+    ``nearest``, nearest relative to their window; ``per_pass``, the nearest of each earlier
+    pass through the place first (a pass: submaps next to each other along the path), then the
+    nearest of the rest."""
     min_score: float = bounded(0.55, ge=0.0, le=1.0)
     """A match must score this mean likelihood in the branch-and-bound grid ..."""
     min_fit: float = bounded(0.6, ge=0.0, le=1.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam.backend.global_loops import consistent, keyframes
+from slam.backend.global_loops import candidate_order, consistent, keyframes
 from slam.backend.submaps import stretches
 from slam.config import Config
 from slam.kernels.bnb import bnb_search, max_pyramid, splat_likelihood
@@ -196,3 +196,18 @@ def test_compact_view_keeps_the_field_and_drops_unused_tiles():
     one = match_one(full, start, ex, ey, luts, step_inv, 10, 1e-3, 1)
     two = match_one(small, start, ex, ey, luts, step_inv, 10, 1e-3, 1)
     assert np.array_equal(one[0], two[0]) and one[1] == two[1] and one[2] == two[2]
+
+
+def test_candidates_per_pass_reach_an_older_pass_of_the_place():
+    """fr-clinic's final return in miniature: three neighbouring submaps of a recent pass lie
+    nearer (relative to their windows) than the start's, which ``nearest`` never searches and
+    ``per_pass`` searches second; the rest follow by ratio, and the choice never repeats."""
+    submaps = np.array([0, 1, 2, 40, 41, 42, 43])  # the start's pass, then a recent one
+    ratio = np.array([0.45, 0.40, 0.7, 0.1, 0.05, 0.2, 0.9])
+    assert candidate_order(submaps, ratio, 3).tolist() == [4, 3, 5]
+    assert candidate_order(submaps, ratio, 3, "per_pass").tolist() == [4, 1, 3]
+    full = candidate_order(submaps, ratio, 10, "per_pass")
+    assert full.tolist() == [4, 1, 3, 5, 0, 2, 6]
+    one_pass = candidate_order(submaps[3:], ratio[3:], 3, "per_pass")
+    assert one_pass.tolist() == candidate_order(submaps[3:], ratio[3:], 3).tolist()
+    assert candidate_order(submaps[:1], ratio[:1], 3, "per_pass").tolist() == [0]

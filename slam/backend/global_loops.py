@@ -9,9 +9,10 @@ module adds, in the same pose graph and the same rounds:
    ``backend.submap_length`` metres each (:mod:`slam.backend.submaps`).
 2. **Search.** For keyframe ``i`` and a submap that ended at least ``loops.min_path`` back, the
    window is ``window_xy_min + drift_xy · path gap`` (capped by ``window_xy_max``), and likewise
-   in rotation: the drift a filter may have accumulated since it last saw that place. The
-   ``backend.candidates`` submaps nearest relative to their window are searched by
-   branch-and-bound (:func:`slam.kernels.bnb.bnb_search`), exact over the whole window.
+   in rotation: the drift a filter may have accumulated since it last saw that place.
+   ``backend.candidates`` submaps are searched by branch-and-bound
+   (:func:`slam.kernels.bnb.bnb_search`), exact over the whole window: the nearest relative to
+   its window of each earlier pass through the place first (:func:`candidate_order`).
 3. **Verification.** The best pose must score ``min_score``; refined by Levenberg-Marquardt
    against the submap's distance field it must stay within two search cells, and of the beams
    that land on the submap's known cells ``backend.min_fit`` must lie within
@@ -180,7 +181,9 @@ def _search_keyframes(
         ok = reach <= wxy
         if not ok.any():
             continue
-        order = np.argsort(reach[ok] / wxy[ok], kind="stable")[: bc.candidates]
+        order = candidate_order(
+            eligible[ok], reach[ok] / wxy[ok], bc.candidates, bc.candidate_choice
+        )
         px, py = _search_points(seq, int(steps[i]), config)
         if px.size < lc.min_beams:
             continue
@@ -222,6 +225,26 @@ def _search_keyframes(
                 (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
             )
     return edges, searched
+
+
+def candidate_order(
+    submaps: NDArray[np.int64], ratio: F64, count: int, choice: str = "nearest"
+) -> NDArray[np.int64]:
+    """Which of the ``submaps`` (ascending indices, their keyframe's distance relative to their
+    window ``ratio``) a keyframe searches, in order: at most ``count`` positions into
+    ``submaps``. ``nearest``: the smallest ratios. ``per_pass``: first the smallest ratio of
+    each pass — a run of consecutive submap indices, one pass of the robot through the place —
+    by ratio, then the other submaps by ratio. After a long loop the drifted estimate lies
+    nearer the passes it made recently than the true place lies to its own (wider) window, and
+    three neighbouring submaps of one recent pass would take every search."""
+    order = np.argsort(ratio, kind="stable")
+    if choice == "nearest" or order.size <= 1:
+        return order[:count]
+    passes = np.cumsum(np.r_[0, np.diff(submaps) != 1])
+    _, first = np.unique(passes[order], return_index=True)
+    lead = order[np.sort(first)]
+    rest = np.setdiff1d(order, lead, assume_unique=True)
+    return np.concatenate([lead, rest[np.argsort(ratio[rest], kind="stable")]])[:count]
 
 
 def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
