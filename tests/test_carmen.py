@@ -99,9 +99,13 @@ def test_fr_clinic_mixes_180_and_181_beams(carmen_dir):
     short = np.isnan(scans.angles[:, -1])
     assert np.count_nonzero(short) == 5169
     assert np.all(np.isnan(scans.ranges[short, -1]))
-    # Both geometries span -90..+90 degrees.
-    assert scans.scan_angles(int(np.flatnonzero(short)[0]))[179] == pytest.approx(np.pi / 2)
-    assert scans.scan_angles(int(np.flatnonzero(~short)[0]))[180] == pytest.approx(np.pi / 2)
+    # configs/fr-clinic.toml: 1° beams, centred; the 180-reading scans on the half degrees
+    first_short = scans.scan_angles(int(np.flatnonzero(short)[0]))
+    first_long = scans.scan_angles(int(np.flatnonzero(~short)[0]))
+    assert first_short[[0, 179]] == pytest.approx(np.deg2rad([-89.5, 89.5]))
+    assert first_long[[0, 180]] == pytest.approx(np.deg2rad([-90.0, 90.0]))
+    spread = load_carmen(carmen_dir / "fr-clinic.clf.gz", lidar=LidarConfig(fov_deg=180.0)).scans
+    assert spread.scan_angles(int(np.flatnonzero(short)[0]))[179] == pytest.approx(np.pi / 2)
     assert scans.invalid_beams == 0  # NaN padding is not an invalid reading
     assert log.summary()["scans"]["no_return_beams"] == 5849 + 150066
 

@@ -271,3 +271,25 @@ def test_the_quality_table_lists_logs_scored_without_relations():
     )
     del benches["slam.mit-killian"]
     assert len(tables.slam_quality_table(benches).splitlines()) == 2  # header only
+
+
+def test_the_readme_shows_a_readable_picture_of_every_benchmark_log():
+    """One map per log of ``tools/bench.py slam`` (``tools/bench_pictures.py``), in the README,
+    at a size a reader can see and the repository can hold."""
+    import cv2
+    import numpy as np
+
+    pictures = load_tool("bench_pictures")
+    logs = pictures.picture_logs(json.loads((ROOT / "docs" / "bench" / "slam.json").read_text()))
+    assert sorted(logs) == ["aces", "fr-clinic", "fr079", "intel", "mit-csail", "mit-killian"]
+    readme = (ROOT / "README.md").read_text()
+    for log in logs:
+        path = ROOT / "docs" / "images" / f"slam-{log}.png"
+        assert f'<img src="docs/images/slam-{log}.png"' in readme, log
+        image = cv2.imread(str(path))
+        assert image is not None, path
+        assert 600 <= max(image.shape[:2]) <= 800, (log, image.shape)
+        assert path.stat().st_size < 300_000, log
+    wide = np.zeros((1586, 3000, 3), np.uint8)
+    assert pictures.scaled(wide, 800).shape == (423, 800, 3)
+    assert pictures.scaled(wide[:100, :200], 800).shape == (100, 200, 3)
