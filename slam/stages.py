@@ -363,20 +363,33 @@ def registration_beams(
     :class:`RegistrationScans`)."""
     most = config.rbpf.refine_beams if most is None else most
     width = max(1, min(most or seq.num_beams, seq.num_beams))
-    ex = np.zeros((len(scans), width))
-    ey = np.zeros((len(scans), width))
-    counts = np.zeros(len(scans), dtype=np.int64)
+    # every scan's endpoints side by side (NaN where no return or no beam); each row's returns
+    # in beam order, thinned to ``width`` evenly spread as Scan.hits thins them (the same
+    # np.linspace positions, row by row): the values Scan.hits gives, without a copy per scan
+    all_x = np.full((len(scans), seq.num_beams), np.nan, dtype=np.float32)
+    all_y = np.full((len(scans), seq.num_beams), np.nan, dtype=np.float32)
     for i, k in enumerate(scans):
-        all_x, all_y = seq.scan(int(k)).endpoints()
-        hit = ~np.isnan(all_x)
-        n = int(np.count_nonzero(hit))
-        if n > width:  # thinned as Scan.hits thins
-            hx, hy = seq.hits(int(k), width)
-            n = hx.size
-            ex[i, :n], ey[i, :n] = hx, hy
-        else:  # every return, without the copies of Scan.hits
-            ex[i, :n], ey[i, :n] = all_x[hit], all_y[hit]
-        counts[i] = n
+        hx, hy = seq.scan(int(k)).endpoints()
+        all_x[i, : hx.size], all_y[i, : hy.size] = hx, hy
+    hit = ~np.isnan(all_x)
+    counts = np.count_nonzero(hit, axis=1).astype(np.int64)
+    order = np.argsort(~hit, axis=1, kind="stable")  # the returns first, in beam order
+    pos = np.tile(np.arange(width, dtype=np.int64), (len(scans), 1))
+    thin = np.flatnonzero(counts > width)
+    if thin.size and width > 1:
+        step = (counts[thin] - 1).astype(np.float64) / (width - 1)
+        at = np.arange(width, dtype=np.float64)[None, :] * step[:, None]
+        at[:, -1] = counts[thin] - 1
+        pos[thin] = at.round().astype(np.int64)
+    elif thin.size:
+        pos[thin] = 0
+    counts[thin] = width
+    front = np.take_along_axis(order, pos, axis=1)
+    ex = np.take_along_axis(all_x, front, axis=1).astype(np.float64)
+    ey = np.take_along_axis(all_y, front, axis=1).astype(np.float64)
+    beyond = np.arange(width)[None, :] >= counts[:, None]
+    ex[beyond] = 0.0
+    ey[beyond] = 0.0
     return ex, ey, counts
 
 

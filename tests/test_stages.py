@@ -151,3 +151,49 @@ def test_scan_registration_corrects_the_scans_between_updates(tmp_path):
     assert nodes.max() < 0.03  # the nodes, exact at the start, stay within the field's bias
     off_config = load_config("", None, ["rbpf.register_scans=false"])
     assert ScanRegistration().run(output, off_config) is output
+
+
+def _beams_scan_by_scan(seq: ScanSequence, scans, width: int):
+    """registration_beams as it was written before it was vectorised: one scan at a time."""
+    ex = np.zeros((len(scans), width))
+    ey = np.zeros((len(scans), width))
+    counts = np.zeros(len(scans), dtype=np.int64)
+    for i, k in enumerate(scans):
+        all_x, all_y = seq.scan(int(k)).endpoints()
+        hit = ~np.isnan(all_x)
+        n = int(np.count_nonzero(hit))
+        if n > width:
+            hx, hy = seq.hits(int(k), width)
+            n = hx.size
+            ex[i, :n], ey[i, :n] = hx, hy
+        else:
+            ex[i, :n], ey[i, :n] = all_x[hit], all_y[hit]
+        counts[i] = n
+    return ex, ey, counts
+
+
+@pytest.mark.parametrize("most", [0, 1, 2, 7, 40, 61, 1000])
+def test_registration_beams_give_what_each_scan_gives(most):
+    """The vectorised extraction equals Scan.hits scan by scan, bit for bit: scans of different
+    widths, invalid and no-return readings, thinned (evenly spread) and not."""
+    from slam.scans import Scan
+    from slam.stages import registration_beams
+
+    rng = np.random.default_rng(3)
+    seq = ScanSequence()
+    for k in range(25):
+        n = int(rng.choice([0, 1, 2, 30, 59, 60, 61]))
+        ranges = rng.uniform(0.2, 12.0, n).astype(np.float32)
+        ranges[rng.random(n) < 0.2] = np.nan
+        ranges[rng.random(n) < 0.1] = 30.0  # beyond range_max: not a return
+        angles = np.linspace(-1.5, 1.5, n) if n > 1 else np.zeros(n)
+        scan = Scan(float(k), ranges, angles, 0.1, 20.0, 30.0, np.array([0.1, 0.02, 0.01]))
+        seq.append(scan, np.array([0.1 * k, 0.0, 0.0]))
+    config = load_config("", None, [f"rbpf.refine_beams={most}"])
+    scans = np.array([3, 0, 24, 7, 7, 11, 19, 2], dtype=np.int64)
+    got = registration_beams(seq, scans, config)
+    width = max(1, min(most or seq.num_beams, seq.num_beams))
+    want = _beams_scan_by_scan(seq, scans, width)
+    for a, b in zip(got, want, strict=True):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
