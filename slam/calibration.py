@@ -407,3 +407,104 @@ def calibrate_mount(
     pairs = pairs[kept]
     odo = relative(scans.odometry[pairs[:, 0]], scans.odometry[pairs[:, 1]])
     return estimate_mount(laser, odo, stated, settings)
+
+
+# --- the beams of a log that mixes n and n − 1 readings --------------------------------------
+
+
+def short_scan_geometries(short: int, fov: float) -> dict[str, F64]:
+    """The angles (rad) that scans of ``short`` readings may have when the log's other scans
+    have ``short + 1`` spread over ``fov`` (one step ``fov / short`` apart, centred): spread
+    over the whole field of view, one step apart and centred (a SICK LMS's interlaced sweeps:
+    the half steps between the long scan's beams), or one step apart from its first beam or to
+    its last."""
+    i = np.arange(short, dtype=np.float64)
+    step = fov / short
+    return {
+        "spread": (i - (short - 1) / 2.0) * (fov / max(short - 1, 1)),
+        "centred": (i - (short - 1) / 2.0) * step,
+        "from_first": (i - short / 2.0) * step,
+        "to_last": (i - short / 2.0 + 1.0) * step,
+    }
+
+
+@dataclass(frozen=True)
+class BeamGeometryCheck:
+    """How well each candidate geometry of a log's shorter scans lets the matcher agree with
+    the odometry (:func:`check_beam_geometry`)."""
+
+    short: int
+    """Readings of the shorter scans (the longer ones have one more)."""
+    fov_deg: float
+    """The span of the longer scans (degrees)."""
+    rows: dict[str, dict[str, float | int]]
+    """Per geometry (:func:`short_scan_geometries`): ``rotation_rms_deg`` (trimmed RMS of the
+    matcher's rotation minus the odometry's), ``pairs_fitted`` and the median difference
+    (degrees) on pairs from a short to a long scan (``short_to_long_deg``) and back
+    (``long_to_short_deg``)."""
+    best: str
+    """The geometry with the smallest disagreement."""
+
+    @property
+    def beam_step_deg(self) -> float:
+        """The step (degrees) that declares the ``centred`` geometry (``lidar.beam_step_deg``)."""
+        return self.fov_deg / self.short
+
+    def as_dict(self) -> dict:
+        """The check as plain values (for ``slam data calibrate --json``)."""
+        return {
+            "short": self.short,
+            "fov_deg": round(self.fov_deg, 4),
+            "best": self.best,
+            "beam_step_deg": round(self.beam_step_deg, 6),
+            "geometries": self.rows,
+        }
+
+
+def check_beam_geometry(
+    scans, config: Config, every: int = 2, settings: CalibrationSettings | None = None
+) -> BeamGeometryCheck | None:
+    """Which angles the shorter scans of ``scans`` (a :class:`slam.scans.LogScans`) have, when
+    the log mixes scans of ``n`` and ``n − 1`` readings whose lines carry no angles (fr-clinic's
+    180 and 181): every ``every``-th pair of consecutive scans is registered as
+    :func:`pair_motions` registers them, in the laser's frame, under each geometry of
+    :func:`short_scan_geometries` (the longer scans as the loader spreads them), and the rotation
+    found is compared with the odometry's. A wrong geometry turns a short scan against a long
+    one (opposite biases on the two kinds of mixed pair) or distorts it (fewer pairs fit, a larger
+    disagreement). ``None`` when the log's scans do not mix two such counts."""
+    settings = settings or CalibrationSettings()
+    log_scans = scans.log.scans
+    if log_scans.angles.ndim != 2:
+        return None
+    readings = np.count_nonzero(np.isfinite(log_scans.angles[scans.indices]), axis=1)
+    counts = np.unique(readings)
+    if counts.size != 2 or counts[1] != counts[0] + 1 or counts[0] < 2:
+        return None
+    short = int(counts[0])
+    long_angles = log_scans.angles[scans.indices[int(np.argmax(readings))]]
+    fov = float(long_angles[-1] - long_angles[0])
+    pairs = np.array([(k, k + 1) for k in range(0, len(scans) - 1, every)], dtype=np.int64)
+    kinds = readings[pairs[:, 0]] - readings[pairs[:, 1]]  # -1: short to long, +1: back
+    odometry = np.asarray(scans.odometry, dtype=np.float64)
+    turn = relative(odometry[pairs[:, 0]], odometry[pairs[:, 1]])[:, 2]
+    rows: dict[str, dict[str, float | int]] = {}
+    for name, angles in short_scan_geometries(short, fov).items():
+
+        def laser_frame(k: int, angles: F64 = angles) -> tuple[F64, F64]:
+            sc = scans.scan(k)
+            a = angles if readings[k] == short else long_angles
+            r = np.asarray(sc.ranges[: a.size], dtype=np.float64)
+            ok = np.isfinite(r) & (r >= sc.range_min) & (r < sc.range_max)
+            return r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])
+
+        motions, kept = pair_motions(laser_frame, odometry, pairs, config, settings)
+        d = np.degrees(wrap_angle(motions[:, 2] - turn[kept])) if kept.size else np.zeros(0)
+        rms = round(_trimmed_rms(d, settings.trim), 4) if d.size else float("nan")
+        row: dict[str, float | int] = {"pairs_fitted": int(kept.size), "rotation_rms_deg": rms}
+        for kind, label in ((-1, "short_to_long_deg"), (1, "long_to_short_deg")):
+            sel = kinds[kept] == kind
+            if sel.any():
+                row[label] = round(float(np.median(d[sel])), 4)
+        rows[name] = row
+    best = min(rows, key=lambda n: np.nan_to_num(rows[n]["rotation_rms_deg"], nan=np.inf))
+    return BeamGeometryCheck(short, float(np.degrees(fov)), rows, best)

@@ -11,6 +11,7 @@ from synthetic_logs import ray_cast, write_carmen
 
 from slam.calibration import (
     CalibrationSettings,
+    check_beam_geometry,
     estimate_mount,
     pair_motions,
     synchronise_odometry,
@@ -236,3 +237,57 @@ def test_the_smoothing_stage_runs_by_default(tmp_path):
     smooth = json.loads((tmp_path / "smooth" / "metrics.json").read_text())["filter"]
     assert "odometry_disagreement_m" not in plain
     assert smooth["odometry_disagreement_m"] < 0.02  # the synthetic odometry is exact
+
+
+class _MixedScans:
+    """The part of a :class:`slam.scans.LogScans` that :func:`check_beam_geometry` reads: scans
+    alternating between 181 readings (−90°..+90°) and 180 (the half degrees between, as a SICK
+    LMS's interlaced sweeps give), cast in the synthetic room along a turning path with exact
+    odometry; the loader's angles for the short scans are the spread ones (it cannot know)."""
+
+    def __init__(self, n: int) -> None:
+        from types import SimpleNamespace
+
+        self.odometry = np.c_[
+            np.linspace(-1.0, 1.0, n), np.linspace(-0.5, 0.3, n), 0.05 * np.arange(n)
+        ]
+        self.indices = np.arange(n)
+        self.ranges = np.full((n, 181), np.nan)
+        angles = np.full((n, 181), np.nan)
+        long = np.deg2rad(np.arange(181) - 90.0)
+        short = np.deg2rad(np.arange(180) - 89.5)
+        for k in range(n):
+            true = long if k % 2 == 0 else short
+            self.ranges[k, : true.size] = ray_cast(self.odometry[k], true)
+            angles[k, : true.size] = long if k % 2 == 0 else np.linspace(-np.pi / 2, np.pi / 2, 180)
+        self.log = SimpleNamespace(scans=SimpleNamespace(angles=angles))
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def scan(self, k: int):
+        from slam.scans import Scan
+
+        angles = self.log.scans.angles[k]
+        return Scan(float(k), self.ranges[k], angles, 0.05, 30.0, 30.0, np.zeros(3))
+
+
+def test_the_beam_check_finds_the_interlaced_geometry():
+    check = check_beam_geometry(_MixedScans(30), load_config(""), every=1)
+    assert check is not None and check.short == 180
+    assert check.fov_deg == pytest.approx(180.0)
+    assert check.best == "centred" and check.beam_step_deg == pytest.approx(1.0)
+    rows = check.rows
+    assert rows["centred"]["pairs_fitted"] == 29
+    assert rows["centred"]["rotation_rms_deg"] < 0.15  # the matcher's own noise: about 0.1°
+    for wrong in ("from_first", "to_last"):
+        assert rows[wrong]["rotation_rms_deg"] > 0.4  # half a degree on every pair
+        assert rows[wrong]["short_to_long_deg"] * rows[wrong]["long_to_short_deg"] < 0
+    assert abs(rows["centred"]["short_to_long_deg"]) < 0.1
+    assert json.loads(json.dumps(check.as_dict()))["best"] == "centred"
+
+
+def test_the_beam_check_leaves_logs_of_one_width_alone():
+    scans = _MixedScans(6)
+    scans.log.scans.angles[1::2, 180] = np.pi / 2  # the short scans get a 181st reading
+    assert check_beam_geometry(scans, load_config("")) is None

@@ -7,13 +7,12 @@ each count) this registers the 180-reading scan onto the 181-reading one by ICP 
 odometry's relative pose) under each hypothesis for the 180-reading beams, and compares the
 median point-to-segment residual per pair (docs/slam.md, "The beam step of the 180-reading logs").
 
-A second check uses the filter's own matcher (``--matcher``): every other pair of consecutive
-scans is registered as ``slam data calibrate`` registers them (:func:`slam.calibration.pair_motions`,
-scan ``j`` onto a one-scan distance field of scan ``i``), under each hypothesis, and the rotation
-it finds is compared with the odometry's: the trimmed RMS difference (the odometry's disagreement
-of docs/slam.md), the pairs that fit, and the median difference by the pair's reading counts. A
-wrong geometry for one count turns a 180-reading scan against a 181-reading one: the two mixed
-kinds of pair then show opposite biases.
+A second check uses the filter's own matcher (``--matcher``, the check ``slam data calibrate``
+prints: :func:`slam.calibration.check_beam_geometry`): every other pair of consecutive scans is
+registered under each hypothesis, and the rotation found is compared with the odometry's: the
+trimmed RMS difference, the pairs that fit, and the median difference by the pair's reading
+counts. A wrong geometry for one count turns a 180-reading scan against a 181-reading one: the
+two mixed kinds of pair then show opposite biases.
 
 Usage::
 
@@ -29,11 +28,13 @@ import sys
 
 import numpy as np
 
-from slam.calibration import CalibrationSettings, pair_motions
-from slam.config import Config, load_config
+from slam.calibration import check_beam_geometry
+from slam.config import load_config
 from slam.io.carmen import load_carmen
 from slam.io.datadir import resolve_data_dir
 from slam.io.registry import get_dataset
+from slam.pipeline import load_source
+from slam.scans import LogScans
 
 HYPOTHESES = {
     "spread 180/179 deg (default)": (np.arange(180) - 89.5) * np.deg2rad(180 / 179),
@@ -99,49 +100,6 @@ def icp_residual(
     return float(np.median(best[np.isfinite(best)]))
 
 
-def matcher_rotations(
-    ranges: np.ndarray,
-    counts: np.ndarray,
-    odometry: np.ndarray,
-    config: Config,
-    hypotheses: dict[str, np.ndarray],
-    every: int = 2,
-) -> dict[str, dict]:
-    """Per hypothesis (angles of the 180-reading scans; the 181-reading ones are
-    :data:`ANGLES_181`): the matcher's rotation between consecutive scans ``(k, k + 1)``, ``k`` a
-    multiple of ``every``, against the odometry's (module docstring). ``ranges`` ``(N, 181)``,
-    ``counts`` ``(N,)`` readings per scan, ``odometry`` ``(N, 3)``."""
-    lidar = config.lidar
-    low = lidar.range_min or 0.0
-    high = min(lidar.range_max or np.inf, lidar.no_return or np.inf)
-    pairs = np.array([(k, k + 1) for k in range(0, len(counts) - 1, every)], dtype=np.int64)
-    kinds = counts[pairs[:, 0]] * 1000 + counts[pairs[:, 1]]
-    out: dict[str, dict] = {}
-    for name, angles in hypotheses.items():
-
-        def hits_of(k: int, angles: np.ndarray = angles) -> tuple[np.ndarray, np.ndarray]:
-            a = angles if counts[k] == 180 else ANGLES_181
-            r = ranges[k, : a.size]
-            ok = np.isfinite(r) & (r >= low) & (r < high)
-            return r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])
-
-        motions, kept = pair_motions(hits_of, odometry, pairs, config, CalibrationSettings())
-        i, j = pairs[kept, 0], pairs[kept, 1]
-        turn = np.array([_relative(odometry[a], odometry[b])[2] for a, b in zip(i, j, strict=True)])
-        d = np.degrees(np.angle(np.exp(1j * (motions[:, 2] - turn))))
-        trimmed = np.sort(np.abs(d))[: max(1, int(round(0.95 * d.size)))]
-        row: dict = {
-            "pairs_fitted": int(kept.size),
-            "rotation_rms_deg": round(float(np.sqrt(np.mean(trimmed**2))), 4),
-        }
-        for kind, label in ((180181, "180_to_181"), (181180, "181_to_180"), (180180, "180_to_180")):
-            sel = kinds[kept] == kind
-            if sel.any():
-                row[f"median_{label}_deg"] = round(float(np.median(d[sel])), 4)
-        out[name] = row
-    return out
-
-
 def main() -> int:
     """Print (or emit as JSON) the residuals per hypothesis and the paired comparison."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -162,16 +120,16 @@ def main() -> int:
     ranges = np.asarray(scans.ranges, dtype=np.float64)
     counts = np.where(np.isnan(scans.angles[:, -1]), 180, 181)
     if args.matcher:
-        rows = matcher_rotations(ranges, counts, scans.odometry, config, HYPOTHESES)
+        log = load_source(args.log, resolve_data_dir(None), config).log
+        check = check_beam_geometry(LogScans.from_log(log, config), config)
         if args.json:
-            print(json.dumps({"log": args.log, **rows}, indent=2))
+            print(json.dumps({"log": args.log, **check.as_dict()}, indent=2))
         else:
-            for name, row in rows.items():
-                mixed = (row.get("median_180_to_181_deg"), row.get("median_181_to_180_deg"))
+            for name, row in check.rows.items():
                 print(
-                    f"{name:30s} rotation vs odometry {row['rotation_rms_deg']:.3f} deg RMS over "
-                    f"{row['pairs_fitted']} pairs; median 180->181 {mixed[0]:+.3f}, "
-                    f"181->180 {mixed[1]:+.3f} deg"
+                    f"{name:10s} rotation vs odometry {row['rotation_rms_deg']:.3f} deg RMS over "
+                    f"{row['pairs_fitted']} pairs; median 180->181 "
+                    f"{row['short_to_long_deg']:+.3f}, 181->180 {row['long_to_short_deg']:+.3f} deg"
                 )
         return 0
     change = np.flatnonzero(counts[1:] != counts[:-1])

@@ -244,7 +244,7 @@ def run_inspect(args: argparse.Namespace) -> int:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """``slam data calibrate``: the odometry synchronisation and the mount estimate."""
-    from slam.calibration import calibrate_mount
+    from slam.calibration import calibrate_mount, check_beam_geometry
     from slam.commands.run import overrides_from
     from slam.config import load_config
     from slam.io.sources import resolve
@@ -265,12 +265,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
         raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
     stated = [float(v) for v in log.scans.laser_offset]  # type: ignore[union-attr]
+    beams = check_beam_geometry(scans, config)
     report = {
         "log": str(log.source or args.name),
         "scans": len(scans),
         "odometry_sync": None if sync is None else sync.as_dict(),
         "mount": mount.as_dict(),
         "stated_mount": {"x": stated[0], "y": stated[1], "yaw_deg": math.degrees(stated[2])},
+        "beam_geometry": None if beams is None else beams.as_dict(),
     }
     if args.json:
         print(json.dumps(report, indent=2))
@@ -317,4 +319,23 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
         f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/slam.md: ground truth may "
         f"refer to the laser or to the odometry point)"
     )
+    beams = report.get("beam_geometry")
+    if beams:
+        short = beams["short"]
+        lines.append(
+            f"beams     scans of {short} and {short + 1} readings over {beams['fov_deg']:g}°: the "
+            f"matcher's rotation against the odometry's (trimmed RMS, pairs that fit) with the "
+            f"{short}-reading beams"
+        )
+        for name, row in beams["geometries"].items():
+            lines.append(
+                f"          {name:10s} {row['rotation_rms_deg']:.3f}°, {row['pairs_fitted']} pairs"
+            )
+        if beams["best"] == "centred":
+            lines.append(
+                f"          centred fits best: --set lidar.beam_step_deg={beams['beam_step_deg']:g} "
+                "declares it (docs/slam.md, the beam step of the 180-reading logs)"
+            )
+        else:
+            lines.append(f"          {beams['best']} fits best")
     return lines
