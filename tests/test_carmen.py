@@ -480,3 +480,24 @@ def test_a_log_without_its_config_finds_its_no_echo_code(carmen_dir, name, file,
     assert configured.summary()["scans"]["no_return_beams"] == no_return_beams
     hits = lambda s: np.isfinite(s.ranges) & (s.ranges < s.range_max)  # noqa: E731
     np.testing.assert_array_equal(hits(unseen.scans), hits(configured.scans))
+
+
+def test_a_log_mixing_two_widths_gets_a_note_until_its_beam_step_is_declared(tmp_path):
+    """fr-clinic's 180- and 181-reading lines in miniature: without ``lidar.beam_step_deg`` the
+    run's warnings say what the shorter scans are taken as and which command measures them."""
+    from slam.io import sources
+
+    lines = [flaser([1.0 + 0.01 * i] * (180 + i % 2), t=1.0 + i) for i in range(6)]
+    path = write(tmp_path, lines)
+    ref = sources.resolve(str(path), tmp_path, where="test")
+    notes = sources.load(ref, load_config(""), ("scans",)).notes
+    assert notes == [
+        f"{path}: scans of 180 and 181 readings, the 180-reading ones spread over the field of "
+        "view like the others; if one laser takes both (a SICK LMS's interlaced sweeps), "
+        "`slam data calibrate` measures which angles they have (lidar.beam_step_deg)"
+    ]
+    stepped = load_config("", None, ["lidar.beam_step_deg=1.0"])
+    assert sources.load(ref, stepped, ("scans",)).notes == []
+    one = write(tmp_path, [flaser([1.0] * 181, t=1.0 + i) for i in range(4)], "one.clf")
+    ref_one = sources.resolve(str(one), tmp_path, where="test")
+    assert sources.load(ref_one, load_config(""), ("scans",)).notes == []

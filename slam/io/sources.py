@@ -111,6 +111,28 @@ class Source:
     """Lines for the run's ``warnings`` (where the demo is)."""
 
 
+def mixed_width_notes(log: Log, config: Config) -> list[str]:
+    """A warning for a log whose lines carry no angles and mix scans of ``n`` and ``n − 1``
+    readings while ``lidar.beam_step_deg`` is unset: the shorter ones are then spread over the
+    field of view like the longer ones, which one laser's interlaced sweeps (fr-clinic) do not
+    do; ``slam data calibrate`` measures which angles they have."""
+    scans = log.scans
+    if config.lidar.beam_step_deg is not None or scans is None or scans.angles.ndim != 2:
+        return []
+    if log.kind != "carmen":  # a bag's LaserScan messages carry their own angles
+        return []
+    counts = np.unique(np.count_nonzero(np.isfinite(scans.angles), axis=1))
+    if counts.size != 2 or counts[1] != counts[0] + 1:
+        return []
+    short, long = int(counts[0]), int(counts[1])
+    return [
+        f"{log.source or log.name}: scans of {short} and {long} readings, the {short}-reading "
+        f"ones spread over the field of view like the others; if one laser takes both (a SICK "
+        f"LMS's interlaced sweeps), `slam data calibrate` measures which angles they have "
+        f"(lidar.beam_step_deg)"
+    ]
+
+
 def names_hint() -> str:
     """What a dataset NAME may be, for messages."""
     from slam.io import registry
@@ -230,7 +252,7 @@ def load(
         from slam.io import registry
 
         log = registry.load_dataset(ref.name, ref.data_dir, need=need, config=config)
-        return Source(log)
+        return Source(log, notes=mixed_width_notes(log, config))
     if ref.kind is Kind.CARMEN:
         from slam.io.carmen import load_carmen
 
@@ -244,7 +266,7 @@ def load(
         if absent:
             found = ", ".join(log.streams()) or "none"
             raise DataError(f"{ref.path}: the log has no {', '.join(absent)} stream; found {found}")
-        return Source(log)
+        return Source(log, notes=mixed_width_notes(log, config))
     folder = ensure(ref, progress)
     assert ref.number is not None  # set for every ECE276A kind by resolve()
     log = load_ece276a(
