@@ -472,15 +472,14 @@ def check_beam_geometry(
     found is compared with the odometry's. A wrong geometry turns a short scan against a long
     one (opposite biases on the two kinds of mixed pair) or distorts it (fewer pairs fit, a larger
     disagreement). ``None`` when the log's scans do not mix two such counts."""
+    from slam.io.log import mixed_widths
+
     settings = settings or CalibrationSettings()
     log_scans = scans.log.scans
-    if log_scans.angles.ndim != 2:
+    readings = log_scans.readings()[scans.indices]
+    short = mixed_widths(readings)
+    if short is None:
         return None
-    readings = np.count_nonzero(np.isfinite(log_scans.angles[scans.indices]), axis=1)
-    counts = np.unique(readings)
-    if counts.size != 2 or counts[1] != counts[0] + 1 or counts[0] < 2:
-        return None
-    short = int(counts[0])
     long_angles = log_scans.angles[scans.indices[int(np.argmax(readings))]]
     fov = float(long_angles[-1] - long_angles[0])
     pairs = np.array([(k, k + 1) for k in range(0, len(scans) - 1, every)], dtype=np.int64)

@@ -248,6 +248,8 @@ class _MixedScans:
     def __init__(self, n: int) -> None:
         from types import SimpleNamespace
 
+        from slam.io.log import ScanStream
+
         self.odometry = np.c_[
             np.linspace(-1.0, 1.0, n), np.linspace(-0.5, 0.3, n), 0.05 * np.arange(n)
         ]
@@ -260,7 +262,9 @@ class _MixedScans:
             true = long if k % 2 == 0 else short
             self.ranges[k, : true.size] = ray_cast(self.odometry[k], true)
             angles[k, : true.size] = long if k % 2 == 0 else np.linspace(-np.pi / 2, np.pi / 2, 180)
-        self.log = SimpleNamespace(scans=SimpleNamespace(angles=angles))
+        stream = ScanStream(np.arange(n, dtype=np.float64), self.ranges.astype(np.float32),
+                            angles, 0.05, 30.0, 30.0)  # fmt: skip
+        self.log = SimpleNamespace(scans=stream)
 
     def __len__(self) -> int:
         return len(self.indices)

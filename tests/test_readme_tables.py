@@ -293,3 +293,29 @@ def test_the_readme_shows_a_readable_picture_of_every_benchmark_log():
     wide = np.zeros((1586, 3000, 3), np.uint8)
     assert pictures.scaled(wide, 800).shape == (423, 800, 3)
     assert pictures.scaled(wide[:100, :200], 800).shape == (100, 200, 3)
+
+
+def test_bench_pictures_refuse_a_bench_they_cannot_use(tmp_path, monkeypatch, capsys):
+    """Exit 2 with the file and what was expected, and no picture written."""
+    pictures = load_tool("bench_pictures")
+    written = []
+    monkeypatch.setattr(pictures, "write_png", lambda *a, **k: written.append(a))
+    cases = {
+        tmp_path / "absent.json": "expected the JSON tools/bench.py slam writes",
+        tmp_path / "list.json": "expected the JSON tools/bench.py slam writes",
+        tmp_path / "none.json": "expected SLAM benches with a sweep_dir, found none",
+        tmp_path / "run.json": "quality.png: expected the bench run's quality picture",
+    }
+    (tmp_path / "list.json").write_text("[1, 2]")
+    (tmp_path / "none.json").write_text(json.dumps({"benches": {"slam.demo_100": {}}}))
+    run_dir = {"sweep_dir": str(tmp_path / "sweep")}
+    (tmp_path / "run.json").write_text(json.dumps({"benches": {"slam.intel": run_dir}}))
+    for bench, message in cases.items():
+        monkeypatch.setattr("sys.argv", ["bench_pictures.py", "--bench", str(bench)])
+        assert pictures.main() == 2
+        err = capsys.readouterr().err
+        assert message in err, err
+    monkeypatch.setattr("sys.argv", ["bench_pictures.py", "--size", "0"])
+    assert pictures.main() == 2
+    assert "--size: expected a positive number of pixels, found 0" in capsys.readouterr().err
+    assert written == []

@@ -100,6 +100,35 @@ def icp_residual(
     return float(np.median(best[np.isfinite(best)]))
 
 
+def _matcher_report(name: str, config, as_json: bool) -> int:
+    """``--matcher``: :func:`slam.calibration.check_beam_geometry` on log ``name``, printed."""
+    log = load_source(name, resolve_data_dir(None), config).log
+    check = check_beam_geometry(LogScans.from_log(log, config), config)
+    if check is None:
+        widths = ", ".join(str(w) for w in np.unique(log.scans.readings()))
+        print(f"{log.source or name}: expected scans of two widths, n and n - 1 readings, found "
+              f"scans of {widths} readings", file=sys.stderr)  # fmt: skip
+        return 2
+    if as_json:
+        print(json.dumps({"log": name, **check.as_dict()}, indent=2))
+        return 0
+    short = check.short
+    for geometry, row in check.rows.items():
+        medians = ", ".join(
+            f"median {label} {row[key]:+.3f}"
+            for key, label in (
+                ("short_to_long_deg", f"{short}->{short + 1}"),
+                ("long_to_short_deg", f"{short + 1}->{short}"),
+            )  # fmt: skip
+            if key in row
+        )
+        print(
+            f"{geometry:10s} rotation vs odometry {row['rotation_rms_deg']:.3f} deg RMS over "
+            f"{row['pairs_fitted']} pairs; {medians} deg"
+        )
+    return 0
+
+
 def main() -> int:
     """Print (or emit as JSON) the residuals per hypothesis and the paired comparison."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -112,6 +141,8 @@ def main() -> int:
     )
     args = parser.parse_args()
     config = load_config(args.log)
+    if args.matcher:
+        return _matcher_report(args.log, config, args.json)
     path = resolve_data_dir(None) / get_dataset(args.log).log_file().path
     scans = load_carmen(path, lidar=config.lidar).scans
     if scans.angles.ndim != 2 or scans.ranges.shape[1] != 181:
@@ -119,19 +150,6 @@ def main() -> int:
         return 2
     ranges = np.asarray(scans.ranges, dtype=np.float64)
     counts = np.where(np.isnan(scans.angles[:, -1]), 180, 181)
-    if args.matcher:
-        log = load_source(args.log, resolve_data_dir(None), config).log
-        check = check_beam_geometry(LogScans.from_log(log, config), config)
-        if args.json:
-            print(json.dumps({"log": args.log, **check.as_dict()}, indent=2))
-        else:
-            for name, row in check.rows.items():
-                print(
-                    f"{name:10s} rotation vs odometry {row['rotation_rms_deg']:.3f} deg RMS over "
-                    f"{row['pairs_fitted']} pairs; median 180->181 "
-                    f"{row['short_to_long_deg']:+.3f}, 181->180 {row['long_to_short_deg']:+.3f} deg"
-                )
-        return 0
     change = np.flatnonzero(counts[1:] != counts[:-1])
     change = change[change > 0]
     rng = np.random.default_rng(0)

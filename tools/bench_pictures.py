@@ -22,6 +22,8 @@ from pathlib import Path
 
 import cv2
 
+from slam.io.atomic import write_png
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "images"
 
@@ -46,12 +48,24 @@ def scaled(image, size: int):
 
 
 def main() -> int:
-    """Write the pictures; exit 2 naming the first run folder without a ``quality.png``."""
+    """Write the pictures; exit 2, writing none, on a bench file that is not the bench's JSON or
+    naming the first run folder without a ``quality.png``."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--bench", type=Path, default=ROOT / "docs" / "bench" / "slam.json")
     parser.add_argument("--size", type=int, default=800, help="longer side, pixels")
     args = parser.parse_args()
-    logs = picture_logs(json.loads(args.bench.read_text()))
+    if args.size < 1:
+        print(f"--size: expected a positive number of pixels, found {args.size}", file=sys.stderr)
+        return 2
+    try:
+        logs = picture_logs(json.loads(args.bench.read_text()))
+    except (OSError, ValueError, KeyError, AttributeError, TypeError) as exc:
+        print(f"{args.bench}: expected the JSON tools/bench.py slam writes (a 'benches' object), "
+              f"found {type(exc).__name__}: {exc}", file=sys.stderr)  # fmt: skip
+        return 2
+    if not logs:
+        print(f"{args.bench}: expected SLAM benches with a sweep_dir, found none", file=sys.stderr)
+        return 2
     images = {}
     for log, run in logs.items():
         image = cv2.imread(str(run / "quality.png"), cv2.IMREAD_COLOR)
@@ -60,10 +74,9 @@ def main() -> int:
                   "(run tools/bench.py slam on this machine first)", file=sys.stderr)  # fmt: skip
             return 2
         images[log] = scaled(image, args.size)
-    OUT.mkdir(parents=True, exist_ok=True)
-    for log, image in images.items():
+    for log, image in images.items():  # every picture read before any is written
         path = OUT / f"slam-{log}.png"
-        cv2.imwrite(str(path), image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+        write_png(path, image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
         print(f"{path.relative_to(ROOT)}: {image.shape[1]}x{image.shape[0]}")
     return 0
 

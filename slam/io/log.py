@@ -110,6 +110,21 @@ class ScanStream:
         """Beam angles of scan ``i``."""
         return self.angles if self.angles.ndim == 1 else self.angles[i]
 
+    def readings(self) -> NDArray[np.int64]:
+        """``(N,)`` beams of each scan (the width of its row of ``angles``)."""
+        if self.angles.ndim == 1:
+            return np.full(len(self), self.angles.shape[0], dtype=np.int64)
+        return np.count_nonzero(np.isfinite(self.angles), axis=1).astype(np.int64)
+
+
+def mixed_widths(readings: NDArray[np.int64]) -> int | None:
+    """``n − 1`` when the scans of ``readings`` (beams per scan) are of two widths, ``n`` and
+    ``n − 1`` (fr-clinic's 181 and 180), else ``None``."""
+    counts = np.unique(readings)
+    if counts.size != 2 or counts[1] != counts[0] + 1 or counts[0] < 2:
+        return None
+    return int(counts[0])
+
 
 @dataclass(frozen=True)
 class OdometryStream:

@@ -116,17 +116,16 @@ def mixed_width_notes(log: Log, config: Config) -> list[str]:
     readings while ``lidar.beam_step_deg`` is unset: the shorter ones are then spread over the
     field of view like the longer ones, which one laser's interlaced sweeps (fr-clinic) do not
     do; ``slam data calibrate`` measures which angles they have."""
+    from slam.io.log import mixed_widths
+
     scans = log.scans
-    if config.lidar.beam_step_deg is not None or scans is None or scans.angles.ndim != 2:
+    if config.lidar.beam_step_deg is not None or scans is None or log.kind != "carmen":
+        return []  # declared, or no scans, or a bag whose LaserScan messages carry their angles
+    short = mixed_widths(scans.readings())
+    if short is None:
         return []
-    if log.kind != "carmen":  # a bag's LaserScan messages carry their own angles
-        return []
-    counts = np.unique(np.count_nonzero(np.isfinite(scans.angles), axis=1))
-    if counts.size != 2 or counts[1] != counts[0] + 1:
-        return []
-    short, long = int(counts[0]), int(counts[1])
     return [
-        f"{log.source or log.name}: scans of {short} and {long} readings, the {short}-reading "
+        f"{log.source or log.name}: scans of {short} and {short + 1} readings, the {short}-reading "
         f"ones spread over the field of view like the others; if one laser takes both (a SICK "
         f"LMS's interlaced sweeps), `slam data calibrate` measures which angles they have "
         f"(lidar.beam_step_deg)"
