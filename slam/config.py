@@ -116,7 +116,13 @@ class LidarConfig(Validated):
     beam_step_deg: float | None = bounded(None, gt=0.0, le=10.0)
     """Angle between neighbouring beams (degrees) for logs whose lines carry no geometry (CARMEN
     FLASER): the ``n`` beams are centred on straight ahead this far apart whatever ``n`` (e.g. 1°
-    for a SICK LMS logged with 180 or 181 readings); unset: ``fov_deg / (n − 1)``."""
+    for a SICK LMS logged with 180 or 181 readings); unset: ``fov_deg / (n − 1)``, or measured
+    (``measure_beam_step``)."""
+    measure_beam_step: bool = True
+    """With ``beam_step_deg`` unset, a CARMEN log that mixes scans of ``n`` and ``n − 1``
+    readings (a SICK LMS's interlaced sweeps) has its beam geometry measured when it loads
+    (:func:`slam.calibration.measure_beam_step`): where beams one step apart, centred, fit the
+    odometry best, the log is read with that step and the run's ``config.toml`` records it."""
     range_min: float | None = bounded(None, ge=0.0, lt=MAX_RANGE_M)
     """Shortest valid range (m); shorter readings are invalid beams."""
     range_max: float | None = bounded(None, gt=0.0, le=MAX_RANGE_M)

@@ -170,6 +170,7 @@ def execute(request: RunRequest) -> Result:
             warnings.simplefilter("always")
             reach_stage("load")
             source = sources.load(ref, config, _needs(config), request.progress, request.bag)
+            config = source.configured(config)  # a measured beam step: config.toml records it
             doubts = check_plausibility(source.log, config)  # time base, odometry jumps
             from slam.viz.recorder import start_recording
 
@@ -279,6 +280,7 @@ def run_dataset(
         request = RunRequest(name, config, folder, out=Path(out), force=force, progress=progress)
         return execute(request)
     source = sources.load(ref, config, _needs(config), progress)
+    config = source.configured(config)
     doubts = check_plausibility(source.log, config)  # time base, odometry jumps
     result = _estimate(source, config, progress, [])
     result.metrics["warnings"] = doubts + list(source.notes)
@@ -301,6 +303,8 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     scans = LogScans.from_log(log, config)
     if scans.odometry_sync is not None:
         base["odometry_sync"] = scans.odometry_sync.as_dict()
+    if source.beam_geometry is not None:
+        base["beam_geometry"] = source.beam_geometry
     beams = int(log.scans.ranges.shape[1])  # type: ignore[union-attr]
     _check_memory(log.name, len(scans), beams, scans.odometry, scans.range_max, config)
     bar = ProgressObserver(len(scans), enabled=progress, label=f"{log.name} {method}")

@@ -61,13 +61,23 @@ def flaser_line(ranges, pose, t: float) -> str:
     return f"FLASER {len(ranges)} {nums} {p} {p} {t:.6f} host {t:.6f}"
 
 
-def carmen_lines(n: int = 40, beams: int = 180, period: float = 0.1) -> list[str]:
-    """FLASER lines of ``n`` scans along :func:`path`, one every ``period`` seconds."""
+def carmen_lines(
+    n: int = 40, beams: int = 180, period: float = 0.1, interlaced: bool = False
+) -> list[str]:
+    """FLASER lines of ``n`` scans along :func:`path`, one every ``period`` seconds.
+
+    ``interlaced``: a SICK LMS's interlaced sweeps instead, as fr-clinic has them: the even
+    scans read the 181 whole degrees from −90° to +90°, the odd ones the 180 half degrees
+    between them (``beams`` is not used)."""
     angles = np.linspace(-np.pi / 2, np.pi / 2, beams)
-    return [
-        flaser_line(ray_cast(pose, angles), pose, 100.0 + period * k)
-        for k, pose in enumerate(path(n))
-    ]
+    halves = np.deg2rad(np.arange(180) - 89.5)
+    wholes = np.deg2rad(np.arange(181) - 90.0)
+    lines = []
+    for k, pose in enumerate(path(n)):
+        if interlaced:
+            angles = halves if k % 2 else wholes
+        lines.append(flaser_line(ray_cast(pose, angles), pose, 100.0 + period * k))
+    return lines
 
 
 def write_carmen(folder: Path, lines: list[str], name: str = "room.clf") -> Path:

@@ -295,3 +295,57 @@ def test_the_beam_check_leaves_logs_of_one_width_alone():
     scans = _MixedScans(6)
     scans.log.scans.angles[1::2, 180] = np.pi / 2  # the short scans get a 181st reading
     assert check_beam_geometry(scans, load_config("")) is None
+
+
+def test_a_run_reads_an_interlaced_log_with_its_measured_beam_step(tmp_path):
+    """``slam run`` of a log of interlaced sweeps (no configuration): the beam step measured
+    when the log loads is in the run's ``config.toml`` and ``metrics.json``, and the run is the
+    run with that step declared, bit for bit."""
+    from synthetic_logs import carmen_lines
+
+    from slam.cli import main
+
+    log = write_carmen(tmp_path, carmen_lines(80, interlaced=True))
+    base = ["run", str(log), "--no-texture", "--no-record", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "measured")]) == 0
+    declared = ["--set", "lidar.beam_step_deg=1.0"]
+    assert main([*base, "--out", str(tmp_path / "declared"), *declared]) == 0
+    config = (tmp_path / "measured" / "config.toml").read_text()
+    assert "beam_step_deg = 1.0\n" in config
+    metrics = json.loads((tmp_path / "measured" / "metrics.json").read_text())
+    assert metrics["beam_geometry"]["applied"] is True
+    assert metrics["beam_geometry"]["best"] == "centred"
+    assert metrics["warnings"] == []
+    assert "beam_geometry" not in json.loads((tmp_path / "declared" / "metrics.json").read_text())
+    measured = (tmp_path / "measured" / "trajectory.tum").read_bytes()
+    assert measured == (tmp_path / "declared" / "trajectory.tum").read_bytes()
+
+
+def test_calibrate_says_the_run_measures_the_beam_step(tmp_path, capsys):
+    """``slam data calibrate`` of a log of interlaced sweeps shows every geometry and says that
+    a run reads the log with the measured step; with the measurement off it prints the
+    ``--set`` that declares it."""
+    from synthetic_logs import path
+
+    from slam.cli import main
+
+    halves, wholes = np.deg2rad(np.arange(180) - 89.5), np.deg2rad(np.arange(181) - 90.0)
+    drive = path(120)  # along the walls (the geometries differ), then a turn on the spot
+    spin = np.repeat(drive[-1:], 12, axis=0)
+    spin[:, 2] += 0.12 * np.arange(1, 13)  # turning pairs for the mount
+    poses = np.vstack([drive, spin])
+    lines = [flaser(ray_cast(p, halves if k % 2 else wholes), p, 100.0 + PERIOD * k)
+             for k, p in enumerate(poses)]  # fmt: skip
+    log = write_carmen(tmp_path, lines)
+    capsys.readouterr()
+    assert main(["data", "calibrate", str(log), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["beam_step_deg"] == 1.0 and report["beam_step_measured"] is True
+    assert report["beam_geometry"]["best"] == "centred"
+    assert main(["data", "calibrate", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "centred fits best; `slam run` measures it when the log loads and reads the log with " \
+        "lidar.beam_step_deg = 1" in out  # fmt: skip
+    off = ["--set", "lidar.measure_beam_step=false"]
+    assert main(["data", "calibrate", str(log), *off]) == 0
+    assert "centred fits best: --set lidar.beam_step_deg=1 declares it" in capsys.readouterr().out

@@ -92,14 +92,19 @@ def test_other_logs_counts(carmen_dir, name, scans, beams, odom, no_return_beams
 
 
 def test_fr_clinic_mixes_180_and_181_beams(carmen_dir):
-    log = load_carmen(carmen_dir / "fr-clinic.clf.gz", lidar=load_config("fr-clinic").lidar)
-    scans = log.scans
+    from slam.io import sources
+
+    ref = sources.resolve("fr-clinic", carmen_dir.parent, where="test")
+    source = sources.load(ref, load_config("fr-clinic"), ("scans",))
+    log, scans = source.log, source.log.scans
     assert len(scans) == 6917
     assert scans.angles.shape == (6917, 181)
     short = np.isnan(scans.angles[:, -1])
     assert np.count_nonzero(short) == 5169
     assert np.all(np.isnan(scans.ranges[short, -1]))
-    # configs/fr-clinic.toml: 1° beams, centred; the 180-reading scans on the half degrees
+    # measured when it loads (configs/fr-clinic.toml declares no step): 1° beams, centred; the
+    # 180-reading scans on the half degrees
+    assert source.beam_step_deg == 1.0 and source.beam_geometry["best"] == "centred"
     first_short = scans.scan_angles(int(np.flatnonzero(short)[0]))
     first_long = scans.scan_angles(int(np.flatnonzero(~short)[0]))
     assert first_short[[0, 179]] == pytest.approx(np.deg2rad([-89.5, 89.5]))
@@ -483,21 +488,82 @@ def test_a_log_without_its_config_finds_its_no_echo_code(carmen_dir, name, file,
 
 
 def test_a_log_mixing_two_widths_gets_a_note_until_its_beam_step_is_declared(tmp_path):
-    """fr-clinic's 180- and 181-reading lines in miniature: without ``lidar.beam_step_deg`` the
-    run's warnings say what the shorter scans are taken as and which command measures them."""
+    """fr-clinic's 180- and 181-reading lines in miniature, with the measurement off: without
+    ``lidar.beam_step_deg`` the run's warnings say what the shorter scans are taken as and which
+    command measures them."""
     from slam.io import sources
 
     lines = [flaser([1.0 + 0.01 * i] * (180 + i % 2), t=1.0 + i) for i in range(6)]
     path = write(tmp_path, lines)
     ref = sources.resolve(str(path), tmp_path, where="test")
-    notes = sources.load(ref, load_config(""), ("scans",)).notes
-    assert notes == [
+    off = load_config("", None, ["lidar.measure_beam_step=false"])
+    source = sources.load(ref, off, ("scans",))
+    assert source.notes == [
         f"{path}: scans of 180 and 181 readings, the 180-reading ones spread over the field of "
         "view like the others; if one laser takes both (a SICK LMS's interlaced sweeps), "
         "`slam data calibrate` measures which angles they have (lidar.beam_step_deg)"
     ]
+    assert source.beam_geometry is None and source.configured(off) is off
     stepped = load_config("", None, ["lidar.beam_step_deg=1.0"])
     assert sources.load(ref, stepped, ("scans",)).notes == []
     one = write(tmp_path, [flaser([1.0] * 181, t=1.0 + i) for i in range(4)], "one.clf")
     ref_one = sources.resolve(str(one), tmp_path, where="test")
     assert sources.load(ref_one, load_config(""), ("scans",)).notes == []
+    assert sources.load(ref_one, load_config(""), ("scans",)).beam_geometry is None
+
+
+def test_a_beam_geometry_measured_on_too_few_pairs_is_not_applied(tmp_path):
+    """Six scans of a featureless wall: the measurement runs (``lidar.measure_beam_step``, the
+    default) but fits too few pairs to decide, so the log keeps the spread geometry and the
+    warning says it was measured and not applied."""
+    from slam.io import sources
+
+    lines = [flaser([1.0 + 0.01 * i] * (180 + i % 2), t=1.0 + i) for i in range(6)]
+    path = write(tmp_path, lines)
+    ref = sources.resolve(str(path), tmp_path, where="test")
+    config = load_config("")
+    source = sources.load(ref, config, ("scans",))
+    measured = source.beam_geometry
+    assert measured is not None and measured["applied"] is False
+    rows = measured["geometries"]
+    fitted = rows[measured["best"]]["pairs_fitted"]
+    assert fitted < 50
+    assert source.notes == [
+        f"{path}: scans of 180 and 181 readings, the 180-reading ones spread over the field of "
+        f"view like the others: their beam geometry was measured ({measured['best']} fits best, "
+        f"{fitted} pairs fitted; centred {rows['centred']['rotation_rms_deg']:.3f}° against "
+        f"spread {rows['spread']['rotation_rms_deg']:.3f}°; `slam data calibrate` shows each "
+        "geometry) but not applied (lidar.beam_step_deg declares one)"
+    ]
+    assert source.beam_step_deg is None and source.configured(config) is config
+    spread = np.deg2rad(np.linspace(-90.0, 90.0, 180))
+    np.testing.assert_allclose(source.log.scans.angles[0, :180], spread)  # scan 0: 180 readings
+
+
+def test_an_interlaced_log_is_read_with_its_measured_beam_step(tmp_path):
+    """A SICK LMS's interlaced sweeps in the synthetic room (181 whole degrees, then the 180 half
+    degrees between): loading it measures the beam geometry, finds the centred 1° step and reads
+    the log with it, as ``lidar.beam_step_deg = 1`` declares it; the configuration the run then
+    records says so."""
+    from synthetic_logs import carmen_lines, write_carmen
+
+    from slam.io import sources
+
+    path = write_carmen(tmp_path, carmen_lines(80, interlaced=True))
+    ref = sources.resolve(str(path), tmp_path, where="test")
+    config = load_config("")
+    source = sources.load(ref, config, ("scans",))
+    measured = source.beam_geometry
+    assert measured["applied"] is True and measured["best"] == "centred"
+    assert measured["short"] == 180 and measured["beam_step_deg"] == 1.0
+    rows = measured["geometries"]
+    assert rows["centred"]["pairs_fitted"] >= 50
+    for other in ("spread", "from_first", "to_last"):
+        assert rows["centred"]["rotation_rms_deg"] < rows[other]["rotation_rms_deg"]
+    assert source.notes == [] and source.beam_step_deg == 1.0
+    assert source.configured(config).lidar.beam_step_deg == 1.0
+    declared = sources.load(ref, load_config("", None, ["lidar.beam_step_deg=1.0"]), ("scans",))
+    np.testing.assert_array_equal(source.log.scans.angles, declared.log.scans.angles)
+    np.testing.assert_allclose(
+        source.log.scans.angles[1, :180], np.deg2rad(np.arange(180) - 89.5), atol=1e-12
+    )

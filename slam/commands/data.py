@@ -244,7 +244,7 @@ def run_inspect(args: argparse.Namespace) -> int:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """``slam data calibrate``: the odometry synchronisation and the mount estimate."""
-    from slam.calibration import calibrate_mount, check_beam_geometry
+    from slam.calibration import calibrate_mount, measure_beam_step
     from slam.commands.run import overrides_from
     from slam.config import load_config
     from slam.io.sources import resolve
@@ -255,7 +255,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     ref = resolve(args.name, data_dir, where="slam data calibrate LOG")
     name = ref.config_name if ref.shipped_config else ""
     config = load_config(name, args.config, overrides_from(args))
-    log = load_source(args.name, data_dir, config).log
+    source = load_source(args.name, data_dir, config)
+    config = source.configured(config)  # the beam step measured when it loaded, if applied
+    log = source.log
     scans = LogScans.from_log(log, config)
     sync = scans.odometry_sync
     try:
@@ -265,14 +267,23 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
         raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
     stated = [float(v) for v in log.scans.laser_offset]  # type: ignore[union-attr]
-    beams = check_beam_geometry(scans, config)
+    beams = source.beam_geometry  # measured as the log loaded (what a run does) ...
+    if beams is None:  # ... or not (a declared step, the measurement off): the same measurement
+        check = measure_beam_step(log, config)
+        beams = None if check is None else {**check.as_dict(), "applied": False}
+        declarable = check is not None and check.declares_step
+    else:
+        declarable = bool(beams["applied"])
     report = {
         "log": str(log.source or args.name),
         "scans": len(scans),
         "odometry_sync": None if sync is None else sync.as_dict(),
         "mount": mount.as_dict(),
         "stated_mount": {"x": stated[0], "y": stated[1], "yaw_deg": math.degrees(stated[2])},
-        "beam_geometry": None if beams is None else beams.as_dict(),
+        "beam_geometry": beams,
+        "beam_step_deg": config.lidar.beam_step_deg,
+        "beam_step_measured": source.beam_step_deg is not None,
+        "beam_step_declarable": declarable,
     }
     if args.json:
         print(json.dumps(report, indent=2))
@@ -321,6 +332,8 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
     )
     beams = report.get("beam_geometry")
     if beams:
+        from slam.calibration import BEAM_MARGIN
+
         short = beams["short"]
         lines.append(
             f"beams     scans of {short} and {short + 1} readings over {beams['fov_deg']:g}°: the "
@@ -331,11 +344,25 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
             lines.append(
                 f"          {name:10s} {row['rotation_rms_deg']:.3f}°, {row['pairs_fitted']} pairs"
             )
-        if beams["best"] == "centred":
+        step = report.get("beam_step_deg")
+        if report.get("beam_step_measured"):
+            lines.append(
+                f"          {beams['best']} fits best; `slam run` measures it when the log loads "
+                f"and reads the log with lidar.beam_step_deg = {step:g} (lidar.measure_beam_step; "
+                "docs/slam.md, the beam step of the 180-reading logs)"
+            )
+        elif step is not None:
+            lines.append(
+                f"          {beams['best']} fits best; declared: lidar.beam_step_deg = {step:g}"
+            )
+        elif report.get("beam_step_declarable"):
             lines.append(
                 f"          centred fits best: --set lidar.beam_step_deg={beams['beam_step_deg']:g} "
                 "declares it (docs/slam.md, the beam step of the 180-reading logs)"
             )
         else:
-            lines.append(f"          {beams['best']} fits best")
+            lines.append(
+                f"          {beams['best']} fits best; read spread, as the lines say (a run reads "
+                f"them centred only when that fits {BEAM_MARGIN:.0%} better than spread)"
+            )
     return lines

@@ -22,7 +22,7 @@ suffix or folder content) and a branch of :func:`load`.
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -109,9 +109,52 @@ class Source:
     """The true trajectory when the dataset has one (simulated logs)."""
     notes: list[str] = field(default_factory=list)
     """Lines for the run's ``warnings`` (where the demo is)."""
+    beam_geometry: dict | None = None
+    """What :func:`slam.calibration.measure_beam_step` measured when the log loaded (its
+    ``as_dict()`` and ``applied``: whether the log was read with the measured step)."""
+    beam_step_deg: float | None = None
+    """The ``lidar.beam_step_deg`` the log was read with when it was measured (None: the
+    configured geometry)."""
+
+    def configured(self, config: Config) -> Config:
+        """``config`` as the log was read: with the measured ``lidar.beam_step_deg`` when one was
+        applied (what the run's ``config.toml`` then records), else ``config`` itself."""
+        if self.beam_step_deg is None:
+            return config
+        from slam.config import load_config
+
+        step = f"lidar.beam_step_deg={self.beam_step_deg!r}"
+        return load_config(config.dataset, None, [step], base=config)
 
 
-def mixed_width_notes(log: Log, config: Config) -> list[str]:
+def carmen_source(log: Log, config: Config, read: Callable[[Config], Log]) -> Source:
+    """The :class:`Source` of a loaded CARMEN ``log``, its beam geometry measured when it mixes
+    scans of ``n`` and ``n − 1`` readings and ``lidar.beam_step_deg`` is unset
+    (``lidar.measure_beam_step``; :func:`slam.calibration.measure_beam_step`): where beams one
+    step apart and centred fit best, the log is read again by ``read`` with that step, else it
+    stays as read and the run's warnings say what its shorter scans were taken as."""
+    lidar = config.lidar
+    if lidar.beam_step_deg is not None or not lidar.measure_beam_step:
+        return Source(log, notes=mixed_width_notes(log, config))
+    from slam.calibration import measure_beam_step
+
+    check = measure_beam_step(log, config)
+    if check is None:
+        return Source(log)
+    measured = {**check.as_dict(), "applied": check.declares_step}
+    if not check.declares_step:
+        rows = check.rows
+        why = (
+            f"{check.best} fits best, {rows[check.best]['pairs_fitted']} pairs fitted; centred "
+            f"{rows['centred']['rotation_rms_deg']:.3f}° against spread "
+            f"{rows['spread']['rotation_rms_deg']:.3f}°"
+        )
+        return Source(log, notes=mixed_width_notes(log, config, why), beam_geometry=measured)
+    stepped = Source(log, beam_step_deg=check.beam_step_deg).configured(config)
+    return Source(read(stepped), beam_geometry=measured, beam_step_deg=check.beam_step_deg)
+
+
+def mixed_width_notes(log: Log, config: Config, measured: str = "") -> list[str]:
     """A warning for a log whose lines carry no angles and mix scans of ``n`` and ``n − 1``
     readings while ``lidar.beam_step_deg`` is unset: the shorter ones are then spread over the
     field of view like the longer ones, which one laser's interlaced sweeps (fr-clinic) do not
@@ -124,6 +167,13 @@ def mixed_width_notes(log: Log, config: Config) -> list[str]:
     short = mixed_widths(scans.readings())
     if short is None:
         return []
+    if measured:  # measured when it loaded, and no step declared by it
+        return [
+            f"{log.source or log.name}: scans of {short} and {short + 1} readings, the "
+            f"{short}-reading ones spread over the field of view like the others: their beam "
+            f"geometry was measured ({measured}; `slam data calibrate` shows each geometry) "
+            f"but not applied (lidar.beam_step_deg declares one)"
+        ]
     return [
         f"{log.source or log.name}: scans of {short} and {short + 1} readings, the {short}-reading "
         f"ones spread over the field of view like the others; if one laser takes both (a SICK "
@@ -250,22 +300,30 @@ def load(
     if ref.kind is Kind.REGISTRY:
         from slam.io import registry
 
-        log = registry.load_dataset(ref.name, ref.data_dir, need=need, config=config)
-        return Source(log, notes=mixed_width_notes(log, config))
+        def read(config: Config) -> Log:
+            return registry.load_dataset(ref.name, ref.data_dir, need=need, config=config)
+
+        log = read(config)
+        if ref.loader != "carmen":
+            return Source(log)
+        return carmen_source(log, config, read)
     if ref.kind is Kind.CARMEN:
         from slam.io.carmen import load_carmen
 
-        log = load_carmen(
-            ref.path,
-            name=ref.display_name,
-            lidar=config.lidar,
-            memory_share=config.checks.max_memory_share,
-        )
+        def read(config: Config) -> Log:
+            return load_carmen(
+                ref.path,
+                name=ref.display_name,
+                lidar=config.lidar,
+                memory_share=config.checks.max_memory_share,
+            )
+
+        log = read(config)
         absent = [s for s in need if s not in log.streams()]
         if absent:
             found = ", ".join(log.streams()) or "none"
             raise DataError(f"{ref.path}: the log has no {', '.join(absent)} stream; found {found}")
-        return Source(log, notes=mixed_width_notes(log, config))
+        return carmen_source(log, config, read)
     folder = ensure(ref, progress)
     assert ref.number is not None  # set for every ECE276A kind by resolve()
     log = load_ece276a(

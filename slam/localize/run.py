@@ -225,6 +225,7 @@ def localize(request: LocalizeRequest) -> Path:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             source = sources.load(ref, config, _needs(config), request.progress)
+            config = source.configured(config)
             doubts = check_plausibility(source.log, config)
             scans = LogScans.from_log(source.log, config)
         messages = doubts + sorted({str(w.message) for w in caught})
