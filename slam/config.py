@@ -270,14 +270,16 @@ class RbpfConfig(Validated):
     0: never."""
     probe_yaw: tuple[float, ...] = bounded((0.1, 0.2, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the best particle's predicted pose the probe tries, both signs."""
-    probe_evidence: float = bounded(0.02, ge=0.0, le=1.0)
+    probe_evidence_per_m: float = bounded(0.03, ge=0.0, le=100.0)
     """The probe runs only on a log whose odometry has been seen to err by the probe's smallest
     rotation: at an update, once the best particle's first match has turned its predicted
-    heading by at least ``min(probe_yaw)`` in at least this share of the updates before it (and
-    in at least ``probe_evidence_count`` of them). On a log whose odometry never errs that much
-    a firing can only be a misreading of an ambiguous scan (a wide hall); 0: always."""
+    heading by at least ``min(probe_yaw)`` at least this often per metre of the odometry's
+    travel so far (3 per 100 m; and in at least ``probe_evidence_count`` updates). Per metre,
+    not per update, so that a robot that scans less often, whose updates each span more
+    motion, is judged by the same events. On a log whose odometry never errs that much a firing
+    can only be a misreading of an ambiguous scan (a wide hall); 0: always."""
     probe_evidence_count: int = bounded(3, ge=0, le=100000)
-    """See ``probe_evidence``: the fewest such updates that open the probe."""
+    """See ``probe_evidence_per_m``: the fewest such updates that open the probe."""
     proposal_motion_prior: bool = False
     """Include the odometry model in the proposal's covariance (else the scan likelihood alone,
     with a unit ridge)."""

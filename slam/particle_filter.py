@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import statistics
 from dataclasses import dataclass, field
 from typing import Any
@@ -301,11 +302,13 @@ class RbpfFilter:
         self.fallbacks = 0
         self.retries = 0
         self.probes = 0
-        self.matched_updates = 0
-        """Updates whose scan has been matched (the share ``probe_evidence`` is taken of)."""
+        self.travelled = 0.0
+        """The odometry's travel (m) over the updates so far (what ``rbpf.probe_evidence_per_m``
+        is taken of)."""
         self.gross_turns = 0
         """Updates whose best first match turned the predicted heading by at least the basin
-        probe's smallest rotation (the evidence that opens the probe, ``rbpf.probe_evidence``)."""
+        probe's smallest rotation (the evidence that opens the probe,
+        ``rbpf.probe_evidence_per_m``)."""
         self.recent_best: list[float] = []
         """Best per-beam log-likelihood of the first match of the last ``rbpf.retry_window``
         updates (the basin probe's reference)."""
@@ -327,15 +330,15 @@ class RbpfFilter:
     def probe_open(self) -> bool:
         """Whether the basin probe may fire at the next update: ``rbpf.probe_gain`` is set and
         the updates so far show an odometry that errs by the probe's rotations
-        (``rbpf.probe_evidence``, ``rbpf.probe_evidence_count``)."""
+        (``rbpf.probe_evidence_per_m``, ``rbpf.probe_evidence_count``)."""
         rc = self.config.rbpf
         if rc.probe_gain <= 0:
             return False
-        if rc.probe_evidence <= 0:
+        if rc.probe_evidence_per_m <= 0:
             return True
         return (
             self.gross_turns >= rc.probe_evidence_count
-            and self.gross_turns >= rc.probe_evidence * self.matched_updates
+            and self.gross_turns >= rc.probe_evidence_per_m * self.travelled
         )
 
     def _make_room(self, k: int, poses: F64) -> None:
@@ -407,7 +410,7 @@ class RbpfFilter:
         # from unless a retry changed the matches
         probe = probe if self.retries == retries else None
         match = self._probe(predicted, hits, match, probe, probe_open)
-        self.matched_updates += 1
+        self.travelled += math.hypot(float(moved[0]), float(moved[1]))
         self.gross_turns += int(turn >= min(rc.probe_yaw))
         self.particles = match.poses
         fused = rc.proposal_mean == "fused"

@@ -161,21 +161,22 @@ def test_a_closed_probe_keeps_its_reference_and_does_not_fire():
 
 
 @pytest.mark.parametrize(
-    ("share", "count", "gross", "updates", "open_"),
+    ("per_m", "count", "gross", "travelled", "open_"),
     [
-        (0.02, 3, 0, 0, False),  # nothing seen yet
-        (0.02, 3, 2, 10, False),  # 20 % of the updates, but fewer than 3
-        (0.02, 3, 3, 100, True),  # 3 %: mit-csail's odometry shows 8-9 %
-        (0.02, 3, 3, 151, False),  # 1.99 %
-        (0.02, 3, 1, 6916, False),  # fr-clinic: 1 of 6916
-        (0.0, 3, 0, 0, True),  # 0: always open
+        (0.03, 3, 0, 0.0, False),  # nothing seen yet
+        (0.03, 3, 2, 10.0, False),  # 20 per 100 m, but fewer than 3
+        (0.03, 3, 3, 100.0, True),  # 3 per 100 m: mit-csail's odometry shows 34-39, fr079's 4-7
+        (0.03, 3, 3, 100.1, False),  # just under 3 per 100 m
+        (0.03, 3, 12, 516.5, False),  # intel: 2.3 per 100 m
+        (0.03, 3, 1, 1416.5, False),  # fr-clinic: 1 in 1.4 km
+        (0.0, 3, 0, 0.0, True),  # 0: always open
     ],
 )
-def test_the_probe_opens_on_evidence_of_gross_odometry_turns(share, count, gross, updates, open_):
+def test_the_probe_opens_on_evidence_of_gross_odometry_turns(per_m, count, gross, travelled, open_):
     f = _filter(_cast(ROOM))
-    rc = dataclasses.replace(f.config.rbpf, probe_evidence=share, probe_evidence_count=count)
+    rc = dataclasses.replace(f.config.rbpf, probe_evidence_per_m=per_m, probe_evidence_count=count)
     f.config = dataclasses.replace(f.config, rbpf=rc)
-    f.gross_turns, f.matched_updates = gross, updates
+    f.gross_turns, f.travelled = gross, travelled
     assert f.probe_open is open_
     f.config = dataclasses.replace(f.config, rbpf=dataclasses.replace(rc, probe_gain=0.0))
     assert f.probe_open is False
