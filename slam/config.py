@@ -270,6 +270,14 @@ class RbpfConfig(Validated):
     0: never."""
     probe_yaw: tuple[float, ...] = bounded((0.1, 0.2, 0.3), min_length=1, gt=0.0, le=math.pi)
     """Rotations (rad) of the best particle's predicted pose the probe tries, both signs."""
+    probe_shift: tuple[float, ...] = bounded((0.3, 0.6), gt=0.0, le=10.0)
+    """Shifts (m) along its heading of the best particle's predicted pose that the translational
+    basin probe tries, both signs, at an update whose best match falls short of the recent ones
+    by more than ``probe_gain`` per beam: the rotation probe's test and remedy for an odometry
+    that gets the distance between two updates wrong by more than the matcher's basin (fr079's
+    reversals at a third of its scan rate: 0.4–0.6 m). Open on the same evidence rule
+    (``probe_evidence_per_m``, ``probe_evidence_count``), counted over the updates whose best
+    first match moved the predicted position by at least ``min(probe_shift)``; empty: never."""
     probe_evidence_per_m: float = bounded(0.03, ge=0.0, le=100.0)
     """The probe runs only on a log whose odometry has been seen to err by the probe's smallest
     rotation: at an update, once the best particle's first match has turned its predicted

@@ -309,6 +309,11 @@ class RbpfFilter:
         """Updates whose best first match turned the predicted heading by at least the basin
         probe's smallest rotation (the evidence that opens the probe,
         ``rbpf.probe_evidence_per_m``)."""
+        self.gross_shifts = 0
+        """Updates whose best first match moved the predicted position by at least the
+        translational probe's smallest shift (the evidence that opens it)."""
+        self.shift_probes = 0
+        """Firings of the translational probe."""
         self.recent_best: list[float] = []
         """Best per-beam log-likelihood of the first match of the last ``rbpf.retry_window``
         updates (the basin probe's reference)."""
@@ -331,14 +336,26 @@ class RbpfFilter:
         """Whether the basin probe may fire at the next update: ``rbpf.probe_gain`` is set and
         the updates so far show an odometry that errs by the probe's rotations
         (``rbpf.probe_evidence_per_m``, ``rbpf.probe_evidence_count``)."""
+        return self._evidence(self.gross_turns)
+
+    @property
+    def shift_probe_open(self) -> bool:
+        """Whether the translational probe may fire at the next update: shifts to try
+        (``rbpf.probe_shift``) and the same rule as :attr:`probe_open` over the updates whose
+        first match moved the predicted position by the smallest of them."""
+        return bool(self.config.rbpf.probe_shift) and self._evidence(self.gross_shifts)
+
+    def _evidence(self, events: int) -> bool:
+        """Whether ``events`` gross odometry errors so far open a probe: ``rbpf.probe_gain``
+        set, at least ``rbpf.probe_evidence_count`` of them and ``rbpf.probe_evidence_per_m``
+        per metre of the odometry's travel (0: always)."""
         rc = self.config.rbpf
         if rc.probe_gain <= 0:
             return False
         if rc.probe_evidence_per_m <= 0:
             return True
         return (
-            self.gross_turns >= rc.probe_evidence_count
-            and self.gross_turns >= rc.probe_evidence_per_m * self.travelled
+            events >= rc.probe_evidence_count and events >= rc.probe_evidence_per_m * self.travelled
         )
 
     def _make_room(self, k: int, poses: F64) -> None:
@@ -396,7 +413,7 @@ class RbpfFilter:
         then draw each particle around its match (:func:`sample_around`)."""
         rc = self.config.rbpf
         self._make_room(k, predicted)
-        probe_open = self.probe_open
+        probe_open, shift_open = self.probe_open, self.shift_probe_open
         match = self.maps.match(
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
             rc.min_inliers, rc.coarse_stride, self.probe_yaws if probe_open else None,
@@ -404,14 +421,19 @@ class RbpfFilter:
         probe, match.probe = match.probe, None
         b = int(np.argmax(match.loglik))
         turn = abs(float(wrap_angle(match.poses[b, 2] - predicted[b, 2])))
+        shift = float(np.hypot(*(match.poses[b, :2] - predicted[b, :2])))
         retries = self.retries
         match = self._retry(predicted, hits, match)
         # the kernel probed from the best particle of the first match: still the one to probe
         # from unless a retry changed the matches
         probe = probe if self.retries == retries else None
+        typical = self._typical()  # the recent updates' fit, before this one joins them
         match = self._probe(predicted, hits, match, probe, probe_open)
+        if shift_open:
+            match = self._shift_probe(predicted, hits, match, typical)
         self.travelled += math.hypot(float(moved[0]), float(moved[1]))
         self.gross_turns += int(turn >= min(rc.probe_yaw))
+        self.gross_shifts += int(bool(rc.probe_shift) and shift >= min(rc.probe_shift, default=0))
         self.particles = match.poses
         fused = rc.proposal_mean == "fused"
         motion_cov = None
@@ -499,13 +521,64 @@ class RbpfFilter:
             starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
             starts[:, 2] = wrap_angle(starts[:, 2] + yaws)
             probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+        j = self._winner(probe, beams, first, typical)
+        if j is None:
+            return match
+        self.probes += 1
+        self._keep_better(match, predicted, float(yaws[j]), hits)
+        return match
+
+    def _winner(self, probe: MatchResult, beams: int, first: float, typical: float) -> int | None:
+        """The probe's start that fires, or None: the best-scoring start on enough known cells,
+        when its per-beam log-likelihood is ``rbpf.probe_gain`` above the first match's
+        (``first``) and closes at least half of its shortfall from ``typical``."""
+        rc = self.config.rbpf
         score = np.where(probe.inliers >= rc.min_inliers, probe.loglik, -np.inf)
         j = int(np.argmax(score))
         gain = float(score[j]) / beams - first
         if gain < rc.probe_gain or gain < 0.5 * (typical - first):
+            return None
+        return j
+
+    def _typical(self) -> float | None:
+        """The median best per-beam log-likelihood of the last ``rbpf.retry_window`` first
+        matches (the probes' reference), or None before five updates."""
+        recent = self.recent_best
+        return statistics.median(recent) if len(recent) >= 5 else None
+
+    def _shift_probe(
+        self, predicted: F64, hits: tuple[F64, F64], match: MatchResult, typical: float | None
+    ) -> MatchResult:
+        """``match``, or, when the best particle's match falls short of ``typical`` (the recent
+        updates' per-beam log-likelihood) by more than ``rbpf.probe_gain`` and a start shifted
+        along its heading explains the scan better, the best per particle of it and of the
+        matches from the predicted poses shifted that far along their own headings.
+
+        The rotation probe's test (:meth:`_probe`) for the distance instead of the heading: the
+        best particle's predicted pose is matched again from starts shifted by
+        ±``rbpf.probe_shift``; one of them fires when it scores ``probe_gain`` per beam above
+        the match and closes at least half of the shortfall. Only a match that falls short is
+        probed, so the extra matches are made where they can matter. No random draw."""
+        rc = self.config.rbpf
+        beams = max(hits[0].size, 1)
+        b = int(np.argmax(match.loglik))
+        first = float(match.loglik[b]) / beams
+        if typical is None or first >= typical - rc.probe_gain:
             return match
-        self.probes += 1
-        self._keep_better(match, predicted, float(yaws[j]), hits)
+        th = float(predicted[b, 2])
+        shifts = np.concatenate([np.asarray(rc.probe_shift), -np.asarray(rc.probe_shift)])
+        starts = np.repeat(predicted[b : b + 1], shifts.size, axis=0)
+        starts[:, 0] += shifts * math.cos(th)
+        starts[:, 1] += shifts * math.sin(th)
+        probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+        j = self._winner(probe, beams, first, typical)
+        if j is None:
+            return match
+        self.shift_probes += 1
+        start = predicted.copy()
+        start[:, 0] += shifts[j] * np.cos(predicted[:, 2])
+        start[:, 1] += shifts[j] * np.sin(predicted[:, 2])
+        self._keep_better_from(match, start, hits)
         return match
 
     def _keep_better(
@@ -513,9 +586,14 @@ class RbpfFilter:
     ) -> None:
         """Match every particle again from its predicted pose turned by ``yaw`` and keep, in
         ``match``, the new match where it scores higher on enough known cells."""
-        rc = self.config.rbpf
         start = predicted.copy()
         start[:, 2] = wrap_angle(start[:, 2] + yaw)
+        self._keep_better_from(match, start, hits)
+
+    def _keep_better_from(self, match: MatchResult, start: F64, hits: tuple[F64, F64]) -> None:
+        """Match every particle again from its pose in ``start`` and keep, in ``match``, the
+        new match where it scores higher on enough known cells."""
+        rc = self.config.rbpf
         alt = self.maps.match(
             start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
             rc.coarse_stride,
@@ -581,6 +659,8 @@ class RbpfFilter:
                 "match_retries": self.retries,
                 "basin_probes": self.probes,
                 "gross_turns": self.gross_turns,
+                "shift_probes": self.shift_probes,
+                "gross_shifts": self.gross_shifts,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
             },

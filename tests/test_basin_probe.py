@@ -180,3 +180,60 @@ def test_the_probe_opens_on_evidence_of_gross_odometry_turns(per_m, count, gross
     assert f.probe_open is open_
     f.config = dataclasses.replace(f.config, rbpf=dataclasses.replace(rc, probe_gain=0.0))
     assert f.probe_open is False
+
+
+SHIFTED = np.array([[0.5, 0.0, 0.0], [0.53, 0.02, 0.01], [0.48, -0.02, -0.01]])
+"""Predicted poses 0.5 m ahead of the true position along the heading, as after an odometry
+that counted forward travel while the robot backed up (fr079's reversals)."""
+
+
+def test_the_shift_probe_recovers_a_distance_beyond_the_basin():
+    hits = _cast(ROOM)
+    f = _filter(hits)
+    f.shift_probes = 0
+    first = _match(f, SHIFTED, hits)
+    assert (first.poses[:, 0] > 0.4).all(), "the first match must stay in the wrong basin"
+    assert (first.loglik / hits[0].size < -1.5).all()
+    got = f._shift_probe(SHIFTED, hits, first, -0.05)
+    assert f.shift_probes == 1
+    np.testing.assert_allclose(got.poses[:, :2], 0.0, atol=0.05)
+    np.testing.assert_allclose(got.poses[:, 2], 0.0, atol=0.01)
+    assert (got.loglik / hits[0].size > -1.0).all()
+
+
+def test_the_shift_probe_leaves_good_matches_and_new_space_alone():
+    """No firing without a shortfall from the recent updates (a good match, or no reference
+    yet), nor when no shifted start explains the scan (another room)."""
+    hits = _cast(ROOM)
+    near = np.array([[0.03, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.0]])
+    other = _cast(ROOM[:, ::-1] * np.array([1.6, 0.7]))
+    for predicted, scan, typical in ((near, hits, -0.05), (SHIFTED, hits, None),
+                                     (SHIFTED, other, -0.05)):  # fmt: skip
+        f = _filter(hits)
+        f.shift_probes = 0
+        first = _match(f, predicted, scan)
+        kept = first.poses.copy()
+        got = f._shift_probe(predicted, scan, first, typical)
+        assert f.shift_probes == 0
+        np.testing.assert_array_equal(got.poses, kept)
+
+
+@pytest.mark.parametrize(
+    ("shift", "shifts", "travelled", "open_"),
+    [
+        ((0.3, 0.6), 3, 100.0, True),  # fr079: 6.4 first matches of 0.3 m or more per 100 m
+        ((0.3, 0.6), 2, 10.0, False),  # fewer than 3
+        ((0.3, 0.6), 20, 1402.0, False),  # fr-clinic: 1.4 per 100 m
+        ((), 50, 100.0, False),  # no shifts: never
+    ],
+)
+def test_the_shift_probe_opens_on_evidence_of_gross_odometry_shifts(
+    shift, shifts, travelled, open_
+):
+    f = _filter(_cast(ROOM))
+    f.config = dataclasses.replace(
+        f.config, rbpf=dataclasses.replace(f.config.rbpf, probe_shift=shift)
+    )
+    f.gross_turns, f.gross_shifts, f.travelled = 0, shifts, travelled
+    assert f.shift_probe_open is open_
+    assert f.probe_open is False  # the rotation probe counts its own evidence
