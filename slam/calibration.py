@@ -511,7 +511,7 @@ def measure_beam_step(log, config: Config) -> BeamGeometryCheck | None:
     if log.scans is None or mixed_widths(log.scans.readings()) is None:
         return None
     whole = ["filter.every=1", "filter.max_scans=0", 'robot.odometry_sync="scan"']
-    measuring = load_config(config.dataset, None, whole, base=config)
+    measuring = load_config("", None, whole, base=config)  # "": the shipped file is in base
     with warnings.catch_warnings():  # the run's own selection reports sparse scans
         warnings.simplefilter("ignore")
         scans = LogScans.from_log(log, measuring)

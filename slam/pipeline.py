@@ -275,7 +275,8 @@ def run_dataset(
     folder = resolve_data_dir(None if data_dir is None else Path(data_dir))
     ref = sources.resolve(name, folder, where="slam.run")
     base = config if config is not None else load_config(ref.config_name)
-    config = load_config(base.dataset, None, [*settings, *overrides], base=base)
+    # "": the dataset's file is in base already (re-reading it would undo the caller's config)
+    config = load_config("", None, [*settings, *overrides], base=base)
     if out is not None:
         request = RunRequest(name, config, folder, out=Path(out), force=force, progress=progress)
         return execute(request)

@@ -567,3 +567,14 @@ def test_an_interlaced_log_is_read_with_its_measured_beam_step(tmp_path):
     np.testing.assert_allclose(
         source.log.scans.angles[1, :180], np.deg2rad(np.arange(180) - 89.5), atol=1e-12
     )
+
+
+def test_a_measured_beam_step_keeps_the_users_settings():
+    """The configuration a measured beam step is added to keeps every setting the user gave,
+    even one the dataset's shipped file also sets."""
+    from slam.io.sources import Source
+
+    config = load_config("fr-clinic", None, ["lidar.range_max=8", "filter.seed=3"])
+    got = Source(log=None, beam_step_deg=1.0).configured(config)  # type: ignore[arg-type]
+    assert got.lidar.range_max == 8.0 and got.filter.seed == 3
+    assert got.lidar.beam_step_deg == 1.0 and got.dataset == "fr-clinic"

@@ -358,3 +358,16 @@ def test_registration_rounds_measure_the_odometry_once(small, monkeypatch):
     first = replay(log, one, 200, stages=stages)
     again = replay(log, one, 150, stages=stages)
     assert len(calls) == 4 and len(first.poses) == 200 and len(again.poses) == 150
+
+
+def test_slam_run_keeps_a_given_config_over_the_datasets_file(carmen_dir, tmp_path):
+    """``slam.run(name, config)`` with a key the dataset's shipped file also sets (fr-clinic's
+    ``lidar.range_max``): the run uses the given value, and the beam step measured as the log
+    loads is added to it, not in place of it."""
+    config = slam.load_config("fr-clinic", None, ["lidar.range_max=8"])
+    out = tmp_path / "run"
+    slam.run("fr-clinic", config, max_scans=20, data_dir=carmen_dir.parent, out=out)
+    used = slam.load_config("", out / "config.toml")
+    assert used.lidar.range_max == 8.0
+    assert used.lidar.beam_step_deg == 1.0  # measured: configs/fr-clinic.toml declares none
+    assert used.dataset == "fr-clinic"

@@ -124,7 +124,7 @@ class Source:
         from slam.config import load_config
 
         step = f"lidar.beam_step_deg={self.beam_step_deg!r}"
-        return load_config(config.dataset, None, [step], base=config)
+        return load_config("", None, [step], base=config)  # "": keep the user's settings
 
 
 def carmen_source(log: Log, config: Config, read: Callable[[Config], Log]) -> Source:
