@@ -238,6 +238,91 @@ def test_robotlaser1_carries_its_geometry(tmp_path):
     assert log.meta["robotlaser_scans"] == 2
 
 
+def rawlaser(ranges, remissions=(), start=-1.0, res=0.5, max_range=40.0, t=1.0) -> str:
+    fields = ["RAWLASER1", "0", str(start), str(res * (len(ranges) - 1)), str(res)]
+    fields += [str(max_range), "0.01", "0", str(len(ranges)), *map(str, ranges)]
+    fields += [str(len(remissions)), *map(str, remissions)]
+    return " ".join([*fields, f"{t:.6f}", "host", f"{t:.6f}"])
+
+
+def test_rawlaser1_scans_are_placed_by_the_odom_stream(tmp_path):
+    """A log of raw scans (RAWLASER1, no pose) and ODOM messages: the scans keep their own
+    geometry and range limit, their odometry is the stream at their times, and the laser sits
+    on the odometry point unless the configuration says where."""
+    from slam.config import RobotConfig
+    from slam.odometry import scan_odometry
+
+    lines = [odom_line(0.0, 0.0, 0.0, 0.0), odom_line(1.0, 0.5, 0.2, 2.0)]
+    lines += [rawlaser([1.0, 2.0, 3.0, 45.0], remissions=(0.5, 0.6), t=0.5)]
+    lines += [rawlaser([2.0, 2.5, 3.5, 4.5], t=1.0)]
+    log = load_carmen(write(tmp_path, lines))
+    scans = log.scans
+    np.testing.assert_allclose(scans.angles, [-1.0, -0.5, 0.0, 0.5])
+    np.testing.assert_array_equal(scans.ranges[0], np.float32([1, 2, 3, 45]))
+    np.testing.assert_array_equal(scans.time, [0.5, 1.0])
+    assert scans.odometry is None and scans.laser_pose is None
+    np.testing.assert_allclose(
+        scan_odometry(log, RobotConfig()), [[0.25, 0.125, 0.05], [0.5, 0.25, 0.1]]
+    )
+    np.testing.assert_array_equal(scans.laser_offset, [0.0, 0.0, 0.0])
+    assert log.meta["laser_offset_source"] == "not stated"
+    assert scans.no_return == 40.0  # the declared max_range
+    assert log.meta["rawlaser_scans"] == 2 and log.meta["skipped_lines"] == 0
+    mounted = LidarConfig(use_log_laser_pose=False, x=0.2, y=0.0, yaw=0.0)
+    np.testing.assert_array_equal(
+        load_carmen(write(tmp_path, lines), lidar=mounted).scans.laser_offset, [0.2, 0.0, 0.0]
+    )
+
+
+def test_rawlaser1_beside_flaser_is_skipped(tmp_path):
+    """A logger that writes a scan as FLASER and again as RAWLASER1: the FLASER lines are the
+    scans, the raw ones are counted as skipped."""
+    lines = [flaser([1.0, 2.0, 3.0], t=1.0), rawlaser([1.0, 2.0, 3.0], t=1.0)]
+    log = load_carmen(write(tmp_path, lines))
+    assert len(log.scans) == 1 and log.scans.odometry is not None
+    assert log.meta["skipped"] == {"RAWLASER1": 1} and log.meta["rawlaser_scans"] == 0
+
+
+def test_rawlaser1_without_odom_is_one_error(tmp_path):
+    path = write(tmp_path, [rawlaser([1.0, 2.0], t=1.0), rawlaser([1.0, 2.0], t=2.0)])
+    with pytest.raises(DataError) as err:
+        load_carmen(path)
+    assert str(err.value) == (
+        f"{path}: RAWLASER1 lines carry no pose and the log has no ODOM lines to place them with "
+        "(expected ODOM, FLASER or ROBOTLASER1 lines; found 2 RAWLASER1 lines only)"
+    )
+    bad = write(tmp_path, [odom_line(0, 0, 0, 0.0), rawlaser([1.0, 2.0], t=1.0) + " 7"], "bad.clf")
+    with pytest.raises(
+        DataError, match=r"bad\.clf:2: RAWLASER1 line: expected 15 fields, found 16"
+    ):
+        load_carmen(bad)
+
+
+def test_slam_runs_on_a_log_of_raw_scans(tmp_path):
+    """The synthetic room as RAWLASER1 lines and an ODOM stream: ``slam run`` tracks the path."""
+    from synthetic_logs import path as room_path
+    from synthetic_logs import ray_cast
+
+    from slam.cli import main
+
+    poses = room_path(120)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    lines = []
+    for k, pose in enumerate(poses):
+        t = 100.0 + 0.1 * k
+        lines.append(odom_line(*pose, t))
+        r = [f"{v:.3f}" for v in ray_cast(pose, angles)]
+        lines.append(rawlaser(r, start=-np.pi / 2, res=np.pi / 180, max_range=30.0, t=t))
+    log = write(tmp_path, lines, "raw.clf")
+    out = tmp_path / "run"
+    assert main(["run", str(log), "--out", str(out), "--no-texture", "--no-record", "--quiet"]) == 0
+    from slam.io.tum import read_tum
+
+    got = read_tum(out / "trajectory.tum")
+    assert len(got) == 120
+    assert np.abs(got.poses[:, :2] - poses[:, :2]).max() < 0.05
+
+
 # --- malformed input: each error names the file and line ------------------------------------------
 
 GOOD = flaser([1.0, 2.0, 3.0], t=1.0)

@@ -17,7 +17,15 @@ Messages
   n_remissions rem_1.. laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
   forward_safety_dist side_safety_dist turn_axis ipc_timestamp hostname logger_timestamp``
   → :attr:`Log.scans`, beam ``k`` at ``start_angle + k · angular_res``.
-* Any other message type (``PARAM``, ``SYNC``, ``RAWLASER1``, ...) is counted and skipped:
+* ``RAWLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
+  n_remissions rem_1.. ipc_timestamp hostname logger_timestamp`` → :attr:`Log.scans`, read only
+  when the log has no FLASER or ROBOTLASER1 line (a logger that writes both writes the same
+  scans twice): beam ``k`` at ``start_angle + k · angular_res``; the line carries no pose, so
+  the scans' odometry is the ``ODOM`` stream interpolated at their times (a log of raw scans
+  needs ``ODOM`` lines) and the laser sits on the odometry point (the log states no mount;
+  with ``lidar.use_log_laser_pose = false``, ``lidar.x``, ``lidar.y``, ``lidar.yaw``;
+  ``slam data calibrate`` measures it).
+* Any other message type (``PARAM``, ``SYNC``, ``RAWLASER2``, ...) is counted and skipped:
   ``log.meta["skipped"]`` maps type to count, ``log.meta["skipped_lines"]`` is the total.
 
 Scans stay in FILE order: the odometry written in the scan lines follows file order, not
@@ -136,6 +144,9 @@ _ROBOTLASER_TAIL = (
 )
 
 
+_RAWLASER_TAIL = ("ipc_timestamp", "hostname", "logger_timestamp")
+
+
 @dataclass(frozen=True)
 class _Lines:
     """Lines of one message layout: their text and 1-based line numbers in the file."""
@@ -153,11 +164,13 @@ class _ScanGroup:
     ranges: F64
     angles: F64
     """``(n,)`` shared by the group or ``(L, n)`` per scan (ROBOTLASER1)."""
-    laser_pose: F64
-    odometry: F64
+    laser_pose: F64 | None
+    """``(L, 3)`` laser pose in the odometry frame (None: RAWLASER1 lines carry none)."""
+    odometry: F64 | None
+    """``(L, 3)`` robot odometry pose (None: RAWLASER1)."""
     time: F64
     max_range: F64 | None = None
-    """ROBOTLASER1: the range limit each line declares."""
+    """ROBOTLASER1, RAWLASER1: the range limit each line declares."""
 
 
 def load_carmen(
@@ -188,12 +201,23 @@ def load_carmen(
     text = _read_text(path)
     lines = text.split("\n")
 
-    comments, skipped, odom, flaser, robotlaser = _group_lines(path, lines)
+    comments, skipped, odom, flaser, robotlaser, rawlaser = _group_lines(path, lines)
     groups = [_parse_flaser(path, n, g, lidar) for n, g in flaser.items()]
     groups += [_parse_robotlaser(path, n, nrem, g) for (n, nrem), g in robotlaser.items()]
+    raw_scans = sum(len(g.lineno) for g in rawlaser.values())
+    if groups and raw_scans:  # the same laser's scans again, without their poses
+        skipped["RAWLASER1"] = raw_scans
+    elif rawlaser:
+        if not odom.text:
+            raise DataError(
+                f"{path}: RAWLASER1 lines carry no pose and the log has no ODOM lines to place "
+                f"them with (expected ODOM, FLASER or ROBOTLASER1 lines; found {raw_scans} "
+                "RAWLASER1 lines only)"
+            )
+        groups = [_parse_rawlaser(path, n, nrem, g) for (n, nrem), g in rawlaser.items()]
     if not groups:
         raise DataError(
-            f"{path}: no scans (expected FLASER or ROBOTLASER1 lines; found "
+            f"{path}: no scans (expected FLASER, ROBOTLASER1 or RAWLASER1 lines; found "
             f"{len(odom.text)} ODOM, {len(comments)} comment and "
             f"{sum(skipped.values())} other lines)"
         )
@@ -205,6 +229,7 @@ def load_carmen(
         "comment_lines": len(comments),
         "flaser_scans": sum(len(g.lineno) for g in flaser.values()),
         "robotlaser_scans": sum(len(g.lineno) for g in robotlaser.values()),
+        "rawlaser_scans": raw_scans if not flaser and not robotlaser else 0,
         "odom_messages": len(odom.text),
         "skipped": dict(sorted(skipped.items())),
         "skipped_lines": sum(skipped.values()),
@@ -222,16 +247,22 @@ def load_carmen(
     )
 
 
+Layouts = dict[tuple[int, int], _Lines]
+"""ROBOTLASER1 or RAWLASER1 lines by ``(num_readings, num_remissions)``."""
+
+
 def _group_lines(
     path: Path, lines: list[str]
-) -> tuple[list[str], dict[str, int], _Lines, dict[int, _Lines], dict[tuple[int, int], _Lines]]:
+) -> tuple[list[str], dict[str, int], _Lines, dict[int, _Lines], Layouts, Layouts]:
     """Sort a log's lines by message: ``(comments, skipped counts per type, ODOM lines, FLASER
-    lines per beam count, ROBOTLASER1 lines per layout)``, each line kept with its number."""
+    lines per beam count, ROBOTLASER1 lines per layout, RAWLASER1 lines per layout)``, each
+    line kept with its number."""
     comments: list[str] = []
     skipped: dict[str, int] = {}
     odom = _Lines([], [])
     flaser: dict[int, _Lines] = {}
-    robotlaser: dict[tuple[int, int], _Lines] = {}
+    robotlaser: Layouts = {}
+    rawlaser: Layouts = {}
     for lineno, raw in enumerate(lines, start=1):
         line = raw.strip()
         if not line:
@@ -247,8 +278,11 @@ def _group_lines(
         elif kind == "ODOM":
             group = odom
         elif kind == "ROBOTLASER1":
-            key = _robotlaser_layout(path, lineno, line)
+            key = _laser_layout(path, lineno, line, kind)
             group = robotlaser.setdefault(key, _Lines([], []))
+        elif kind == "RAWLASER1":
+            key = _laser_layout(path, lineno, line, kind)
+            group = rawlaser.setdefault(key, _Lines([], []))
         else:
             if not _MESSAGE_TYPE.match(kind):
                 raise DataError(
@@ -259,7 +293,7 @@ def _group_lines(
             continue
         group.text.append(line)
         group.lineno.append(lineno)
-    return comments, skipped, odom, flaser, robotlaser
+    return comments, skipped, odom, flaser, robotlaser, rawlaser
 
 
 def _stem(path: Path) -> str:
@@ -310,13 +344,14 @@ def _beam_count(path: Path, lineno: int, tokens: Sequence[str], index: int, kind
     return n
 
 
-def _robotlaser_layout(path: Path, lineno: int, line: str) -> tuple[int, int]:
-    """``(num_readings, num_remissions)`` of a ROBOTLASER1 line: what fixes its layout."""
+def _laser_layout(path: Path, lineno: int, line: str, kind: str) -> tuple[int, int]:
+    """``(num_readings, num_remissions)`` of a ROBOTLASER1 or RAWLASER1 line (``kind``): what
+    fixes its layout (both start with the same nine fields, readings and remissions)."""
     tokens = line.split()
-    n = _beam_count(path, lineno, tokens, 8, "ROBOTLASER1")
+    n = _beam_count(path, lineno, tokens, 8, kind)
     if len(tokens) <= 9 + n:
         raise DataError(
-            f"{path}:{lineno}: ROBOTLASER1 declares {n} readings but the line ends after "
+            f"{path}:{lineno}: {kind} declares {n} readings but the line ends after "
             f"{len(tokens)} fields, before its remission count"
         )
     token = tokens[9 + n]
@@ -324,12 +359,12 @@ def _robotlaser_layout(path: Path, lineno: int, line: str) -> tuple[int, int]:
         nrem = int(token)
     except ValueError:
         raise DataError(
-            f"{path}:{lineno}: ROBOTLASER1 remission count (field {10 + n}): expected an "
+            f"{path}:{lineno}: {kind} remission count (field {10 + n}): expected an "
             f"integer, found {_clip(token)!r}"
         ) from None
     if not 0 <= nrem <= MAX_BEAMS:
         raise DataError(
-            f"{path}:{lineno}: ROBOTLASER1 remission count: expected 0..{MAX_BEAMS}, found {nrem}"
+            f"{path}:{lineno}: {kind} remission count: expected 0..{MAX_BEAMS}, found {nrem}"
         )
     return n, nrem
 
@@ -458,7 +493,9 @@ def _parse_flaser(path: Path, n: int, lines: _Lines, lidar: LidarConfig) -> _Sca
     )
 
 
-def _robotlaser_field(n: int, nrem: int) -> Callable[[int], str]:
+def _robotlaser_field(
+    n: int, nrem: int, tail: tuple[str, ...] = _ROBOTLASER_TAIL
+) -> Callable[[int], str]:
     def name(col: int) -> str:
         if col < 9:
             return _ROBOTLASER_HEAD[col]
@@ -468,9 +505,35 @@ def _robotlaser_field(n: int, nrem: int) -> Callable[[int], str]:
             return "num_remissions"
         if col < 10 + n + nrem:
             return f"remission {col - 9 - n}"
-        return _ROBOTLASER_TAIL[col - 10 - n - nrem]
+        return tail[col - 10 - n - nrem]
 
     return name
+
+
+def _parse_rawlaser(path: Path, n: int, nrem: int, lines: _Lines) -> _ScanGroup:
+    """RAWLASER1 lines of one layout: ROBOTLASER1's head, readings and remissions, then only
+    ``ipc_timestamp hostname logger_timestamp`` (no pose)."""
+    base = 10 + n + nrem
+    values = _parse_table(
+        path,
+        "RAWLASER1",
+        lines,
+        base + 3,
+        skip=(0, base + 1),
+        field_name=_robotlaser_field(n, nrem, _RAWLASER_TAIL),
+        finite=lambda col: col < 9 or col == 9 + n or col >= base,
+    )
+    # values column c-1 holds file column c for c <= base; the logger stamp is last.
+    start, res, max_range = values[:, 1], values[:, 3], values[:, 4]
+    return _ScanGroup(
+        order=np.asarray(lines.lineno, dtype=np.int64),
+        ranges=values[:, 8 : 8 + n],
+        angles=start[:, None] + res[:, None] * np.arange(n)[None, :],
+        laser_pose=None,
+        odometry=None,
+        time=values[:, base - 1],
+        max_range=max_range,
+    )
 
 
 def _parse_robotlaser(path: Path, n: int, nrem: int, lines: _Lines) -> _ScanGroup:
@@ -575,6 +638,7 @@ def _assemble_scans(
         setting="checks.max_memory_share",
     )
 
+    posed = all(g.odometry is not None for g in groups)  # RAWLASER1 lines carry no pose
     time = np.empty(total)
     laser_pose = np.empty((total, 3))
     odometry = np.empty((total, 3))
@@ -588,8 +652,9 @@ def _assemble_scans(
         start += g.order.shape[0]
         n = g.ranges.shape[1]
         time[rows] = g.time
-        laser_pose[rows] = g.laser_pose
-        odometry[rows] = g.odometry
+        if posed:
+            laser_pose[rows] = g.laser_pose
+            odometry[rows] = g.odometry
         ranges[rows, :n] = g.ranges
         padded[rows, n:] = True
         if shared is None:
@@ -597,9 +662,12 @@ def _assemble_scans(
     stored, invalid_beams = valid_ranges(ranges, range_min)
     invalid_beams -= int(np.count_nonzero(padded))  # padding is not a reading
 
-    if lidar.use_log_laser_pose:
+    if lidar.use_log_laser_pose and posed:
         offset = _median_offset(odometry, laser_pose)
         source = "log"
+    elif lidar.use_log_laser_pose:  # RAWLASER1: the log states no mount; at the odometry point
+        offset = np.zeros(3)
+        source = "not stated"
     else:
         offset = np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64)
         source = "config"
@@ -611,8 +679,8 @@ def _assemble_scans(
         range_max=float(range_max),
         no_return=float(no_return),
         laser_offset=offset,
-        odometry=odometry,
-        laser_pose=laser_pose,
+        odometry=odometry if posed else None,
+        laser_pose=laser_pose if posed else None,
         invalid_beams=invalid_beams,
         lines=np.sort(order),
     )
