@@ -183,6 +183,10 @@ class OdometrySync:
     """The disagreement of the stream at that lag (degrees)."""
     pairs: int
     """Pairs of consecutive scans compared (those whose match fitted)."""
+    written: bool = True
+    """Whether the log writes a pose with each scan (CARMEN); else (a bag, raw CARMEN scans)
+    the first candidate, ``"scan"``, is the stream at the scans' own times, and a choice of it
+    is reported as ``"stream"`` at lag 0."""
 
     def as_dict(self) -> dict[str, float | int | str]:
         """The choice as plain values (for ``metrics.json``)."""

@@ -484,26 +484,31 @@ class LogScans:
         return selected.synchronised(config)
 
     def synchronised(self, config: Config) -> LogScans:
-        """These scans with the odometry ``robot.odometry_sync`` picks when the log gives both
-        a pose with each scan and a stream of odometry messages (:mod:`slam.calibration`);
-        unchanged when it gives one of them, or with ``"scan"``."""
+        """These scans with the odometry ``robot.odometry_sync`` picks when the log has a stream
+        of odometry messages (:mod:`slam.calibration`): against the pose written with each
+        scan (CARMEN), or, where the scans carry none (a bag, raw CARMEN scans), against the
+        stream at the scans' own times, which :func:`slam.odometry.scan_odometry` gave and
+        which stays unless the stream at a lag agrees with the laser clearly better.
+        Unchanged with ``"scan"`` or without a stream."""
         from slam.calibration import OdometrySync, stream_at, synchronise_odometry
 
         mode, stream = config.robot.odometry_sync, self.log.odometry
         if mode == "scan" or stream is None or len(stream.time) < 2 or len(self) < 2:
             return self
-        if self.log.scans.odometry is None:  # type: ignore[union-attr]
-            return self  # the stream is the only odometry: scan_odometry interpolated it
+        written = self.log.scans.odometry is not None  # type: ignore[union-attr]
         if mode == "stream":
             lag = config.robot.odometry_lag_s
             poses = stream_at(stream.time, stream.poses, self.times + lag)
             nan = float("nan")
-            sync = OdometrySync("stream", lag, nan, nan, lag, nan, 0)
+            sync = OdometrySync("stream", lag, nan, nan, lag, nan, 0, written)
         else:
             poses, sync = synchronise_odometry(
                 lambda k: self.scan(k).hits(), self.times, self.odometry,
                 (stream.time, stream.poses), config,
             )  # fmt: skip
+            sync = replace(sync, written=written)
+            if not written and sync.source == "scan":  # the stream at the scans' times, kept
+                return replace(self, odometry_sync=replace(sync, source="stream"))
         return replace(self, odometry=np.ascontiguousarray(poses), odometry_sync=sync)
 
     def __len__(self) -> int:

@@ -349,3 +349,33 @@ def test_calibrate_says_the_run_measures_the_beam_step(tmp_path, capsys):
     off = ["--set", "lidar.measure_beam_step=false"]
     assert main(["data", "calibrate", str(log), *off]) == 0
     assert "centred fits best: --set lidar.beam_step_deg=1 declares it" in capsys.readouterr().out
+
+
+def test_a_stream_only_log_reads_its_odometry_at_the_lag_the_laser_agrees_with(tmp_path):
+    """Raw scans (RAWLASER1, no pose of their own) and an odometry stream whose messages carry
+    the pose of 0.1 s before their stamp: ``slam run`` reads the stream 0.1 s after each scan
+    (``metrics.json``: ``written`` false), ``robot.odometry_sync = "scan"`` keeps the stream
+    at the scans' times."""
+    from slam.cli import main
+
+    times = 100.0 + np.arange(300) * PERIOD
+    odom_times = 100.0 + np.arange(-5, 1000) * 0.03
+    lines = [odom_line(truth(np.array([u - 100.0 - 0.1]))[0], u) for u in odom_times]
+    for t in times:
+        ranges = ray_cast(truth(np.array([t - 100.0]))[0], ANGLES)
+        nums = " ".join(f"{r:.3f}" for r in np.where(np.isfinite(ranges), ranges, 81.91))
+        step = float(ANGLES[1] - ANGLES[0])
+        head = f"RAWLASER1 0 {ANGLES[0]} {step * (ANGLES.size - 1)} {step} 81.9 0.01 0"
+        lines.append(f"{head} {ANGLES.size} {nums} 0 {t:.6f} host {t:.6f}")
+    lines.sort(key=lambda line: float(line.split()[-1]))  # the log in time order
+    log = write_carmen(tmp_path, lines)
+    base = ["run", str(log), "--no-texture", "--no-record", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "auto")]) == 0
+    sync = json.loads((tmp_path / "auto" / "metrics.json").read_text())["odometry_sync"]
+    assert sync["source"] == "stream" and sync["written"] is False
+    assert abs(sync["lag_s"] - 0.1) <= 0.021
+    assert sync["disagreement_deg"] < 0.8 * sync["scan_disagreement_deg"]  # at lag 0
+    assert (
+        main([*base, "--out", str(tmp_path / "kept"), "--set", 'robot.odometry_sync="scan"']) == 0
+    )
+    assert "odometry_sync" not in json.loads((tmp_path / "kept" / "metrics.json").read_text())

@@ -302,8 +302,13 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
     elif sync["pairs"] == 0:
         lines.append(f"odometry  {sync['source']} at {sync['lag_s']:+.2f} s (set, not measured)")
     else:
+        first = (
+            "the poses written with the scans"
+            if sync.get("written", True)
+            else "the odometry messages at the scans' times"
+        )
         lines.append(
-            f"odometry  the poses written with the scans disagree with the laser's rotations by "
+            f"odometry  {first} disagree with the laser's rotations by "
             f"{sync['scan_disagreement_deg']:.3f}° (trimmed RMS over {sync['pairs']} pairs of "
             f"consecutive scans), the odometry messages at {sync['stream_lag_s']:+.2f} s by "
             f"{sync['stream_disagreement_deg']:.3f}°"
