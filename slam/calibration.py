@@ -482,7 +482,7 @@ class BeamGeometryCheck:
             "short": self.short,
             "fov_deg": round(self.fov_deg, 4),
             "best": self.best,
-            "beam_step_deg": round(self.beam_step_deg, 6),
+            "beam_step_deg": self.beam_step_deg,
             "geometries": self.rows,
         }
 

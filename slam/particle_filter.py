@@ -509,8 +509,9 @@ class RbpfFilter:
         beams = max(hits[0].size, 1)
         b = int(np.argmax(match.loglik))
         first = float(match.loglik[b]) / beams
+        typical = self._typical()
+        typical = first if typical is None else typical
         recent = self.recent_best
-        typical = statistics.median(recent) if len(recent) >= 5 else first
         recent.append(first)
         if len(recent) > rc.retry_window:
             del recent[0]
