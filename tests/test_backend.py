@@ -211,3 +211,29 @@ def test_candidates_per_pass_reach_an_older_pass_of_the_place():
     one_pass = candidate_order(submaps[3:], ratio[3:], 3, "per_pass")
     assert one_pass.tolist() == candidate_order(submaps[3:], ratio[3:], 3).tolist()
     assert candidate_order(submaps[:1], ratio[:1], 3, "per_pass").tolist() == [0]
+
+
+def test_where_the_local_closures_put_a_keyframe_and_when_two_places_agree():
+    """A global match joins a submap a local closure already joins: where that closure puts
+    the keyframe (its match carried along the trajectory), and whether a match there agrees
+    (the same tolerance as :func:`consistent`)."""
+    from slam.backend.global_loops import _same_place, _Stretches
+    from slam.geometry import compose, relative
+
+    n = 200
+    x = np.zeros((n, 3))
+    x[:, 0] = np.linspace(0.0, 100.0, n)
+    path = x[:, 0].copy()
+    correction = np.array([0.4, -0.2, 0.03])  # the local closure moves keyframe 180 by this
+    matched = compose(correction, x[180])
+    local = [(10, 180, relative(x[10], matched), np.eye(3))]
+    st = _Stretches.of(x, path, 10.0, local)
+    assert st.closed_sub.tolist() == [0] and st.closed_node.tolist() == [180]
+    placed, drift = st.placed(np.array([True]), 181, x, path)
+    assert np.allclose(placed, [compose(correction, x[181])]) and np.allclose(drift, [path[1]])
+    assert st.placed(np.array([False]), 181, x, path)[0].shape == (0, 3)
+    config, at = Config(), placed[0]
+    assert _same_place(at, at + [0.25, 0.0, 0.0], 0.5, config)
+    assert not _same_place(at, at + [1.8, 0.0, 0.0], 0.5, config)
+    assert _same_place(at, at + [1.8, 0.0, 0.0], 80.0, config)  # 0.3 m + 2 % of 80 m
+    assert not _same_place(at, at + [0.0, 0.0, 0.1], 0.5, config)

@@ -17,7 +17,13 @@ module adds, in the same pose graph and the same rounds:
    against the submap's distance field it must stay within two search cells, and of the beams
    that land on the submap's known cells ``backend.min_fit`` must lie within
    ``loops.fit_distance`` of its surfaces, those being at least ``backend.min_overlap`` of all
-   the scan's beams (:func:`_fits`).
+   the scan's beams (:func:`_fits`). A submap that a local closure already joins to the
+   keyframe's neighbourhood is searched like any other; its match is dropped when it puts the
+   keyframe where that local closure does, or fits the submap no better than where the local
+   closure puts it (:func:`_held_locally`). The local search looks only ±``loops.search_xy``
+   around a drifted estimate and can close a loop wrongly; a search skipped behind such a
+   closure left the loop open (aces with its odometry's distances 5 % long: the start's
+   junction 1.8 m off after the first large loop, docs/slam.md).
 4. **Consistency.** A closure counts only when another closure, found from a different
    keyframe within ``agree_path`` metres of path (and to a submap as near), implies the same
    correction of the trajectory (``agree_xy``, ``agree_th``, plus the drift allowed between
@@ -94,10 +100,12 @@ class _Stretches(NamedTuple):
     """``(S,)`` path position of each submap's last node."""
     mid_path: F64
     """``(S,)`` path position halfway through each submap."""
-    closed_at: F64
-    """Path position of the keyframe of every local closure."""
     closed_sub: NDArray[np.int64]
     """The submap that holds the earlier node of every local closure."""
+    closed_node: NDArray[np.int64]
+    """The keyframe (node) of every local closure."""
+    closed_pose: F64
+    """``(K, 3)`` the pose every local closure matched its keyframe at."""
 
     @classmethod
     def of(cls, x: F64, path: F64, length: float, local: list) -> _Stretches:
@@ -117,9 +125,27 @@ class _Stretches(NamedTuple):
             spread,
             np.array([path[hi - 1] for _, hi in subs]),
             np.array([0.5 * (path[lo] + path[hi - 1]) for lo, hi in subs]),
-            np.array([path[i] for _, i, _, _ in local]),
             np.array([sub_of[j] for j, _, _, _ in local], dtype=np.int64),
+            np.array([i for _, i, _, _ in local], dtype=np.int64),
+            np.array([compose(x[j], z) for j, _, z, _ in local]).reshape(-1, 3),
         )
+
+    def placed(self, joined: NDArray[np.bool_], i: int, x: F64, path: F64) -> tuple[F64, F64]:
+        """Where the ``joined`` local closures put keyframe ``i`` (``(K, 3)``, each closure's
+        match carried to ``i`` along the trajectory ``x``) and the path (m) between each
+        closure's keyframe and ``i``."""
+        nodes = self.closed_node[joined]
+        poses = compose(self.closed_pose[joined], relative(x[nodes], x[i]))
+        return poses.reshape(-1, 3), np.abs(path[nodes] - path[i])
+
+
+def _same_place(a: F64, b: F64, drift: float, config: Config) -> bool:
+    """Whether two closures that put one keyframe at ``a`` and ``b`` agree, ``drift`` metres of
+    path apart (``agree_xy``, ``agree_th``, plus the drift allowed over that path)."""
+    bc, lc = config.backend, config.loops
+    if np.hypot(*(a[:2] - b[:2])) > bc.agree_xy + lc.seq_sigma_rel * drift:
+        return False
+    return abs(wrap_angle(a[2] - b[2])) <= bc.agree_th + bc.drift_th * drift
 
 
 def detect_global(
@@ -127,10 +153,11 @@ def detect_global(
 ) -> tuple[list, int]:
     """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
 
-    See the module docstring (steps 1-3); :func:`consistent` is step 4. A submap that a local
-    closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node within
-    ``keyframe_path`` of the keyframe is not searched again: that loop is closed. ``table``:
-    the nodes' hits (:func:`slam.graph.node_hits`; computed here when not given).
+    See the module docstring (steps 1-3); :func:`consistent` is step 4. A match to a submap
+    that a local closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node
+    within ``keyframe_path`` of the keyframe is kept only where that closure does not already
+    hold the loop (:func:`_held_locally`). ``table``: the nodes' hits (:func:`slam.graph.node_hits`;
+    computed here when not given).
 
     Keyframes are independent: ranges of them are searched on the kernel threads
     (:func:`slam.kernels.threads.in_threads`), which share one :class:`SubmapCache` (a submap
@@ -192,9 +219,8 @@ def _search_keyframes(
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         for q in order:
             s = int(eligible[ok][q])
-            near = np.abs(st.closed_at - path[i]) <= bc.keyframe_path
-            if np.any(near & (st.closed_sub == s)):
-                continue
+            near = np.abs(path[st.closed_node] - path[i]) <= bc.keyframe_path
+            joined = near & (st.closed_sub == s)
             lo, hi = st.subs[s]
             pyr = cache.pyramid(lo, hi)
             if pyr is None:
@@ -216,6 +242,10 @@ def _search_keyframes(
                 continue
             if not _fits(view, refined, ex, ey, config):
                 continue
+            if joined.any() and _held_locally(
+                st, joined, view, (ex, ey), refined, int(i), x, path, config
+            ):
+                continue
             hessian, gradient = np.zeros((3, 3)), np.zeros(3)
             normal_equations(
                 view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
@@ -225,6 +255,31 @@ def _search_keyframes(
                 (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
             )
     return edges, searched
+
+
+def _held_locally(
+    st: _Stretches,
+    joined: NDArray[np.bool_],
+    view,
+    scan: tuple[F64, F64],
+    pose: F64,
+    i: int,
+    x: F64,
+    path: F64,
+    config: Config,
+) -> bool:
+    """Whether the ``joined`` local closures already hold the loop that a global match of
+    keyframe ``i``'s ``scan`` at ``pose`` on the submap ``view`` would close: one of them puts
+    the keyframe where the match does (:func:`_same_place`), or the scan fits the submap at
+    least as well where one of them puts it (as many beams within ``loops.fit_distance`` of its
+    surfaces). A local closure can be wrong — the local search looks only ±``loops.search_xy``
+    around a drifted estimate — and a match that fits better is then kept to compete with it."""
+    placed, drift = st.placed(joined, i, x, path)
+    if any(_same_place(p, pose, d, config) for p, d in zip(placed, drift, strict=True)):
+        return True
+    fit_distance = config.loops.fit_distance
+    _, close = fit_counts(view, pose, *scan, fit_distance)
+    return any(fit_counts(view, p, *scan, fit_distance)[1] >= close for p in placed)
 
 
 def candidate_order(
@@ -266,7 +321,7 @@ def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
 
 def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
     """The closures of ``edges`` that another closure from a different keyframe agrees with."""
-    bc, lc = config.backend, config.loops
+    bc = config.backend
     if len(edges) < 2:
         return []
     matched = [compose(x[j], z) for j, _, z, _ in edges]
@@ -280,10 +335,7 @@ def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
             if gap_i > bc.agree_path or gap_j > bc.agree_path:
                 continue
             moved = compose(moves[k], x[im])  # keyframe m corrected by closure k
-            drift = gap_i + gap_j
-            if np.hypot(*(moved[:2] - matched[m][:2])) > bc.agree_xy + lc.seq_sigma_rel * drift:
-                continue
-            if abs(wrap_angle(moved[2] - matched[m][2])) > bc.agree_th + bc.drift_th * drift:
+            if not _same_place(moved, matched[m], gap_i + gap_j, config):
                 continue
             keep.append(edges[k])
             break
