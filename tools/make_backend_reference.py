@@ -11,8 +11,8 @@ poses) and ``<case>.json`` (the figures with the local loop closing only and wit
     SLAM_DATA_DIR=../shared/data uv run python tools/make_backend_reference.py
 
 The filter output of each (case's log file, seed) is cached in ``$SLAM_CACHE_DIR/backend/`` (a
-full filter run per log, minutes); ``--filter-output DIR`` reads ``<file stem>-<seed>.npz`` from
-``DIR`` instead. A case reads the benchmark's CARMEN log unless it names another recording of
+full filter run per log, minutes); ``--filter-output DIR`` reads ``<log>-<seed>.npz`` (a case
+with its own recording: ``<file name>-<seed>.npz``) from ``DIR`` instead. A case reads the benchmark's CARMEN log unless it names another recording of
 the same run in the data directory (a ROS bag: the same scans and times, so the relations hold).
 """
 
