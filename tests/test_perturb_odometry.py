@@ -81,4 +81,9 @@ def test_an_existing_output_is_never_replaced_and_factors_are_bounded(tmp_path, 
     assert "--turn-scale: expected a factor from 0.5 to 2, found 3.0" in capsys.readouterr().err
     assert tool.main([str(tmp_path / "none.clf"), str(tmp_path / "d.clf")]) == 2
     assert "none.clf: cannot read" in capsys.readouterr().err
+    bare = tmp_path / "bare.clf"
+    bare.write_text("# no odometry here\nPARAM robot_width 0.5\n")
+    assert tool.main([str(bare), str(tmp_path / "e.clf")]) == 2
+    assert "bare.clf: no ODOM or FLASER lines" in capsys.readouterr().err
+    bare.unlink()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.clf", "b.clf"]
