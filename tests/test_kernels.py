@@ -285,6 +285,70 @@ def test_one_pose_insert_equals_the_parallel_kernels(signed):
             assert np.array_equal(a, b, equal_nan=True)
 
 
+def _cell_values(maps, particle=0):
+    """Every cell of one particle's ``dist`` layer as one 2-D array (NaN where no tile is)."""
+    t = maps.tables[particle]
+    side = 1 << maps.shift
+    out = np.full((t.shape[0] * side, t.shape[1] * side), np.nan, dtype=np.float32)
+    for ty, tx in zip(*np.nonzero(t >= 0), strict=True):
+        out[ty * side : (ty + 1) * side, tx * side : (tx + 1) * side] = maps.dist[t[ty, tx]]
+    return out
+
+
+@pytest.mark.parametrize("particles", [1, 2])
+def test_the_distance_updates_are_the_straightforward_rule_bit_for_bit(particles):
+    """Each kept hit gives every cell whose centre is nearer than ``dmax`` (strictly) its
+    distance ``sqrt(dx² + dy²)`` where that is below what the cell holds. The kernel decides most
+    cells by squared distances with no square root; against this rule written out in numpy,
+    the same float32 values cell for cell, with hits placed so that cell centres lie within a
+    few units in the last place of ``dmax`` (both sides), and a second scan whose squares
+    overlap the first's (cells that already hold a nearer hit). Which hits are kept follows the
+    selection's rule (a hit in the cell of the hit before it, or in a cell that already holds a
+    distance no larger than its own, adds nothing)."""
+    res, dmax = 0.05, 0.3
+    maps = ParticleMaps(particles, res, dmax, tile=8, size_m=8.0, capacity=4, signed=False)
+    (ox, oy) = maps.geometry.origin
+    rng = np.random.default_rng(11)
+    centre = ox + (80 + 0.5) * res  # a cell centre (x); hits dmax away from centres along x
+    edge = centre + dmax + np.array([-2e-16, 0.0, 2e-16, -1e-12, 1e-12])
+    first = np.r_[edge, rng.uniform(-2.5, 2.5, 40)]
+    first_y = np.r_[np.full(edge.size, oy + 90.5 * res), rng.uniform(-2.5, 2.5, 40)]
+    second = first[edge.size :] + rng.uniform(-0.2, 0.2, 40)  # near the first ones
+    second_y = first_y[edge.size :] + rng.uniform(-0.2, 0.2, 40)
+    nx = ny = np.zeros(first.size)
+    poses = np.zeros((particles, 3))
+    cells = _cell_values(maps)
+    expected = np.full(cells.shape, np.inf)
+    iy, ix = np.mgrid[0 : cells.shape[0], 0 : cells.shape[1]]
+    dropped = 0
+    for hx, hy in ((first, first_y), (second, second_y)):
+        before = np.where(np.isfinite(expected), expected, np.float32(dmax))
+        last = None
+        for k in range(hx.size):
+            cell = (int(np.floor((hy[k] - oy) / res)), int(np.floor((hx[k] - ox) / res)))
+            own = np.hypot(ox + (cell[1] + 0.5) * res - hx[k], oy + (cell[0] + 0.5) * res - hy[k])
+            kept = cell != last and np.float32(before[cell]) > own  # what adds something
+            last = cell
+            if not kept:
+                dropped += 1
+                continue
+            ccx = ox + (ix + 0.5) * res - hx[k]
+            ccy = oy + (iy + 0.5) * res - hy[k]
+            d = np.sqrt(ccx * ccx + ccy * ccy)
+            near = d < dmax
+            expected[near] = np.minimum(expected[near], d[near])
+        maps.insert(poses, hx, hy, nx[: hx.size], ny[: hx.size], 0.0)
+    want = np.where(np.isfinite(expected), expected, np.nan).astype(np.float32)
+    assert np.sum(np.isfinite(expected)) > 3000  # the squares cover thousands of cells
+    assert dropped > 0  # the second scan has hits the selection drops
+    for p in range(particles):
+        got = _cell_values(maps, p)
+        written = ~np.isnan(got)
+        assert np.array_equal(np.isnan(want[written]), np.isnan(got[written]))
+        assert np.array_equal(want[written], got[written], equal_nan=True)
+        assert np.all(np.isnan(want[~written]))  # no cell outside the tiles was due a value
+
+
 def test_the_unsigned_fields_one_layer_holds_what_two_layers_do():
     """The unsigned field keeps one array for both layers (NaN where no hit is near, read as
     ``dmax``): its maps equal, bit for bit, those of a pool that keeps the ``dist`` layer apart,
