@@ -38,6 +38,27 @@ def test_short_relations_count_where_slam_is_worse_than_dead_reckoning():
     assert none["short_relations"] == 0 and none["slam_share_over"] is None
 
 
+def test_short_relations_flag_the_ones_that_travel_sideways_of_dead_reckoning():
+    """Three relations have the robot travel 19° off the heading dead reckoning keeps (0.7 m
+    aside over 2 m): they are counted, with the share of the SLAM run's mean error they carry,
+    and the span of time they cover; a longer --sideways threshold passes them over."""
+    tool = load_tool("short_relations")
+    n = 40
+    truth = _straight(n)
+    t1 = np.arange(n - 2, dtype=np.float64)
+    dy = np.zeros(n - 2)
+    dy[[20, 21, 22]] = 0.7
+    relations = Relations(t1, t1 + 2.0, np.full(n - 2, 2.0), dy, np.zeros(n - 2))
+    runs = {"slam": truth, "odometry": truth}
+    figures = tool.compare(relations, runs, span=5.0)
+    assert figures["sideways_relations"] == 3
+    assert figures["sideways_share_of_slam_mean_m"] == pytest.approx(3 * 0.7 / (n - 2), abs=1e-4)
+    assert figures["sideways_times_s"] == [[20.0, 24.0]]
+    assert figures["slam_short_mean_m"] == pytest.approx(3 * 0.7 / (n - 2), abs=1e-4)
+    assert figures["odometry_short_mean_m"] == figures["slam_short_mean_m"]
+    assert tool.compare(relations, runs, span=5.0, sideways_deg=25.0)["sideways_relations"] == 0
+
+
 def test_icp_residual_is_least_for_the_true_beam_geometry():
     tool = load_tool("beam_step_check")
     # A room 6 m wide seen from its middle by 181 beams 1° apart: walls at y = ±3 and x = 4.

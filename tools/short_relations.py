@@ -6,7 +6,13 @@ odometry``), over the relations that span less than ``--span`` seconds: the shar
 errors over ``--over`` metres, how many are over it for the SLAM run but under half of it for
 dead reckoning (and the reverse), how far the SLAM run's relative motion is from dead reckoning's
 on its bad relations, and the relations' rotation on the bad and the good ones (docs/slam.md,
-"fr-clinic's short relations").
+"fr-clinic's short relations"); the mean error of both runs on the short relations; and the
+short relations at least ``--sideways-length`` long whose direction of travel, in the frame of
+their first pose, differs from dead reckoning's by more than ``--sideways`` degrees, with the
+share of the SLAM run's mean error (over all its relations) that they carry. Odometry reports
+motion along the robot's heading; a relation that has the robot travel 10–20° off it for tens of
+seconds, where dead reckoning goes straight, is one to check against the scans before blaming
+the run (docs/slam.md, "fr-clinic's reference where its scans disagree").
 
 Usage::
 
@@ -47,8 +53,25 @@ def _motions(trajectory: Trajectory, t1: np.ndarray, t2: np.ndarray) -> np.ndarr
     return relative(trajectory.poses[i], trajectory.poses[j])
 
 
+def _spans(a: np.ndarray, b: np.ndarray, gap: float = 30.0) -> list[list[float]]:
+    """The time spans (s) covered by the relations ``[a, b]`` (sorted by start), those less
+    than ``gap`` apart joined into one."""
+    spans: list[list[float]] = []
+    for lo, hi in sorted(zip(a.tolist(), b.tolist(), strict=True)):
+        if spans and lo - spans[-1][1] < gap:
+            spans[-1][1] = max(spans[-1][1], round(hi, 1))
+        else:
+            spans.append([round(lo, 1), round(hi, 1)])
+    return spans
+
+
 def compare(
-    relations: Relations, runs: dict[str, Trajectory], span: float = 10.0, over: float = 0.2
+    relations: Relations,
+    runs: dict[str, Trajectory],
+    span: float = 10.0,
+    over: float = 0.2,
+    sideways_deg: float = 10.0,
+    sideways_length: float = 0.5,
 ) -> dict:
     """The figures of the module docstring for ``runs`` (``{"slam": Trajectory, "odometry":
     Trajectory}``) against ``relations``, over the relations shorter than ``span`` seconds."""
@@ -62,8 +85,31 @@ def compare(
     apart = relative(_motions(runs["odometry"], t1, t2), _motions(runs["slam"], t1, t2))
     apart_m = np.hypot(apart[:, 0], apart[:, 1])
     half = over / 2
+    dead = _motions(runs["odometry"], t1, t2)
+    turn = np.angle(
+        np.exp(1j * (np.arctan2(motion[:, 1], motion[:, 0]) - np.arctan2(dead[:, 1], dead[:, 0])))
+    )
+    sideways = (
+        short
+        & (np.hypot(motion[:, 0], motion[:, 1]) >= sideways_length)
+        & (np.abs(turn) > np.radians(sideways_deg))
+    )
+    all_slam = errors["slam"].trans
     return {
         "short_relations": int(short.sum()),
+        "slam_short_mean_m": round(float(trans["slam"][short].mean()), 4) if short.any() else None,
+        "odometry_short_mean_m": (
+            round(float(trans["odometry"][short].mean()), 4) if short.any() else None
+        ),
+        "sideways_relations": int(sideways.sum()),
+        "sideways_share_of_slam_mean_m": (
+            round(float(trans["slam"][sideways].sum() / all_slam.size), 4)
+            if all_slam.size
+            else None
+        ),
+        "sideways_times_s": _spans(
+            t1[sideways] - relations.t1.min(), t2[sideways] - relations.t1.min()
+        ),
         "span_s": span,
         "over_m": over,
         "slam_share_over": _share(trans["slam"][short] > over),
@@ -94,6 +140,12 @@ def main() -> int:
     parser.add_argument("odometry", type=Path, help="run folder of the dead-reckoning run")
     parser.add_argument("--span", type=float, default=10.0, help="short: t2 - t1 below this (s)")
     parser.add_argument("--over", type=float, default=0.2, help="a bad relation's error (m)")
+    parser.add_argument(
+        "--sideways", type=float, default=10.0, help="direction off dead reckoning's (degrees)"
+    )
+    parser.add_argument(
+        "--sideways-length", type=float, default=0.5, help="least length of such a relation (m)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     dataset = get_dataset(args.log)
@@ -108,7 +160,8 @@ def main() -> int:
             print(f"{path}: expected a run folder's trajectory.tum", file=sys.stderr)
             return 2
         runs[name] = read_tum(path)
-    report = {"log": args.log, **compare(relations, runs, args.span, args.over)}
+    figures = compare(relations, runs, args.span, args.over, args.sideways, args.sideways_length)
+    report = {"log": args.log, **figures}
     if args.json:
         print(json.dumps(report, indent=2))
     else:
