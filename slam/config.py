@@ -413,6 +413,15 @@ class LoopConfig(Validated):
     """Accept a loop closure when at least this fraction of the scan's beams fit."""
     min_beams: int = bounded(30, ge=0, le=100000)
     """... and at least this many."""
+    unique_shift: float = bounded(1.0, ge=0.0, le=100.0)
+    """A closure, local or global, must place its scan uniquely: moved this far (m) in any of
+    16 directions, the scan must fit its submap clearly worse than where it matched
+    (``unique_ratio``); 0: no such test."""
+    unique_ratio: float = bounded(0.95, gt=0.0, le=10.0)
+    """... that is, with fewer than this share of the beams that fit at the match (within
+    ``fit_distance`` of a surface). A scan that fits as well a metre along a corridor says where
+    across the corridor the robot was, not where along it (docs/slam.md, "Closures that could
+    be a metre elsewhere")."""
     sigma_xy: float = bounded(0.02, gt=0.0, le=100.0)
     """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""
     sigma_th: float = bounded(0.005, gt=0.0, le=10.0)

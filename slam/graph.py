@@ -13,9 +13,11 @@ deterministic, the way graph-based SLAM does, without changing what the filter d
    path (a locally consistent stretch; a drifted later visit would blur a map of the whole past)
    — a brute-force correlative search (±``search_xy``, ±``search_th``: a basin far wider than
    the filter's matcher) unless the scan already fits, then Levenberg-Marquardt — and the match
-   is accepted only if it stayed inside the searched window and at least ``min_fit`` of its
-   beams land within ``fit_distance`` of the submap's surfaces. The accepted pose of ``i``
-   relative to ``j`` becomes an edge with a Cauchy robust kernel.
+   is accepted only if it stayed inside the searched window, at least ``min_fit`` of its
+   beams land within ``fit_distance`` of the submap's surfaces, and the scan moved
+   ``unique_shift`` in any direction would fit clearly worse (:func:`unique_fit`: a corridor's
+   scan fits as well a metre along it). The accepted pose of ``i`` relative to ``j`` becomes an
+   edge with a Cauchy robust kernel.
 4. **Optimisation**: Gauss-Newton on ``Σ ρ(eᵀΩe)`` (:mod:`slam.kernels.graph`), node 0 fixed;
    detection and optimisation run ``rounds`` times (a closed loop brings further ones in reach).
 5. **Do no harm**: loop edges are about as precise as the filter's own relative poses (a few
@@ -35,8 +37,14 @@ from numpy.typing import NDArray
 
 from slam.config import Config, LoopConfig
 from slam.geometry import compose, path_along, relative, spread_corrections, wrap_angle
-from slam.kernels.field import match_one, normal_equations
-from slam.kernels.graph import correlative_search, fit_counts, linearize, solve_system
+from slam.kernels.field import FieldView, match_one, normal_equations
+from slam.kernels.graph import (
+    correlative_search,
+    fit_counts,
+    linearize,
+    shifted_fit,
+    solve_system,
+)
 from slam.kernels.threads import in_threads, threads
 from slam.mapping import ParticleMaps, likelihood_tables
 from slam.scans import ScanHits
@@ -136,8 +144,10 @@ def _detect(
     ``min_path / 2`` behind ``i`` — a stretch of trajectory that is locally consistent, so a
     drifted later visit of the same place does not blur it, and never ``i``'s own neighbours.
     Consecutive candidates with the same submap share it. When the scan already fits where it
-    is, the brute-force search is skipped and only Levenberg-Marquardt runs. ``table`` holds the
-    nodes' hits (:func:`node_hits`; computed here when not given).
+    is, the brute-force search is skipped and only Levenberg-Marquardt runs. A match counts when
+    enough beams fit, it stayed inside the searched window and it is unique
+    (:func:`unique_fit`). ``table`` holds the nodes' hits (:func:`node_hits`; computed here
+    when not given).
 
     The candidates are independent: they are matched in ranges on the kernel threads
     (:func:`slam.kernels.threads.in_threads`), cut where the submap changes
@@ -234,6 +244,8 @@ def _detect_range(
         _, close = fit_counts(view, refined, ex, ey, lc.fit_distance)
         if close < lc.min_fit * ex.size or close < lc.min_beams:
             continue
+        if not unique_fit(view, refined, ex, ey, close, lc):
+            continue
         hessian, gradient = np.zeros((3, 3)), np.zeros(3)
         normal_equations(
             view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
@@ -242,6 +254,24 @@ def _detect_range(
             (j, i, relative(poses[j], refined), _edge_information(hessian, refined, lc, rc))
         )
     return edges
+
+
+UNIQUE_DIRECTIONS = 16
+"""Directions :func:`unique_fit` moves a matched scan in (every 22.5°)."""
+
+
+def unique_fit(view: FieldView, pose: F64, ex: F64, ey: F64, close: int, lc: LoopConfig) -> bool:
+    """Whether scan ``(ex, ey)``, ``close`` of whose beams lie within ``lc.fit_distance`` of the
+    surfaces of the submap ``view`` at ``pose``, fits there uniquely: moved ``lc.unique_shift``
+    in any of :data:`UNIQUE_DIRECTIONS` directions it must fit fewer than ``lc.unique_ratio ·
+    close`` beams (:func:`~slam.kernels.graph.shifted_fit`; always true with ``unique_shift``
+    0). A scan of a corridor whose ends it does not see fits about as well a metre along it: a
+    closure made of it says where across the corridor the robot was, not where along it, and
+    pulls the loop to wherever the drifted estimate happened to put it."""
+    if lc.unique_shift <= 0.0:
+        return True
+    moved = shifted_fit(view, pose, ex, ey, lc.fit_distance, lc.unique_shift, UNIQUE_DIRECTIONS)
+    return moved < lc.unique_ratio * close
 
 
 def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:

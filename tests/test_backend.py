@@ -237,3 +237,51 @@ def test_where_the_local_closures_put_a_keyframe_and_when_two_places_agree():
     assert not _same_place(at, at + [1.8, 0.0, 0.0], 0.5, config)
     assert _same_place(at, at + [1.8, 0.0, 0.0], 80.0, config)  # 0.3 m + 2 % of 80 m
     assert not _same_place(at, at + [0.0, 0.0, 0.1], 0.5, config)
+
+
+def _field_of(points: np.ndarray):
+    from slam.mapping import ParticleMaps
+
+    maps = ParticleMaps(1, RES, 0.3, center=(10.0, 3.0), size_m=40.0, capacity=2048)
+    maps.insert_scans(
+        np.zeros((1, 3)), np.vstack([points[:, 0], points[:, 1]]), np.array([0, len(points)]),
+        np.array([40.0]), 0.0,
+    )  # fmt: skip
+    return maps.field(0)
+
+
+def test_a_scan_that_fits_as_well_a_metre_along_a_corridor_is_not_a_unique_match():
+    """A corridor 2 m wide seen 6 m either way: moved 1 m along it, every beam still lies on a
+    wall, so the match is not unique (a closure made of it would say nothing about where along
+    the corridor the robot was). In a room with inner walls, moved 1 m any way, most beams miss:
+    unique. ``unique_shift = 0`` turns the test off."""
+    from slam.config import LoopConfig
+    from slam.graph import unique_fit
+    from slam.kernels.graph import fit_counts, shifted_fit
+
+    x = np.arange(0.0, 30.0, 0.025)
+    corridor = np.vstack([np.c_[x, 0.0 * x], np.c_[x, 0.0 * x + 2.0]])
+    view = _field_of(corridor)
+    pose = np.array([10.0, 1.0, 0.2])
+    seen = corridor[np.abs(corridor[:, 0] - pose[0]) < 6.0]
+    ex, ey = _scan(seen, pose, 200)
+    lc = LoopConfig()
+    _, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
+    assert close == 200
+    moved = shifted_fit(view, pose, ex, ey, lc.fit_distance, 1.0, 16)
+    assert moved == 200  # along the corridor (16 directions include 0° and 180°)
+    assert not unique_fit(view, pose, ex, ey, close, lc)
+    room = _room()
+    view = _field_of(room)
+    pose = np.array([4.0, 2.5, 0.3])
+    ex, ey = _scan(room, pose, 150)
+    _, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
+    assert close == 150
+    moved = shifted_fit(view, pose, ex, ey, lc.fit_distance, 1.0, 16)
+    assert moved < 0.7 * close  # every direction loses at least a third of the beams
+    assert unique_fit(view, pose, ex, ey, close, lc)
+    off = LoopConfig(unique_shift=0.0)
+    corridor_view = _field_of(corridor)
+    pose = np.array([10.0, 1.0, 0.2])
+    ex, ey = _scan(seen, pose, 200)
+    assert unique_fit(corridor_view, pose, ex, ey, 200, off)

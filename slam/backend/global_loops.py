@@ -17,7 +17,10 @@ module adds, in the same pose graph and the same rounds:
    against the submap's distance field it must stay within two search cells, and of the beams
    that land on the submap's known cells ``backend.min_fit`` must lie within
    ``loops.fit_distance`` of its surfaces, those being at least ``backend.min_overlap`` of all
-   the scan's beams (:func:`_fits`). A submap that a local closure already joins to the
+   the scan's beams (:func:`_fits`), and the match must be unique: moved ``loops.unique_shift``
+   in any direction the scan fits clearly worse (:func:`slam.graph.unique_fit`; a corridor's
+   scan fits as well a metre along it, and two such matches from neighbouring keyframes agree
+   with each other, step 4). A submap that a local closure already joins to the
    keyframe's neighbourhood is searched like any other; its match is dropped when it puts the
    keyframe where that local closure does, or fits the submap no better than where the local
    closure puts it (:func:`_held_locally`). The local search looks only ±``loops.search_xy``
@@ -55,6 +58,7 @@ from slam.graph import (
     loop_rounds,
     node_hits,
     optimize,
+    unique_fit,
 )
 from slam.kernels.bnb import bnb_search
 from slam.kernels.field import match_one, normal_equations
@@ -241,6 +245,9 @@ def _search_keyframes(
             if np.hypot(*(refined[:2] - found[:2])) > 2.0 * bc.resolution:
                 continue
             if not _fits(view, refined, ex, ey, config):
+                continue
+            close = fit_counts(view, refined, ex, ey, lc.fit_distance)[1]
+            if not unique_fit(view, refined, ex, ey, close, lc):
                 continue
             if joined.any() and _held_locally(
                 st, joined, view, (ex, ey), refined, int(i), x, path, config

@@ -429,3 +429,29 @@ def fit_counts(
             if abs(d) < distance:
                 close += 1
     return known, close
+
+
+@njit(cache=True, nogil=True)
+def shifted_fit(
+    view: FieldView,
+    pose: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    distance: float,
+    shift: float,
+    directions: int,
+) -> int:
+    """The most beams within ``distance`` of a surface (:func:`fit_counts`) of a scan at ``pose``
+    moved ``shift`` metres in any of ``directions`` directions evenly spread over the circle
+    (heading unchanged): how well the scan would fit somewhere else nearby. A corridor's scan
+    fits about as well a metre along it as where it matched."""
+    best = 0
+    moved = np.empty(3)
+    moved[2] = pose[2]
+    for k in range(directions):
+        a = 2.0 * np.pi * k / directions
+        moved[0] = pose[0] + shift * np.cos(a)
+        moved[1] = pose[1] + shift * np.sin(a)
+        _, close = fit_counts(view, moved, ex, ey, distance)
+        best = max(best, close)
+    return best
