@@ -59,6 +59,33 @@ def test_short_relations_flag_the_ones_that_travel_sideways_of_dead_reckoning():
     assert tool.compare(relations, runs, span=5.0, sideways_deg=25.0)["sideways_relations"] == 0
 
 
+@pytest.mark.parametrize(
+    ("option", "value", "expected"),
+    [
+        ("--sideways", "-5", "--sideways: expected degrees in [0, 180], found -5"),
+        ("--sideways", "200", "--sideways: expected degrees in [0, 180], found 200"),
+        ("--sideways-length", "-1", "--sideways-length: expected metres >= 0, found -1"),
+    ],
+)
+def test_short_relations_refuse_a_threshold_out_of_range(
+    monkeypatch, capsys, option, value, expected
+):
+    """A threshold out of range: one line naming the option, what was expected and what was
+    found, exit code 2, before any file is read."""
+    tool = load_tool("short_relations")
+    argv = [
+        "short_relations.py",
+        "fr-clinic",
+        "/nonexistent/run",
+        "/nonexistent/odo",
+        option,
+        value,
+    ]
+    monkeypatch.setattr("sys.argv", argv)
+    assert tool.main() == 2
+    assert capsys.readouterr().err.strip() == expected
+
+
 def test_icp_residual_is_least_for_the_true_beam_geometry():
     tool = load_tool("beam_step_check")
     # A room 6 m wide seen from its middle by 181 beams 1° apart: walls at y = ±3 and x = 4.

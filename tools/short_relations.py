@@ -148,6 +148,15 @@ def main() -> int:
     )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if not 0.0 <= args.sideways <= 180.0:
+        print(f"--sideways: expected degrees in [0, 180], found {args.sideways:g}", file=sys.stderr)
+        return 2
+    if not args.sideways_length >= 0.0:
+        print(
+            f"--sideways-length: expected metres >= 0, found {args.sideways_length:g}",
+            file=sys.stderr,
+        )
+        return 2
     dataset = get_dataset(args.log)
     if dataset.relations is None:
         print(f"{args.log}: the registry gives no relations file", file=sys.stderr)

@@ -244,13 +244,11 @@ def _search_keyframes(
             )
             if np.hypot(*(refined[:2] - found[:2])) > 2.0 * bc.resolution:
                 continue
-            if not _fits(view, refined, ex, ey, config):
-                continue
-            close = fit_counts(view, refined, ex, ey, lc.fit_distance)[1]
-            if not unique_fit(view, refined, ex, ey, close, lc):
+            close = _fitting(view, refined, ex, ey, config)
+            if close is None or not unique_fit(view, refined, ex, ey, close, lc):
                 continue
             if joined.any() and _held_locally(
-                st, joined, view, (ex, ey), refined, int(i), x, path, config
+                st, joined, view, (ex, ey), refined, close, int(i), x, path, config
             ):
                 continue
             hessian, gradient = np.zeros((3, 3)), np.zeros(3)
@@ -270,22 +268,23 @@ def _held_locally(
     view,
     scan: tuple[F64, F64],
     pose: F64,
+    close: int,
     i: int,
     x: F64,
     path: F64,
     config: Config,
 ) -> bool:
     """Whether the ``joined`` local closures already hold the loop that a global match of
-    keyframe ``i``'s ``scan`` at ``pose`` on the submap ``view`` would close: one of them puts
-    the keyframe where the match does (:func:`_same_place`), or the scan fits the submap at
-    least as well where one of them puts it (as many beams within ``loops.fit_distance`` of its
-    surfaces). A local closure can be wrong — the local search looks only ±``loops.search_xy``
-    around a drifted estimate — and a match that fits better is then kept to compete with it."""
+    keyframe ``i``'s ``scan`` at ``pose`` (``close`` of its beams within ``loops.fit_distance``
+    of the surfaces of the submap ``view``) would close: one of them puts the keyframe where the
+    match does (:func:`_same_place`), or the scan fits the submap at least as well where one of
+    them puts it (as many beams within ``loops.fit_distance``). A local closure can be wrong —
+    the local search looks only ±``loops.search_xy`` around a drifted estimate — and a match
+    that fits better is then kept to compete with it."""
     placed, drift = st.placed(joined, i, x, path)
     if any(_same_place(p, pose, d, config) for p, d in zip(placed, drift, strict=True)):
         return True
     fit_distance = config.loops.fit_distance
-    _, close = fit_counts(view, pose, *scan, fit_distance)
     return any(fit_counts(view, p, *scan, fit_distance)[1] >= close for p in placed)
 
 
@@ -310,7 +309,13 @@ def candidate_order(
 
 
 def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
-    """Whether scan ``(ex, ey)`` at ``pose`` fits the submap ``view`` (module docstring, step 3).
+    """Whether scan ``(ex, ey)`` at ``pose`` fits the submap ``view`` (:func:`_fitting`)."""
+    return _fitting(view, pose, ex, ey, config) is not None
+
+
+def _fitting(view, pose: F64, ex: F64, ey: F64, config: Config) -> int | None:
+    """The beams of scan ``(ex, ey)`` at ``pose`` within ``loops.fit_distance`` of the surfaces
+    of the submap ``view`` when the scan fits it (module docstring, step 3), else ``None``.
 
     Of the beams that land on the submap's known cells, ``backend.min_fit`` must lie within
     ``loops.fit_distance`` of its surfaces, and those must be ``backend.min_overlap`` of all the
@@ -321,9 +326,9 @@ def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
     """
     bc, lc = config.backend, config.loops
     known, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
-    return (
-        close >= bc.min_fit * known and close >= bc.min_overlap * ex.size and close >= lc.min_beams
-    )
+    if close >= bc.min_fit * known and close >= bc.min_overlap * ex.size and close >= lc.min_beams:
+        return close
+    return None
 
 
 def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
