@@ -234,11 +234,10 @@ def test_resampled_tables_count_their_tiles_as_a_recount_does(parents):
     assert count.sum() == (want >= 0).sum() and top == 48 - len(np.unique(want[want >= 0]))
 
 
-@pytest.mark.parametrize("signed, tolerance", [(True, 1e-3), (False, 0.025)])
-def test_scan_matching_recovers_a_known_offset(signed, tolerance):
-    """The signed field is exact; the unsigned one snaps walls to cell centres (≤ half a cell)."""
+def _room_maps(signed):
+    """Two particles' maps of one room (four walls of a 6 m x 4 m rectangle around the origin,
+    sampled every 2 cm) and the walls' points ``hx``, ``hy``."""
     maps = ParticleMaps(2, 0.05, 0.3, tile=16, size_m=12.0, signed=signed)
-    # a room: four walls of a 6 m x 4 m rectangle, sampled every 2 cm
     s = np.arange(-3.0, 3.0, 0.02)
     t = np.arange(-2.0, 2.0, 0.02)
     hx = np.concatenate([s, s, np.full_like(t, -3.0), np.full_like(t, 3.0)])
@@ -247,6 +246,13 @@ def test_scan_matching_recovers_a_known_offset(signed, tolerance):
     ny = np.concatenate([np.ones_like(s), -np.ones_like(s), np.zeros_like(t), np.zeros_like(t)])
     maps.insert(np.zeros((1, 3)), hx, hy, nx, ny, 0.0)
     maps.share_from(0)
+    return maps, hx, hy
+
+
+@pytest.mark.parametrize("signed, tolerance", [(True, 1e-3), (False, 0.025)])
+def test_scan_matching_recovers_a_known_offset(signed, tolerance):
+    """The signed field is exact; the unsigned one snaps walls to cell centres (≤ half a cell)."""
+    maps, hx, hy = _room_maps(signed)
     # the same room seen from the true pose (0.4, -0.3, 0.1): endpoints in that robot frame
     true = np.array([0.4, -0.3, 0.1])
     c, s_ = np.cos(true[2]), np.sin(true[2])
@@ -475,3 +481,63 @@ def test_particle_score_and_hessian_are_those_at_the_reported_pose():
             maps.field(p), *out.poses[p], ex, ey, luts[-1, 0], luts[-1, 1], step_inv, h, g, 1
         )
         assert out.loglik[p] == -cost and np.array_equal(out.hessian[p], h)
+
+
+def _refine_by_the_rule(view, pose, ex, ey, settings):
+    """The Levenberg-Marquardt levels of ``refine`` written out in Python from its docstring
+    (every beam, ``coarse_stride`` 1): the refined ``(x, y, th, cost, inliers)``."""
+    from slam.kernels.field import accumulate, beam_geometry, gauss_newton_system, scan_cost
+    from slam.kernels.linalg import solve_sym3
+
+    luts, step_inv, tol = settings.luts, settings.step_inv, settings.tolerance
+    x, y, th = (float(v) for v in pose)
+    h, g = np.zeros((3, 3)), np.zeros(3)
+    geo = np.empty((ex.size, 4))
+    beam_geometry(geo, view, x, y, th, 1, ex, ey)
+    cost, inliers = 0.0, 0
+    for level in range(luts.shape[0]):
+        cost_row, weight_row = luts[level, 0], luts[level, 1]
+        cost, inliers = accumulate(geo, cost_row, weight_row, step_inv, h, g)
+        lam = 1e-3
+        for _ in range(settings.max_iter):
+            hd = h.copy()
+            for k in range(3):
+                hd[k, k] += lam * h[k, k] + 1e-9
+            s0, s1, s2, _ = solve_sym3(
+                hd[0, 0], hd[0, 1], hd[0, 2], hd[1, 1], hd[1, 2], hd[2, 2], g[0], g[1], g[2], 1e-18
+            )
+            trial = np.empty((ex.size, 4))
+            beam_geometry(trial, view, x - s0, y - s1, th - s2, 1, ex, ey)
+            new_cost, new_inliers = scan_cost(trial, cost_row, step_inv)
+            if new_cost < cost:  # taken: its Gauss-Newton system too
+                gauss_newton_system(trial, weight_row, step_inv, h, g)
+                x, y, th, cost, inliers, geo = x - s0, y - s1, th - s2, new_cost, new_inliers, trial
+                lam = max(lam * 0.3, 1e-7)
+                if abs(s0) < tol and abs(s1) < tol and abs(s2) < tol:
+                    break
+            else:  # undone, the damping raised tenfold
+                lam *= 10.0
+                if lam > 1e3:
+                    break
+    return x, y, th, cost, inliers
+
+
+def test_the_matcher_is_its_documented_levenberg_marquardt_bit_for_bit():
+    """``refine`` is, bit for bit, the Levenberg-Marquardt of its docstring (written out in
+    Python above), from 24 starts around the true pose in a room of the unsigned field, and it
+    ends near the true pose (within the unsigned field's half cell)."""
+    from slam.kernels.field import MatchSettings, refine
+
+    maps, hx, hy = _room_maps(signed=False)
+    true = np.array([0.4, -0.3, 0.1])
+    c, s = np.cos(true[2]), np.sin(true[2])
+    ex = np.ascontiguousarray((c * (hx - true[0]) + s * (hy - true[1]))[::7])
+    ey = np.ascontiguousarray((-s * (hx - true[0]) + c * (hy - true[1]))[::7])
+    luts, step_inv = likelihood_tables(np.array([0.2, 0.075, 0.04]), 1.0, 0.05, maps.dmax)
+    settings = MatchSettings(luts, step_inv, 5, 1e-3, 1, 0.0)
+    view = maps.field(0)
+    starts = true + np.random.default_rng(3).normal(0.0, [0.05, 0.05, 0.03], size=(24, 3))
+    for start in starts:
+        got = refine(view, start, ex, ey, settings, np.zeros((3, 3)))
+        assert got == _refine_by_the_rule(view, start, ex, ey, settings)
+        assert np.hypot(got[0] - true[0], got[1] - true[1]) < 0.025 and abs(got[2] - true[2]) < 0.01
