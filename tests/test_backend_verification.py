@@ -1,5 +1,5 @@
 """Issue 13's verification and proposal rules on synthetic data: the global closure's fit over the
-submap's known cells (:func:`slam.backend.global_loops._fits`) and the filter's rotated retry of a
+submap's known cells (:func:`slam.backend.global_loops._fitting`) and the filter's rotated retry of a
 failed match (:meth:`slam.particle_filter.RbpfFilter._retry`)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from slam.backend.global_loops import _fits
+from slam.backend.global_loops import _fitting
 from slam.config import Config
 from slam.graph import _empty_map
 from slam.kernels.graph import fit_counts
@@ -46,9 +46,9 @@ def test_fit_counts_only_the_beams_on_the_submap():
     known, close = fit_counts(view, np.zeros(3), ex, ey, config.loops.fit_distance)
     assert close < config.backend.min_fit * ex.size  # the all-beams rule would refuse it
     assert close >= 0.9 * known and close >= config.backend.min_overlap * ex.size
-    assert _fits(view, np.zeros(3), ex, ey, config)
-    assert not _fits(view, np.array([0.25, 0.25, 0.0]), ex, ey, config)
-    assert not _fits(view, np.array([0.0, 0.0, 0.1]), ex, ey, config)
+    assert _fitting(view, np.zeros(3), ex, ey, config) is not None
+    assert _fitting(view, np.array([0.25, 0.25, 0.0]), ex, ey, config) is None
+    assert _fitting(view, np.array([0.0, 0.0, 0.1]), ex, ey, config) is None
 
 
 def test_fit_needs_overlap():
@@ -59,7 +59,7 @@ def test_fit_needs_overlap():
     known, close = fit_counts(view, np.zeros(3), ex, ey, config.loops.fit_distance)
     assert close >= config.backend.min_fit * known
     assert close < config.backend.min_overlap * ex.size
-    assert not _fits(view, np.zeros(3), ex, ey, config)
+    assert _fitting(view, np.zeros(3), ex, ey, config) is None
 
 
 class _Maps:

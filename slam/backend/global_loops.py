@@ -17,7 +17,7 @@ module adds, in the same pose graph and the same rounds:
    against the submap's distance field it must stay within two search cells, and of the beams
    that land on the submap's known cells ``backend.min_fit`` must lie within
    ``loops.fit_distance`` of its surfaces, those being at least ``backend.min_overlap`` of all
-   the scan's beams (:func:`_fits`), and the match must be unique: moved ``loops.unique_shift``
+   the scan's beams (:func:`_fitting`), and the match must be unique: moved ``loops.unique_shift``
    in any direction the scan fits clearly worse (:func:`slam.graph.unique_fit`; a corridor's
    scan fits as well a metre along it, and two such matches from neighbouring keyframes agree
    with each other, step 4). A submap that a local closure already joins to the
@@ -306,11 +306,6 @@ def candidate_order(
     lead = order[np.sort(first)]
     rest = np.setdiff1d(order, lead, assume_unique=True)
     return np.concatenate([lead, rest[np.argsort(ratio[rest], kind="stable")]])[:count]
-
-
-def _fits(view, pose: F64, ex: F64, ey: F64, config: Config) -> bool:
-    """Whether scan ``(ex, ey)`` at ``pose`` fits the submap ``view`` (:func:`_fitting`)."""
-    return _fitting(view, pose, ex, ey, config) is not None
 
 
 def _fitting(view, pose: F64, ex: F64, ey: F64, config: Config) -> int | None:

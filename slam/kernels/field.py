@@ -770,8 +770,8 @@ def _splat_particle(
     those outside the disc of radius ``dmax`` (whole rows first), and those whose stored
     distance is already smaller. Both tests compare against the squared bound enlarged by a
     relative ``1e-9``, far beyond the rounding of a square root, so every cell they skip is one
-    the exact test skips too: the same maps bit for bit, 18 % faster on the demo's 1000
-    particles. The indices are unsigned (see :func:`_interpolate`)."""
+    the exact test skips too: the same maps bit for bit (``insert_particles`` on the demo at
+    1000 particles 9.6 → 8.2 s). The indices are unsigned (see :func:`_interpolate`)."""
     dist, surface, shift = pool.dist, pool.surface, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
     empty = np.float32(dmax)  # what ``dist`` holds where no hit is near
