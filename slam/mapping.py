@@ -87,6 +87,29 @@ def growth_steps(
     )
 
 
+ScanRays = tuple[F64, NDArray[np.bool_], NDArray[np.int64], F64]
+"""Rays of several scans in the world, scan after scan: ends ``(N, 2)``, which end on an
+obstacle return ``(N,)``, the offsets ``(S + 1,)`` (scan ``i``'s rays are
+``offsets[i]:offsets[i + 1]``) and the sensors ``(S, 2)``."""
+
+
+def integrate_scan_rays(log_odds: NDArray[np.float32], views: NDArray[np.int64], origins: F64,
+                        resolution: float, rays: ScanRays, config: MapConfig) -> None:  # fmt: skip
+    """Bresenham log-odds update of ``log_odds`` with the ``rays`` of several scans, in order,
+    with ``config``'s log-odds: scan ``i`` into the rows and columns ``views[i]`` = ``(r0, c0,
+    h, w)`` of ``log_odds`` as a grid of ``resolution`` whose cell (0, 0) has its lower-left
+    corner at ``origins[i]`` (``h = 0``: skipped; :func:`slam.kernels.grid.integrate_rays`).
+    One scan into a whole grid is :meth:`OccupancyGrid.integrate`; :func:`slam.stages.build_map`
+    replays a growing grid."""
+    ends, hit, offsets, sensors = rays
+    integrate_rays(
+        log_odds, views, origins, float(resolution), sensors, offsets,
+        np.ascontiguousarray(ends[:, 0]), np.ascontiguousarray(ends[:, 1]),
+        np.ascontiguousarray(hit), config.log_odds_hit, config.log_odds_miss,
+        config.log_odds_min, config.log_odds_max,
+    )  # fmt: skip
+
+
 class OccupancyGrid:
     """A dense log-odds occupancy grid that grows to contain what is integrated into it."""
 
@@ -147,21 +170,12 @@ class OccupancyGrid:
         lo = np.minimum(endpoints.min(axis=0), sensor_xy)
         hi = np.maximum(endpoints.max(axis=0), sensor_xy)
         self.ensure_contains(lo[0], lo[1], hi[0], hi[1])
-        c = self.config
         g = self.geometry
-        integrate_rays(
-            self.log_odds,
-            *g.origin,
-            g.resolution,
-            float(sensor_xy[0]),
-            float(sensor_xy[1]),
-            np.ascontiguousarray(endpoints[:, 0]),
-            np.ascontiguousarray(endpoints[:, 1]),
-            np.ascontiguousarray(hit),
-            c.log_odds_hit,
-            c.log_odds_miss,
-            c.log_odds_min,
-            c.log_odds_max,
+        sensor = np.array([sensor_xy[:2]], dtype=np.float64)
+        rays = (endpoints, hit, np.array([0, endpoints.shape[0]]), sensor)
+        view = np.array([[0, 0, *g.shape]])
+        integrate_scan_rays(
+            self.log_odds, view, np.array([g.origin]), g.resolution, rays, self.config
         )
 
     def cropped(self, margin_m: float = 1.0) -> OccupancyGrid:

@@ -386,6 +386,48 @@ class ScanSequence:
         """Rays of scan ``k`` for an occupancy update (:meth:`Scan.rays`)."""
         return self._scans[k].rays(free_range_no_return, stride)
 
+    def ray_table(
+        self, steps: ArrayLike, free_range_no_return: float, stride: int = 1
+    ) -> tuple[F64, NDArray[np.bool_], NDArray[np.int64]]:
+        """The rays of scans ``steps`` (:meth:`rays`) side by side: robot-frame ends ``(N, 2)``,
+        hit flags ``(N,)`` and ``(len(steps) + 1,)`` offsets (scan ``i``'s rays are rows
+        ``offsets[i]:offsets[i + 1]``).
+
+        The values of :meth:`Scan.rays` scan by scan, to the bit, in one pass: the scans'
+        readings padded to one width (NaN: no beam, never kept) and each scan's limits and laser
+        pose as a column, so every element meets the same element-wise operations.
+        """
+        steps = np.asarray(steps, dtype=np.int64)
+        scans = [self._scans[int(k)] for k in steps]
+        for scan in scans:
+            scan._require_resolved()
+        width = max((scan.num_beams for scan in scans), default=0)
+        r = np.full((len(scans), width), np.nan)
+        a = np.full((len(scans), width), np.nan)
+        limits = np.empty((len(scans), 6))  # range_min, range_max, no_return, laser x, y, yaw
+        for i, scan in enumerate(scans):
+            r[i, : scan.num_beams] = scan.ranges
+            a[i, : scan.num_beams] = scan.angles
+            limits[i, :3] = scan.range_min, scan.range_max, scan.no_return
+            limits[i, 3:] = scan.laser_offset
+        range_min, range_max, no_return, lx, ly, lt = (limits[:, j, None] for j in range(6))
+        valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min)
+        hit = valid & (r < range_max)
+        length = np.where(r < no_return, np.minimum(r, range_max), free_range_no_return)
+        keep = hit | (valid & (length > 0))
+        if stride > 1:
+            thin = np.zeros_like(keep)
+            thin[:, ::stride] = True
+            keep &= hit | thin
+        rows = np.nonzero(keep)[0]
+        angle = (lt + a)[keep]
+        c, s = np.cos(angle), np.sin(angle)
+        reach = length[keep]
+        ends = np.stack([lx[rows, 0] + reach * c, ly[rows, 0] + reach * s], axis=1)
+        offsets = np.zeros(len(scans) + 1, dtype=np.int64)
+        np.cumsum(np.count_nonzero(keep, axis=1), out=offsets[1:])
+        return ends, hit[keep], offsets
+
     @classmethod
     def from_log(cls, log: Log, config: Config) -> ScanSequence:
         """The scans a run of ``log`` processes (:class:`LogScans`), with their odometry."""

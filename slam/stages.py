@@ -33,19 +33,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, MapConfig
-from slam.geometry import compose, relative, spread_corrections, transform_points
+from slam.geometry import compose, relative, spread_corrections
 from slam.mapping import (
     OccupancyGrid,
     ParticleMaps,
+    ScanRays,
     _check_growth,
     growth_steps,
+    integrate_scan_rays,
     likelihood_tables,
 )
-from slam.particle_filter import (
-    FilterOutput,
-    integrate_scan,
-    particle_maps,
-)
+from slam.particle_filter import FilterOutput, particle_maps
 from slam.scans import ScanHits, ScanSequence
 
 F64 = NDArray[np.float64]
@@ -221,30 +219,57 @@ def build_map(
     grow (no cells), the grid is allocated once at its final size, and each scan is integrated
     into the part of it the growing grid covered then, with the origin it had then, so every ray
     falls on the very cells it did; the crop then moves the kept rows to the front of the same
-    buffer (:func:`_crop_in_place`). The peak is one grid instead of two (old and new copy).
+    buffer (:func:`_crop_in_place`). The peak is one grid instead of two (old and new copy). The
+    rays of all the scans are computed in one pass (:func:`_world_rays`) and integrated in one
+    kernel call (:func:`slam.mapping.integrate_scan_rays`): on mit-killian's 8194 node scans
+    that is 1.5 → 0.6 s (measured with the call per scan before).
     """
     mc = config.map
     start = OccupancyGrid(mc, center=(float(poses[0, 0]), float(poses[0, 1])))
     span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
-    plan, final = _growth_plan(seq, poses, steps, mc, start, span)
+    rays, boxes = _world_rays(seq, poses, np.asarray(steps, dtype=np.int64), mc)
+    plan, final = _growth_plan(boxes, mc, start, span)
     origin, rows, cols, bottom, left = final
     res = start.resolution
     _check_growth(4.0 * rows * cols, "an occupancy grid", cols * res, rows * res)
+    views = np.zeros((len(plan), 4), dtype=np.int64)  # (r0, c0, h, w); h = 0: no rays, skipped
+    origins = np.zeros((len(plan), 2))
+    for i, state in enumerate(plan):
+        if state is not None:
+            at, h, w, below, beside = state
+            views[i] = bottom - below, left - beside, h, w
+            origins[i] = at
     buffer = np.zeros(rows * cols, dtype=np.float32)
-    full = buffer.reshape(rows, cols)
-    part = OccupancyGrid.from_arrays(full[:0], res, origin, mc)
-    for k, state in zip(steps, plan, strict=True):
-        if state is None:  # a scan without rays: the growing grid skipped it too
-            continue
-        at, h, w, below, beside = state
-        r0, c0 = bottom - below, left - beside
-        view = full[r0 : r0 + h, c0 : c0 + w]
-        part.log_odds, part.origin = view, at
-        integrate_scan(part, seq, int(k), poses[k])
-        if part.log_odds is not view:  # the plan missed a growth: never silently lose rays
-            raise RuntimeError(f"build_map: scan {int(k)} left the planned grid")
-    del full, view, part
+    integrate_scan_rays(buffer.reshape(rows, cols), views, origins, res, rays, mc)
     return _crop_in_place(buffer, rows, cols, origin, config)
+
+
+def _world_rays(
+    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], mc: MapConfig
+) -> tuple[ScanRays, F64]:
+    """The rays :func:`slam.particle_filter.integrate_scan` would integrate for each of the scans
+    ``steps`` at ``poses[steps]``, for all of them at once, and each scan's box ``(S, 4)``:
+    ``(xmin, ymin, xmax, ymax)`` of its ray ends and sensor (NaN: no rays). The same element-wise
+    operations (:meth:`ScanSequence.ray_table`, then those of
+    :func:`slam.geometry.transform_points` and :func:`compose` over the scans), so the same
+    values to the bit, without calls per scan."""
+    ends, hit, offsets = seq.ray_table(steps, mc.free_range_no_return, mc.free_beam_stride)
+    at = poses[steps]
+    sensors = np.ascontiguousarray(compose(at, seq.laser_offset)[:, :2])
+    counts = np.diff(offsets)
+    scan_of = np.repeat(np.arange(len(steps)), counts)
+    c, s = np.cos(at[:, 2])[scan_of], np.sin(at[:, 2])[scan_of]
+    x = at[scan_of, 0] + c * ends[:, 0] - s * ends[:, 1]  # transform_points' order of operations
+    y = at[scan_of, 1] + s * ends[:, 0] + c * ends[:, 1]
+    boxes = np.full((len(steps), 4), np.nan)
+    some = np.flatnonzero(counts > 0)
+    if some.size:
+        first = offsets[some]
+        boxes[some, 0] = np.minimum(np.minimum.reduceat(x, first), sensors[some, 0])
+        boxes[some, 1] = np.minimum(np.minimum.reduceat(y, first), sensors[some, 1])
+        boxes[some, 2] = np.maximum(np.maximum.reduceat(x, first), sensors[some, 0])
+        boxes[some, 3] = np.maximum(np.maximum.reduceat(y, first), sensors[some, 1])
+    return (np.stack([x, y], axis=1), hit, offsets, sensors), boxes
 
 
 GridState = tuple[F64, int, int, int, int]
@@ -267,25 +292,18 @@ def _grown(state: GridState, box: tuple[float, float, float, float], mc: MapConf
 
 
 def _growth_plan(
-    seq: ScanSequence, poses: F64, steps: NDArray[np.int64], mc: MapConfig,
-    start: OccupancyGrid, span: F64,
-) -> tuple[list[GridState | None], GridState]:  # fmt: skip
-    """The state of the growing grid of :func:`build_map` at each scan (``None`` for a scan
-    without rays), and its final state."""
+    boxes: F64, mc: MapConfig, start: OccupancyGrid, span: F64
+) -> tuple[list[GridState | None], GridState]:
+    """The state of the growing grid of :func:`build_map` at each scan, given each scan's box
+    (:func:`_world_rays`; ``None`` for a scan without rays, a NaN box), and its final state."""
     state: GridState = (start.origin.copy(), *start.shape, 0, 0)
     state = _grown(state, tuple(float(v) for v in span), mc)
     plan: list[GridState | None] = []
-    for k in steps:
-        ends, _ = seq.rays(int(k), mc.free_range_no_return, mc.free_beam_stride)
-        if ends.shape[0] == 0:
+    for xmin, ymin, xmax, ymax in boxes:
+        if np.isnan(xmin):
             plan.append(None)
             continue
-        pose = poses[k]
-        sensor = compose(pose, seq.laser_offset)[:2]
-        world = transform_points(pose, ends)
-        lo = np.minimum(world.min(axis=0), sensor)
-        hi = np.maximum(world.max(axis=0), sensor)
-        state = _grown(state, (lo[0], lo[1], hi[0], hi[1]), mc)
+        state = _grown(state, (xmin, ymin, xmax, ymax), mc)
         plan.append(state)
     return plan, state
 

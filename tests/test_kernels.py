@@ -72,24 +72,59 @@ def test_bresenham_both_directions_cover_the_same_length(end):
     assert tuple(backward[0]) == end and tuple(backward[-1]) == (0, 0)
 
 
+def rays_into(grid, ex, ey, hit, sensor=(1.5, 1.5)):
+    """integrate_rays of one scan into the whole grid (1 m cells, origin 0)."""
+    view = np.array([[0, 0, *grid.shape]])
+    sensors = np.array([sensor], dtype=np.float64)
+    offsets = np.array([0, len(ex)])
+    return integrate_rays(grid, view, np.zeros((1, 2)), 1.0, sensors, offsets,
+                          np.array(ex), np.array(ey), np.array(hit), 1.0, -0.5, -2.0, 3.0)  # fmt: skip
+
+
 def test_integrate_rays_hits_and_misses_and_clamps():
     grid = np.zeros((10, 10), dtype=np.float32)
     # sensor at the centre of cell (1, 1), a ray along +x to cell (6, 1)
-    args = (0.0, 0.0, 1.0, 1.5, 1.5)
-    ex, ey, hit = np.array([6.5]), np.array([1.5]), np.array([True])
-    integrate_rays(grid, *args, ex, ey, hit, 1.0, -0.5, -2.0, 3.0)
+    assert rays_into(grid, [6.5], [1.5], [True]) == 6
     np.testing.assert_allclose(grid[1, 1:6], -0.5)
     assert grid[1, 6] == pytest.approx(1.0)
     assert grid[1, 7] == 0.0 and grid[2, 6] == 0.0
     for _ in range(10):
-        integrate_rays(grid, *args, ex, ey, hit, 1.0, -0.5, -2.0, 3.0)
+        rays_into(grid, [6.5], [1.5], [True])
     assert grid[1, 6] == pytest.approx(3.0)  # clamped at l_max
     np.testing.assert_allclose(grid[1, 1:6], -2.0)  # clamped at l_min
     # a free-space-only ray (no return) does not mark its end as occupied
-    integrate_rays(
-        grid, *args, np.array([1.5]), np.array([8.5]), np.array([False]), 1.0, -0.5, -2.0, 3.0
-    )
+    rays_into(grid, [1.5], [8.5], [False])
     assert grid[8, 1] == pytest.approx(-0.5)
+
+
+def test_integrate_rays_puts_each_scan_in_its_part_of_the_grid():
+    """Scan by scan, each into its own part of the grid with its own origin: the cells a part
+    holds are those its scan alone gives a grid of the part's size; a scan with h = 0 is
+    skipped, and rays leaving a part touch nothing outside it."""
+    rng = np.random.default_rng(4)
+    whole = np.zeros((30, 40), dtype=np.float32)
+    views = np.array([[2, 3, 12, 15], [10, 20, 18, 19], [0, 0, 0, 0], [2, 3, 12, 15]])
+    origins = np.array([[-1.0, 2.0], [4.0, -3.0], [0.0, 0.0], [-1.0, 2.0]])
+    sensors = np.array([[5.2, 7.9], [12.0, 4.1], [1.0, 1.0], [3.3, 9.0]])
+    ends = rng.uniform(-5.0, 25.0, (40, 2))
+    hit = rng.random(40) < 0.6
+    offsets = np.array([0, 10, 25, 30, 40])
+    count = integrate_rays(whole, views, origins, 1.0, sensors, offsets, ends[:, 0].copy(),
+                           ends[:, 1].copy(), hit, 1.0, -0.5, -2.0, 3.0)  # fmt: skip
+    want = np.zeros_like(whole)
+    total = 0
+    for i in (0, 1, 3):
+        r0, c0, h, w = views[i]
+        part = np.zeros((h, w), dtype=np.float32)
+        part[:] = want[r0 : r0 + h, c0 : c0 + w]
+        a, b = offsets[i], offsets[i + 1]
+        total += integrate_rays(part, np.array([[0, 0, h, w]]), origins[i : i + 1], 1.0,
+                                sensors[i : i + 1], np.array([0, b - a]), ends[a:b, 0].copy(),
+                                ends[a:b, 1].copy(), hit[a:b], 1.0, -0.5, -2.0, 3.0)  # fmt: skip
+        want[r0 : r0 + h, c0 : c0 + w] = part
+    assert count == total > 50
+    assert whole.tobytes() == want.tobytes()
+    assert (whole[:2] == 0).all() and (whole[:, :3] == 0).all()  # outside every part
 
 
 def test_correlation_counts_endpoints_on_occupied_cells():

@@ -58,6 +58,35 @@ def test_hits_and_rays_follow_the_range_semantics():
     assert hit.tolist() == [True, False]
 
 
+def test_the_ray_table_is_every_scans_rays_to_the_bit():
+    """ScanSequence.ray_table (the final map's one pass over its scans) gives what Scan.rays
+    gives scan by scan: scans of 7 to 12 beams with every kind of reading, their own limits and
+    laser poses, a scan with no ray at all, with and without thinning."""
+    rng = np.random.default_rng(11)
+    seq = ScanSequence()
+    for k in range(40):
+        n = int(rng.integers(7, 13))
+        ranges = rng.uniform(0.05, 10.0, n)
+        ranges[rng.random(n) < 0.15] = np.nan
+        ranges[rng.random(n) < 0.15] = 8.0  # "no return" under LIDAR
+        if k == 17:
+            ranges[:] = np.nan
+        angles = np.sort(rng.uniform(-2.0, 2.0, n))
+        own = {"range_max": 4.0, "laser_offset": rng.normal(0.0, 0.2, 3)} if k % 3 == 0 else {}
+        seq.append(Scan(0.1 * k, ranges, angles, **own).resolved(LIDAR), [k, 0.0, 0.0])
+    steps = np.array([3, 0, 17, 5, 5, *range(6, 40, 2)])
+    for free, stride in ((2.0, 1), (0.0, 1), (3.0, 3)):
+        ends, hit, offsets = seq.ray_table(steps, free, stride)
+        assert offsets[0] == 0 and offsets[-1] == ends.shape[0] == hit.shape[0] > 100
+        for i, k in enumerate(steps):
+            want_ends, want_hit = seq.rays(int(k), free, stride)
+            a, b = offsets[i], offsets[i + 1]
+            assert ends[a:b].tobytes() == want_ends.tobytes()
+            assert hit[a:b].tolist() == want_hit.tolist()
+        assert offsets[3] == offsets[2]  # scan 17: no ray
+    assert hit.any() and not hit.all()
+
+
 def test_scan_sequence_grows_and_keeps_every_scan():
     seq = ScanSequence(capacity=2)
     for k in range(5):

@@ -85,14 +85,15 @@ def test_pictures_by_blocks_of_rows_equal_the_whole(monkeypatch):
 
 def test_the_room_map_grows_many_times(room):
     """The test above is only worth something if the growing grid grows often."""
-    from slam.stages import _growth_plan
+    from slam.stages import _growth_plan, _world_rays
 
     seq, config = room
     poses = turning(seq)
     steps = np.arange(0, len(seq), 2)
     start = OccupancyGrid(config.map, center=(float(poses[0, 0]), float(poses[0, 1])))
     span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
-    plan, _ = _growth_plan(seq, poses, steps, config.map, start, span)
+    _, boxes = _world_rays(seq, poses, steps, config.map)
+    plan, _ = _growth_plan(boxes, config.map, start, span)
     shapes = {(s[1], s[2]) for s in plan if s is not None}
     assert len(shapes) >= 3
 

@@ -78,11 +78,11 @@ def _add_clamped(grid, ix, iy, value, lo, hi):
 @njit(cache=True)
 def integrate_rays(
     log_odds: np.ndarray,
-    ox: float,
-    oy: float,
+    views: np.ndarray,
+    origins: np.ndarray,
     res: float,
-    sx: float,
-    sy: float,
+    sensors: np.ndarray,
+    offsets: np.ndarray,
     ex: np.ndarray,
     ey: np.ndarray,
     hit: np.ndarray,
@@ -91,14 +91,37 @@ def integrate_rays(
     l_min: float,
     l_max: float,
 ) -> int:
-    """Log-odds update of ``log_odds`` for rays from sensor ``(sx, sy)`` to endpoints ``(ex, ey)``.
+    """Log-odds update of ``log_odds`` for the rays of one scan or several, one after the other.
 
-    Every cell a ray passes through gets ``l_miss``; the end cell gets ``l_hit`` when ``hit[k]``
-    (an obstacle return) and ``l_miss`` otherwise (a ray cut at the free-space limit). Values
-    are clamped to ``[l_min, l_max]``. Cells outside the grid are skipped (callers grow the grid
-    first). Returns the number of cells updated.
+    Scan ``i`` has the rays ``offsets[i]:offsets[i + 1]`` from its sensor ``sensors[i]`` to the
+    endpoints ``(ex, ey)``; it updates the rows ``r0:r0 + h`` and columns ``c0:c0 + w`` of
+    ``log_odds`` (``views[i]`` = ``(r0, c0, h, w)``; ``h = 0``: skipped) as a grid whose cell
+    (0, 0) has its lower-left corner at ``origins[i]`` (one scan into a whole grid:
+    ``(0, 0, *log_odds.shape)``; :func:`slam.stages.build_map` replays a growing grid in
+    parts of its final one). Every cell a ray passes through gets ``l_miss``; the end cell gets
+    ``l_hit`` when ``hit[k]`` (an obstacle return) and ``l_miss`` otherwise (a ray cut at the
+    free-space limit). Values are clamped to ``[l_min, l_max]``. Cells outside the part are
+    skipped (callers grow the grid first). Returns the number of cells updated.
     """
-    h, w = log_odds.shape
+    count = 0
+    for i in range(views.shape[0]):
+        r0, c0, h, w = views[i, 0], views[i, 1], views[i, 2], views[i, 3]
+        if h == 0:
+            continue
+        a, b = offsets[i], offsets[i + 1]
+        count += _integrate_part(
+            log_odds, r0, c0, h, w, origins[i, 0], origins[i, 1], res, sensors[i, 0],
+            sensors[i, 1], ex[a:b], ey[a:b], hit[a:b], l_hit, l_miss, l_min, l_max,
+        )  # fmt: skip
+    return count
+
+
+@njit(cache=True)
+def _integrate_part(
+    log_odds, r0, c0, h, w, ox, oy, res, sx, sy, ex, ey, hit, l_hit, l_miss, l_min, l_max
+):
+    """One scan of :func:`integrate_rays`: into the ``h × w`` cells of ``log_odds`` from row
+    ``r0`` and column ``c0``, addressed in place (a slice would be another compiled layout)."""
     x0 = cell_index(sx, ox, res)
     y0 = cell_index(sy, oy, res)
     count = 0
@@ -109,10 +132,10 @@ def integrate_rays(
         x, y = x0, y0
         for _ in range(max(dx, dy)):
             if 0 <= x < w and 0 <= y < h:
-                _add_clamped(log_odds, x, y, l_miss, l_min, l_max)
+                _add_clamped(log_odds, c0 + x, r0 + y, l_miss, l_min, l_max)
                 count += 1
             x, y, err = line_step(x, y, err, dx, dy, stepx, stepy)
         if 0 <= x1 < w and 0 <= y1 < h:
-            _add_clamped(log_odds, x1, y1, l_hit if hit[k] else l_miss, l_min, l_max)
+            _add_clamped(log_odds, c0 + x1, r0 + y1, l_hit if hit[k] else l_miss, l_min, l_max)
             count += 1
     return count
