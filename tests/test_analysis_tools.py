@@ -34,8 +34,33 @@ def test_short_relations_count_where_slam_is_worse_than_dead_reckoning():
     assert figures["odometry_over_slam_under_half"] == 2
     assert figures["bad_slam_to_odometry_median_m"] == pytest.approx(0.5, abs=1e-3)
     assert figures["bad_relation_length_median_m"] == pytest.approx(2.0)
+    assert figures["long_relations"] == 0 and figures["long_worst"] == []
     none = tool.compare(relations, {"slam": slam, "odometry": odometry}, span=1.0)
     assert none["short_relations"] == 0 and none["slam_share_over"] is None
+
+
+def test_long_relations_say_which_windows_carry_the_run_s_error():
+    """Relations of 2 s and of 150 s (the loops): with --span 10 the long ones are counted, and
+    those from the first 100 s to 200-300 s, where the run is 0.6 m off after a slip at 170 s,
+    come first among the windows, with their share of the run's mean."""
+    tool = load_tool("short_relations")
+    n = 400
+    truth = _straight(n)
+    t1 = np.r_[np.arange(0.0, n - 2), np.arange(0.0, 100.0, 5.0)]
+    t2 = np.r_[t1[: n - 2] + 2.0, t1[n - 2 :] + 150.0]
+    relations = Relations(t1, t2, t2 - t1, np.zeros(t1.size), np.zeros(t1.size))
+    slam = Trajectory(truth.times, truth.poses.copy())
+    slam.poses[170:, 1] += 0.6
+    figures = tool.compare(relations, {"slam": slam, "odometry": truth}, span=10.0)
+    assert figures["long_relations"] == 20
+    long_errors = np.where(t2[n - 2 :] >= 170, 0.6, 0.0)
+    assert figures["slam_long_mean_m"] == pytest.approx(long_errors.mean(), abs=1e-4)
+    share = long_errors.sum() / t1.size
+    worst = figures["long_worst"]
+    assert worst[0]["t1_s"] == 0.0 and worst[0]["t2_s"] == 200.0
+    assert worst[0]["mean_m"] == pytest.approx(0.6, abs=1e-3)
+    assert sum(w["share_of_mean_m"] for w in worst) == pytest.approx(share, abs=1e-3)
+    assert figures["long_share_of_slam_mean_m"] == pytest.approx(share, abs=1e-4)
 
 
 def test_short_relations_flag_the_ones_that_travel_sideways_of_dead_reckoning():

@@ -9,7 +9,10 @@ on its bad relations, and the relations' rotation on the bad and the good ones (
 "fr-clinic's short relations"); the mean error of both runs on the short relations; and the
 short relations at least ``--sideways-length`` long whose direction of travel, in the frame of
 their first pose, differs from dead reckoning's by more than ``--sideways`` degrees, with the
-share of the SLAM run's mean error (over all its relations) that they carry. Odometry reports
+share of the SLAM run's mean error (over all its relations) that they carry; and for the
+relations at least ``--span`` long, the SLAM run's mean error on them, the share of its mean they
+carry, and the windows of 100 s (at either end) whose relations carry the most of it (docs/slam.md,
+"fr-clinic's return to its start"). Odometry reports
 motion along the robot's heading; a relation that has the robot travel 10–20° off it for tens of
 seconds, where dead reckoning goes straight, is one to check against the scans before blaming
 the run (docs/slam.md, "fr-clinic's reference where its scans disagree").
@@ -65,6 +68,37 @@ def _spans(a: np.ndarray, b: np.ndarray, gap: float = 30.0) -> list[list[float]]
     return spans
 
 
+def _worst_pairs(
+    t1: np.ndarray,
+    t2: np.ndarray,
+    error: np.ndarray,
+    total: int,
+    bin_s: float = 100.0,
+    most: int = 5,
+) -> list[dict]:
+    """The relations ``t1 → t2`` grouped by the ``bin_s``-second windows of both ends, the
+    ``most`` groups that carry the largest share of a run's mean error over its ``total``
+    relations, largest first: their windows' starts (s), count, mean error and that share."""
+    if error.size == 0:
+        return []
+    key = np.c_[np.floor(t1 / bin_s), np.floor(t2 / bin_s)]
+    groups, where = np.unique(key, axis=0, return_inverse=True)
+    where = where.reshape(-1)
+    sums = np.bincount(where, weights=error, minlength=len(groups))
+    counts = np.bincount(where, minlength=len(groups))
+    order = np.argsort(-sums, kind="stable")[:most]
+    return [
+        {
+            "t1_s": float(groups[g, 0] * bin_s),
+            "t2_s": float(groups[g, 1] * bin_s),
+            "relations": int(counts[g]),
+            "mean_m": round(float(sums[g] / counts[g]), 3),
+            "share_of_mean_m": round(float(sums[g] / total), 4),
+        }
+        for g in order
+    ]
+
+
 def compare(
     relations: Relations,
     runs: dict[str, Trajectory],
@@ -95,7 +129,19 @@ def compare(
         & (np.abs(turn) > np.radians(sideways_deg))
     )
     all_slam = errors["slam"].trans
+    slam_long = trans["slam"][~short]
     return {
+        "long_relations": int((~short).sum()),
+        "slam_long_mean_m": round(float(slam_long.mean()), 4) if slam_long.size else None,
+        "long_share_of_slam_mean_m": (
+            round(float(slam_long.sum() / all_slam.size), 4) if all_slam.size else None
+        ),
+        "long_worst": _worst_pairs(
+            t1[~short] - relations.t1.min(),
+            t2[~short] - relations.t1.min(),
+            slam_long,
+            all_slam.size,
+        ),
         "short_relations": int(short.sum()),
         "slam_short_mean_m": round(float(trans["slam"][short].mean()), 4) if short.any() else None,
         "odometry_short_mean_m": (
