@@ -220,15 +220,18 @@ def build_map(
     into the part of it the growing grid covered then, with the origin it had then, so every ray
     falls on the very cells it did; the crop then moves the kept rows to the front of the same
     buffer (:func:`_crop_in_place`). The peak is one grid instead of two (old and new copy). The
-    rays of all the scans are computed in one pass (:func:`_world_rays`) and integrated in one
-    kernel call (:func:`slam.mapping.integrate_scan_rays`): on mit-killian's 8194 node scans
-    that is 1.5 → 0.6 s (measured with the call per scan before).
+    rays are computed for many scans at once (:func:`_world_rays`, ``_RAYS_AT_ONCE`` beams at a
+    time, once for the plan and again to integrate them) and integrated in one kernel call per
+    such part (:func:`slam.mapping.integrate_scan_rays`), not in numpy and kernel calls per scan.
     """
     mc = config.map
     start = OccupancyGrid(mc, center=(float(poses[0, 0]), float(poses[0, 1])))
     span = np.concatenate([poses[:, :2].min(axis=0) - 1.0, poses[:, :2].max(axis=0) + 1.0])
-    rays, boxes = _world_rays(seq, poses, np.asarray(steps, dtype=np.int64), mc)
-    plan, final = _growth_plan(boxes, mc, start, span)
+    steps = np.asarray(steps, dtype=np.int64)
+    at_once = max(1, _RAYS_AT_ONCE // max(seq.num_beams, 1))  # scans whose rays fit at once
+    parts = [steps[a : a + at_once] for a in range(0, steps.size, at_once)]
+    boxes = np.concatenate([_world_rays(seq, poses, part, mc)[1] for part in parts] or [[]])
+    plan, final = _growth_plan(boxes.reshape(-1, 4), mc, start, span)
     origin, rows, cols, bottom, left = final
     res = start.resolution
     _check_growth(4.0 * rows * cols, "an occupancy grid", cols * res, rows * res)
@@ -240,8 +243,16 @@ def build_map(
             views[i] = bottom - below, left - beside, h, w
             origins[i] = at
     buffer = np.zeros(rows * cols, dtype=np.float32)
-    integrate_scan_rays(buffer.reshape(rows, cols), views, origins, res, rays, mc)
+    for a, part in zip(range(0, steps.size, at_once), parts, strict=True):
+        rays, _ = _world_rays(seq, poses, part, mc)  # again: rays of a few scans at a time
+        b = a + part.size
+        integrate_scan_rays(buffer.reshape(rows, cols), views[a:b], origins[a:b], res, rays, mc)
     return _crop_in_place(buffer, rows, cols, origin, config)
+
+
+_RAYS_AT_ONCE = 1 << 16
+"""Beams whose rays :func:`build_map` computes at once (:func:`_world_rays`, as many scans as
+hold this many beams): a few MB of rays at a time, whatever the length of the log."""
 
 
 def _world_rays(

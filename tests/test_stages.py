@@ -8,6 +8,7 @@ import pytest
 from synthetic_logs import carmen_lines, write_carmen
 
 import slam.rowwise as rowwise
+import slam.stages as stages
 from slam.config import MapConfig, load_config
 from slam.io import sources
 from slam.io.exports import clean_image
@@ -52,7 +53,10 @@ def room(tmp_path_factory) -> tuple[ScanSequence, object]:
     return ScanSequence.from_log(log, config), config
 
 
-def test_final_map_equals_the_growing_grid_to_the_bit(room):
+@pytest.mark.parametrize("beams_at_once", [1 << 16, 7 * 181])
+def test_final_map_equals_the_growing_grid_to_the_bit(room, monkeypatch, beams_at_once):
+    """Whether the rays of the 30 scans are computed together or 7 scans at a time."""
+    monkeypatch.setattr(stages, "_RAYS_AT_ONCE", beams_at_once)
     seq, config = room
     poses = turning(seq)
     steps = np.arange(0, len(seq), 2)
