@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import NamedTuple, Protocol
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,9 @@ from slam.mapping import (
 )
 from slam.particle_filter import FilterOutput, particle_maps
 from slam.scans import ScanHits, ScanSequence
+
+if TYPE_CHECKING:
+    from slam.eval.quality import Rays
 
 F64 = NDArray[np.float64]
 
@@ -156,14 +159,81 @@ class OdometrySmoothing:
         if pairs == 0:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
-        reg = (rc.smooth_sigma_xy, rc.smooth_sigma_th)
-        poses = smooth_with_odometry(output.poses, odometry, reg, odo, config.loops)
+        if self.measured.get("choice_of") is not seq:  # the first round chooses the scale
+            scale, scores, poses = choose_smoothing(output.poses, odometry, seq, odo, config)
+            self.measured.update(choice_of=seq, scale=scale, scores=scores)
+        else:
+            scale = self.measured["scale"]
+            reg = (scale * rc.smooth_sigma_xy, scale * rc.smooth_sigma_th)
+            poses = smooth_with_odometry(output.poses, odometry, reg, odo, config.loops)
         stats = {
             **output.stats,
             "odometry_disagreement_m": round(sxy, 4),
             "odometry_disagreement_deg": round(float(np.degrees(sth)), 3),
+            "smooth_scale": scale,
         }
+        if self.measured["scores"]:
+            stats["smooth_scale_scores"] = [
+                round(v, 4) if np.isfinite(v) else None for v in self.measured["scores"]
+            ]
         return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps], stats=stats)
+
+
+def choose_smoothing(
+    poses: F64, odometry: F64, seq: ScanSequence, odo: tuple[float, float], config: Config
+) -> tuple[float, list[float], F64]:
+    """The multiple of the registration's sigmas :attr:`~slam.config.RbpfConfig.smooth_scales`
+    picks for ``poses`` (every scan's, registered) and the odometry's sigmas ``odo``: each
+    scale's smoothed trajectory (:func:`slam.graph.smooth_with_odometry`) scored by the map
+    quality (:func:`slam.eval.quality.map_quality`) of every ``smooth_choice_every``-th scan,
+    the best unless it beats the first by less than ``smooth_choice_margin``. Returns the scale,
+    the scores (empty with one scale: nothing scored) and the chosen trajectory."""
+    from slam.eval.quality import map_quality
+    from slam.graph import smooth_with_odometry
+
+    rc = config.rbpf
+    trials = []
+    for scale in rc.smooth_scales:
+        reg = (scale * rc.smooth_sigma_xy, scale * rc.smooth_sigma_th)
+        trials.append(smooth_with_odometry(poses, odometry, reg, odo, config.loops))
+    if len(trials) == 1:
+        return rc.smooth_scales[0], [], trials[0]
+    picks = np.arange(0, len(seq), rc.smooth_choice_every)
+    rays = quality_rays(seq, picks, config)
+    times = seq.times[picks]
+    scores = [
+        map_quality(times, trial[picks], rays, config.quality, config.map).score for trial in trials
+    ]
+    values = np.nan_to_num(np.array(scores), nan=-np.inf)  # NaN: nothing judged
+    best = int(np.argmax(values))
+    if not values[best] - values[0] >= rc.smooth_choice_margin:
+        best = 0
+    return rc.smooth_scales[best], scores, trials[best]
+
+
+def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) -> Rays:
+    """The rays of scans ``picks`` of ``seq`` as the map-quality score reads them
+    (:func:`slam.eval.quality.scan_rays`: the scans padded to one width with NaN readings, each
+    with its own beam angles, at most ``rbpf.smooth_choice_beams`` of them; the range limits
+    and laser pose of the first scan)."""
+    from slam.eval.quality import scan_rays
+
+    first = seq.scan(0)
+    ranges = np.full((picks.size, seq.num_beams), np.nan)
+    angles = np.zeros((picks.size, seq.num_beams))
+    for i, k in enumerate(picks):
+        scan = seq.scan(int(k))
+        ranges[i, : scan.num_beams] = scan.ranges
+        angles[i, : scan.num_beams] = scan.angles
+    most = config.rbpf.smooth_choice_beams
+    if seq.num_beams > most:  # evenly spread, as Scan.hits thins
+        beams = np.linspace(0, seq.num_beams - 1, most).round().astype(np.int64)
+        ranges = np.ascontiguousarray(ranges[:, beams])  # (a column pick is Fortran-ordered:
+        angles = np.ascontiguousarray(angles[:, beams])  # the score's kernels would compile anew)
+    return scan_rays(
+        ranges, angles, seq.laser_offset, first.range_min, first.range_max, first.no_return,
+        config.map.free_range_no_return,
+    )  # fmt: skip
 
 
 class FinalMap:

@@ -3,6 +3,8 @@ the grid that grows scan by scan, to the bit; the row-block pictures equal the w
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from synthetic_logs import carmen_lines, write_carmen
@@ -202,3 +204,61 @@ def test_registration_beams_give_what_each_scan_gives(most):
     for a, b in zip(got, want, strict=True):
         assert a.dtype == b.dtype and a.shape == b.shape
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.fixture(scope="module")
+def long_room(tmp_path_factory) -> tuple[ScanSequence, object]:
+    """120 scans along the synthetic room (6 m), with map-quality stretches of 1 m so that
+    every stretch is judged against the others' map."""
+    path = write_carmen(tmp_path_factory.mktemp("long_room"), carmen_lines(120))
+    overrides = ["quality.stretch_m=1.0", "quality.separation_m=1.0", "rbpf.smooth_choice_every=1",
+                 "rbpf.smooth_scales=[1.0, 10.0, 50.0]"]  # fmt: skip
+    config = load_config("", None, overrides)
+    ref = sources.resolve(str(path), path.parent, where="test")
+    log = sources.load(ref, config, ("scans",)).log
+    return ScanSequence.from_log(log, config), config
+
+
+def test_the_map_quality_picks_the_odometry_where_it_is_the_better_shape(long_room):
+    """The registered poses bent by a slow wave (a distorted node map) and an exact odometry:
+    trusting the odometry's shape (the largest scale) scores best and is picked; the same
+    poses exact and an odometry that curves away: the registration's own sigmas are kept."""
+    from slam.stages import choose_smoothing
+
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    k = np.arange(len(seq))
+    bent = truth.copy()
+    bent[:, 1] += 0.3 * np.sin(k / 10.0)
+    bent[:, 2] += 0.03 * np.cos(k / 10.0)
+    scale, scores, poses = choose_smoothing(bent, truth, seq, (0.002, 0.001), config)
+    assert scale == 10.0 and len(scores) == 3  # 10 and 50 score alike (1.0): the first of them
+    assert scores[0] < 0.9 and scores[1] - scores[0] >= config.rbpf.smooth_choice_margin
+    bent_err = np.abs(bent[:, 1] - truth[:, 1]).mean()  # 0.195 m
+    assert np.abs(poses[:, 1] - truth[:, 1]).mean() < 0.2 * bent_err  # 0.018 m
+    from slam.geometry import accumulate, relative
+
+    steps = relative(truth[:-1], truth[1:])
+    steps[:, 2] += 0.02  # the odometry turns 1.1° a step too far
+    curved = accumulate(steps, truth[0])
+    scale, scores, poses = choose_smoothing(truth, curved, seq, (0.002, 0.001), config)
+    assert scale == 1.0 and scores[0] > 0.95 and max(scores[1:]) < 0.5
+    assert np.abs(poses[:, :2] - truth[:, :2]).max() < 0.03
+
+
+def test_one_smoothing_scale_is_no_choice(long_room):
+    """With one scale the trajectory is the smoothing's with the configured sigmas, bit for bit,
+    and nothing is scored."""
+    from slam.graph import smooth_with_odometry
+    from slam.stages import choose_smoothing
+
+    seq, config = long_room
+    one = dataclasses.replace(config, rbpf=dataclasses.replace(config.rbpf, smooth_scales=(1.0,)))
+    rng = np.random.default_rng(2)
+    poses = seq.odometry + rng.normal(0.0, 0.01, seq.odometry.shape)
+    scale, scores, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), one)
+    rc = config.rbpf
+    want = smooth_with_odometry(
+        poses, seq.odometry, (rc.smooth_sigma_xy, rc.smooth_sigma_th), (0.004, 0.002), one.loops
+    )
+    assert scale == 1.0 and scores == [] and got.tobytes() == want.tobytes()

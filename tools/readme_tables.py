@@ -480,6 +480,7 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "slam.seeds_intel": seed_range("intel"),
     "slam.seeds_aces": seed_range("aces"),
     "slam.seeds_fr079": seed_range("fr079"),
+    "slam.seeds_fr-clinic": seed_range("fr-clinic"),
     "slam.demo_scans": _figure("slam.demo_100", "scans"),
     "slam.classic_path": _figure("slam.demo_classic_100", "path_length_m", digits=1),
     "slam.true_path": _figure("slam.demo_classic_100", "true_path_length_m", digits=1),
