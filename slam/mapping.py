@@ -87,14 +87,14 @@ def growth_steps(
     )
 
 
-ScanRays = tuple[F64, NDArray[np.bool_], NDArray[np.int64], F64]
+WorldRays = tuple[F64, NDArray[np.bool_], NDArray[np.int64], F64]
 """Rays of several scans in the world, scan after scan: ends ``(N, 2)``, which end on an
 obstacle return ``(N,)``, the offsets ``(S + 1,)`` (scan ``i``'s rays are
 ``offsets[i]:offsets[i + 1]``) and the sensors ``(S, 2)``."""
 
 
 def integrate_scan_rays(log_odds: NDArray[np.float32], views: NDArray[np.int64], origins: F64,
-                        resolution: float, rays: ScanRays, config: MapConfig) -> None:  # fmt: skip
+                        resolution: float, rays: WorldRays, config: MapConfig) -> None:  # fmt: skip
     """Bresenham log-odds update of ``log_odds`` with the ``rays`` of several scans, in order,
     with ``config``'s log-odds: scan ``i`` into the rows and columns ``views[i]`` = ``(r0, c0,
     h, w)`` of ``log_odds`` as a grid of ``resolution`` whose cell (0, 0) has its lower-left

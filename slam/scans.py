@@ -209,18 +209,36 @@ class Scan:
         self._require_resolved()
         r = self.ranges.astype(np.float64)
         a = self.angles
-        valid = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min)
-        hit = valid & (r < self.range_max)
-        length = np.where(r < self.no_return, np.minimum(r, self.range_max), free_range_no_return)
-        keep = hit | (valid & (length > 0))
-        if stride > 1:
-            thin = np.zeros_like(keep)
-            thin[::stride] = True
-            keep &= hit | thin
+        limits = (self.range_min, self.range_max, self.no_return)  # resolved: numbers
+        keep, hit, length = ray_kinds(r, a, *limits, free_range_no_return, stride)  # type: ignore
         lx, ly, lt = self.laser_offset  # type: ignore[misc]
         c, s = np.cos(lt + a[keep]), np.sin(lt + a[keep])
         ends = np.stack([lx + length[keep] * c, ly + length[keep] * s], axis=1)
         return ends, hit[keep]
+
+
+def ray_kinds(
+    r: F64,
+    a: F64,
+    range_min: float | F64,
+    range_max: float | F64,
+    no_return: float | F64,
+    free_range_no_return: float,
+    stride: int = 1,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], F64]:
+    """Which readings ``r`` (at beam angles ``a``; one scan ``(B,)`` or scans ``(S, B)`` with
+    ``(S, 1)`` limits) give a ray for an occupancy update, which of those are hits, and each
+    ray's length: the range semantics of :meth:`Scan.rays` and :meth:`ScanSequence.ray_table`.
+    Returns ``(keep, hit, length)``, ``hit`` over all readings."""
+    valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min)
+    hit = valid & (r < range_max)
+    length = np.where(r < no_return, np.minimum(r, range_max), free_range_no_return)
+    keep = hit | (valid & (length > 0))
+    if stride > 1:  # every stride-th beam of each scan (hits are always kept)
+        thin = np.zeros_like(keep)
+        thin[..., ::stride] = True
+        keep &= hit | thin
+    return keep, hit, length
 
 
 def odometry_pose(scan: Scan, odometry: ArrayLike) -> NDArray[np.float64]:
@@ -411,14 +429,9 @@ class ScanSequence:
             limits[i, :3] = scan.range_min, scan.range_max, scan.no_return
             limits[i, 3:] = scan.laser_offset
         range_min, range_max, no_return, lx, ly, lt = (limits[:, j, None] for j in range(6))
-        valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min)
-        hit = valid & (r < range_max)
-        length = np.where(r < no_return, np.minimum(r, range_max), free_range_no_return)
-        keep = hit | (valid & (length > 0))
-        if stride > 1:
-            thin = np.zeros_like(keep)
-            thin[:, ::stride] = True
-            keep &= hit | thin
+        keep, hit, length = ray_kinds(
+            r, a, range_min, range_max, no_return, free_range_no_return, stride
+        )
         rows = np.nonzero(keep)[0]
         angle = (lt + a)[keep]
         c, s = np.cos(angle), np.sin(angle)

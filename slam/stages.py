@@ -37,7 +37,7 @@ from slam.geometry import compose, relative, spread_corrections
 from slam.mapping import (
     OccupancyGrid,
     ParticleMaps,
-    ScanRays,
+    WorldRays,
     _check_growth,
     growth_steps,
     integrate_scan_rays,
@@ -327,7 +327,7 @@ hold this many beams): a few MB of rays at a time, whatever the length of the lo
 
 def _world_rays(
     seq: ScanSequence, poses: F64, steps: NDArray[np.int64], mc: MapConfig
-) -> tuple[ScanRays, F64]:
+) -> tuple[WorldRays, F64]:
     """The rays :func:`slam.particle_filter.integrate_scan` would integrate for each of the scans
     ``steps`` at ``poses[steps]``, for all of them at once, and each scan's box ``(S, 4)``:
     ``(xmin, ymin, xmax, ymax)`` of its ray ends and sensor (NaN: no rays). The same element-wise

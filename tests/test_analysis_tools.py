@@ -90,6 +90,9 @@ def test_short_relations_flag_the_ones_that_travel_sideways_of_dead_reckoning():
         ("--sideways", "-5", "--sideways: expected degrees in [0, 180], found -5"),
         ("--sideways", "200", "--sideways: expected degrees in [0, 180], found 200"),
         ("--sideways-length", "-1", "--sideways-length: expected metres >= 0, found -1"),
+        ("--span", "0", "--span: expected seconds > 0, found 0"),
+        ("--span", "nan", "--span: expected seconds > 0, found nan"),
+        ("--over", "-0.2", "--over: expected metres > 0, found -0.2"),
     ],
 )
 def test_short_relations_refuse_a_threshold_out_of_range(

@@ -194,6 +194,12 @@ def main() -> int:
     )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if not args.span > 0.0:
+        print(f"--span: expected seconds > 0, found {args.span:g}", file=sys.stderr)
+        return 2
+    if not args.over > 0.0:
+        print(f"--over: expected metres > 0, found {args.over:g}", file=sys.stderr)
+        return 2
     if not 0.0 <= args.sideways <= 180.0:
         print(f"--sideways: expected degrees in [0, 180], found {args.sideways:g}", file=sys.stderr)
         return 2
