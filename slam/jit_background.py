@@ -8,10 +8,13 @@ loads the log and compiles and runs the filter: the two cores compile at once. W
 which argument types, and in which stage they are first called comes from ``slam/jit_manifest.json``
 (written by ``tools/make_jit_manifest.py`` from a cold ``slam run demo``).
 
-When this process reaches a stage (:func:`reach_stage`), it waits until the background process
-has finished that stage's kernels, then loads them from the cache: a kernel is never compiled twice.
-The wait counts as compilation time (:func:`slam.jit.compile_seconds`), and the progress bar says
-"compiling kernels (first run only)" meanwhile. :func:`report` is what ``metrics.json`` records as
+When this process reaches a stage (:func:`reach_stage`) whose kernels the background process is
+still compiling, it compiles that stage's kernels itself from the last one backwards, those the
+background process has not started (it tells it to skip them), until the background process,
+going on from the first, reports the stage done; then it loads the background process's kernels
+from the cache. At most the kernel the two meet on is compiled twice. The time counts as
+compilation (:func:`slam.jit.compile_seconds`), and the progress bar says "compiling kernels
+(first run only)" meanwhile. :func:`report` is what ``metrics.json`` records as
 ``compile_background``.
 
 It is off with ``SLAM_BACKGROUND_COMPILE=0``, on one core, without the manifest, and when every
@@ -160,15 +163,19 @@ def _is_cached(dispatcher: Any, signature: tuple) -> bool:
 
 def _child(manifest_path: str, stages: list[str]) -> None:
     """The background process: compile the manifest's kernels of ``stages``, in that order,
-    printing one JSON line when each stage is done and one at the end."""
+    printing one JSON line when it starts a kernel (``{"start": i}``, ``i`` its position in the
+    manifest), one when each stage is done and one at the end. A position read from stdin is a
+    kernel the main process compiles itself (:meth:`BackgroundCompiler.wait_for`): skipped."""
     manifest = load_manifest(Path(manifest_path))
     jit.install()
+    claims = _Claims(sys.stdin.fileno())
     total_start = time.perf_counter()
     for stage in stages:
         start, cpu, count = time.perf_counter(), jit.compile_cpu_seconds(), 0
-        for entry in manifest["kernels"]:
-            if entry["stage"] != stage:
+        for i, entry in enumerate(manifest["kernels"]):
+            if entry["stage"] != stage or i in claims.read():
                 continue
+            print(json.dumps({"start": i}), flush=True)
             try:
                 kernel(entry["kernel"]).compile(_signature(entry))
                 count += 1
@@ -186,17 +193,60 @@ def _child(manifest_path: str, stages: list[str]) -> None:
     print(json.dumps(end), flush=True)
 
 
+class _Claims:
+    """The kernels the main process has claimed, as positions it writes one per line to the
+    child's stdin; :meth:`read` takes in, without blocking, every line written so far."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.claimed: set[int] = set()
+        self.rest = b""
+        self.open = True
+        try:
+            os.set_blocking(fd, False)
+        except OSError:  # not a pipe (a terminal, /dev/null): nothing will be claimed
+            self.open = False
+
+    def read(self) -> set[int]:
+        """Every position claimed so far."""
+        while self.open:
+            try:
+                chunk = os.read(self.fd, 4096)
+            except BlockingIOError:
+                break
+            except OSError:
+                self.open = False
+                break
+            if not chunk:  # the main process closed the pipe
+                self.open = False
+                break
+            *lines, self.rest = (self.rest + chunk).split(b"\n")
+            self.claimed.update(int(line) for line in lines if line.strip().isdigit())
+        return self.claimed
+
+
 class BackgroundCompiler:
-    """The background process and what it has reported so far."""
+    """The background process and what it has reported so far.
+
+    Both processes compile a stage's kernels when this one waits for it: the child from the
+    first, this process from the last (:meth:`wait_for`), so a wait lasts about half of what is
+    left to compile instead of all of it.
+    """
 
     def __init__(self, manifest_path: Path, stages: list[str], kernels: int) -> None:
         self.stages = stages
         self.kernels = kernels
+        self.entries = load_manifest(manifest_path)["kernels"]
         self.started = time.perf_counter()
         self.done: dict[str, dict[str, Any]] = {}
         self.errors: list[str] = []
         self.end: dict[str, Any] | None = None
         self.waited: dict[str, float] = {}
+        self.begun: set[int] = set()
+        """Manifest positions the child has started compiling."""
+        self.taken: list[str] = []
+        """Kernels this process compiled itself while it waited (:meth:`wait_for`)."""
+        self._claimed: set[int] = set()
         self._cond = threading.Condition()
         code = (
             "import sys; from slam.jit_background import _child; _child(sys.argv[1], sys.argv[2:])"
@@ -205,7 +255,7 @@ class BackgroundCompiler:
             [sys.executable, "-c", code, str(manifest_path), *stages],
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
-            stdin=subprocess.DEVNULL,
+            stdin=subprocess.PIPE,
             text=True,
         )
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -220,7 +270,9 @@ class BackgroundCompiler:
             except ValueError:
                 continue
             with self._cond:
-                if "stage" in line:
+                if "start" in line:
+                    self.begun.add(int(line["start"]))
+                elif "stage" in line:
                     self.done[line["stage"]] = line
                 elif "error" in line:
                     self.errors.append(line["error"])
@@ -233,16 +285,49 @@ class BackgroundCompiler:
                 self.end = {"end": True, "exit_code": self.proc.returncode}
             self._cond.notify_all()
 
+    def _claim(self, stage: str) -> int | None:
+        """The last kernel of ``stage`` that neither process has started, now this process's
+        (the child is told to skip it); None when there is none. Called holding the lock."""
+        for i in range(len(self.entries) - 1, -1, -1):
+            if self.entries[i]["stage"] != stage or i in self.begun or i in self._claimed:
+                continue
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.write(f"{i}\n")
+                self.proc.stdin.flush()
+            except (OSError, ValueError):  # the child has ended: nothing left to share
+                return None
+            self._claimed.add(i)
+            return i
+        return None
+
     def wait_for(self, stage: str) -> float:
-        """Block until the background process has compiled ``stage``'s kernels (or ended);
-        return the seconds waited."""
+        """Block until ``stage``'s kernels are compiled (or the child ended); return the seconds
+        spent idle (this process's own compiling counts by itself, :mod:`slam.jit`).
+
+        Meanwhile this process compiles the stage's kernels from the last backwards, each one
+        the child has not started (and is told to skip). The two meet in the middle; at worst
+        one kernel is compiled by both, the same machine code written twice to numba's cache.
+        """
         if stage not in self.stages:
             return 0.0
-        start = time.perf_counter()
-        with self._cond:
-            while stage not in self.done and self.end is None:
-                self._cond.wait()
-        waited = time.perf_counter() - start
+        start, compiling = time.perf_counter(), 0.0
+        while True:
+            with self._cond:
+                if stage in self.done or self.end is not None:
+                    break
+                claimed = self._claim(stage)
+                if claimed is None:
+                    self._cond.wait()
+                    continue
+            entry, began = self.entries[claimed], time.perf_counter()
+            try:
+                kernel(entry["kernel"]).compile(_signature(entry))
+                self.taken.append(entry["kernel"])
+            except Exception:  # noqa: BLE001 - compiled at its first call instead
+                pass
+            compiling += time.perf_counter() - began
+        waited = time.perf_counter() - start - compiling
         self.waited[stage] = round(waited, 3)
         return waited
 
@@ -260,6 +345,7 @@ class BackgroundCompiler:
                 "stages": list(self.stages),
                 "kernels": self.kernels,
                 "compiled": {name: line["kernels"] for name, line in self.done.items()},
+                "compiled_while_waiting": list(self.taken),
                 "compile_cpu_s": (self.end or {}).get("compile_cpu_s"),
                 "wall_s": (self.end or {}).get("wall_s"),
                 "waited_s": dict(self.waited),
@@ -331,12 +417,17 @@ def stop() -> None:
 
 def report() -> dict[str, Any]:
     """``compile_background`` of ``metrics.json``: ``enabled``; when off, ``reason``; when on,
-    the stages and kernels given to the background process, what it compiled per stage, its CPU
-    and wall seconds, the seconds this process waited per stage, and ``compiled_here``: kernels
-    this process still compiled itself in those stages (the manifest did not list them)."""
+    the stages and kernels given to the background process, what it compiled per stage, the
+    kernels this process took while it waited (``compiled_while_waiting``), its CPU and wall
+    seconds, the seconds this process waited idle per stage, and ``compiled_here``: kernels this
+    process still compiled itself in those stages at their first call (the manifest did not
+    list them)."""
     compiler = _active["compiler"]
     if compiler is None:
         return {"enabled": False, "reason": _active["reason"]}
     since = jit.compiled_signatures()[_active["mark"] :]
-    here = sorted({name for name, phase, _ in since if phase in compiler.stages})
+    taken = set(compiler.taken)
+    here = sorted(
+        {name for name, phase, _ in since if phase in compiler.stages and name not in taken}
+    )
     return {**compiler.report(), "compiled_here": here}

@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -85,17 +86,27 @@ def blend(a, b, w):
     for i in range(a.size):
         out[i] = (1.0 - w) * a[i] + w * b[i]
     return out
+
+
+@njit(cache=True)
+def scale(a, w):
+    return a * w
 """
 
 
-def _manifest(tmp_path: Path) -> Path:
-    """A manifest of one kernel of a module written in ``tmp_path``, in the texture stage."""
-    (tmp_path / "bg_kernels_for_test.py").write_text(textwrap.dedent(KERNELS))
+def _manifest(tmp_path: Path, module: str = "bg_kernels_for_test", both: bool = False) -> Path:
+    """A manifest of one kernel of ``module``, written in ``tmp_path`` (``blend``), or with
+    ``both`` two (``blend``, ``scale``), in the texture stage (a module name per test: one
+    imported by an earlier test would hold its kernels compiled already)."""
+    (tmp_path / f"{module}.py").write_text(textwrap.dedent(KERNELS))
     array = {"array": "float64", "ndim": 1, "layout": "C", "readonly": False, "aligned": True}
-    entry = {"kernel": "bg_kernels_for_test.blend", "stage": "texture",
-             "signature": [array, array, "float64"], "cpu_s": None}  # fmt: skip
+    entries = [{"kernel": f"{module}.blend", "stage": "texture",
+                "signature": [array, array, "float64"], "cpu_s": None}]  # fmt: skip
+    if both:
+        entries.append({"kernel": f"{module}.scale", "stage": "texture",
+                        "signature": [array, "float64"], "cpu_s": None})  # fmt: skip
     path = tmp_path / "manifest.json"
-    path.write_text(json.dumps({"kernels": [entry], "fingerprints": {}}))
+    path.write_text(json.dumps({"kernels": entries, "fingerprints": {}}))
     return path
 
 
@@ -120,6 +131,11 @@ def test_the_main_process_waits_for_the_background_compiler(fresh_cache) -> None
     started = jit_background.start(manifest)
     assert started["enabled"] and started["stages"] == ["texture"] and started["kernels"] == 1
     jit_background.reach_stage("load")  # a foreground stage: no wait
+    compiler = jit_background._active["compiler"]
+    deadline = time.monotonic() + 120
+    while not compiler.begun and time.monotonic() < deadline:  # the child has taken the kernel:
+        time.sleep(0.01)  # nothing is left for this process to compile while it waits
+    assert compiler.begun == {0}
     before_s, before = jit.compile_seconds(), len(jit.compiled_kernels())
     events: list[bool] = []
     with jit.on_compile(events.append):
@@ -145,6 +161,26 @@ def test_the_main_process_waits_for_the_background_compiler(fresh_cache) -> None
     assert again == {"enabled": False, "reason": "warm cache"}
 
 
+def test_the_main_process_compiles_from_the_last_kernel_while_it_waits(fresh_cache) -> None:
+    manifest = _manifest(fresh_cache, "bg_two_kernels_for_test", both=True)
+    assert jit_background.start(manifest)["kernels"] == 2
+    jit_background.reach_stage("texture")  # at once: the child is still starting Python
+    report = jit_background.report()
+    # this process took the last kernel before the child could reach it, and the child was
+    # told to skip it; the first is the child's, or this process's too if the child was slower
+    # (both, when the child started it as this process claimed it: the one race allowed)
+    taken = report["compiled_while_waiting"]
+    assert taken[0] == "bg_two_kernels_for_test.scale"
+    assert report["compiled"]["texture"] + len(taken) in (2, 3)
+    assert report["compiled_here"] == [] and report["errors"] == []
+    import bg_two_kernels_for_test as kernels
+
+    assert kernels.scale(np.ones(2), 3.0).tolist() == [3.0, 3.0]
+    assert kernels.blend(np.zeros(2), np.ones(2), 0.5).tolist() == [0.5, 0.5]
+    jit_background.stop()
+    assert jit_background.start(manifest) == {"enabled": False, "reason": "warm cache"}
+
+
 def test_off_with_the_environment_variable_on_one_core_or_without_manifest(
     fresh_cache, monkeypatch
 ) -> None:
@@ -162,16 +198,18 @@ def test_off_with_the_environment_variable_on_one_core_or_without_manifest(
 
 
 def test_the_child_reports_each_stage_as_json_lines(fresh_cache) -> None:
-    manifest = _manifest(fresh_cache)
+    manifest = _manifest(fresh_cache, "bg_child_kernels_for_test", both=True)
     code = "import sys; from slam.jit_background import _child; _child(sys.argv[1], sys.argv[2:])"
     proc = subprocess.run(
         [sys.executable, "-c", code, str(manifest), "texture", "quality"],
-        capture_output=True, text=True, check=True, env=dict(os.environ),
+        capture_output=True, text=True, check=True, env=dict(os.environ), input="1\n",
     )  # fmt: skip
     lines = [json.loads(line) for line in proc.stdout.splitlines()]
-    assert [line.get("stage") for line in lines[:2]] == ["texture", "quality"]
-    assert lines[0]["kernels"] == 1 and lines[1]["kernels"] == 0 and lines[0]["cpu_s"] > 0.0
-    assert lines[2]["end"] is True
+    # kernel 1 was claimed on stdin (the main process compiles it): skipped
+    assert lines[0] == {"start": 0}
+    assert [line.get("stage") for line in lines[1:3]] == ["texture", "quality"]
+    assert lines[1]["kernels"] == 1 and lines[2]["kernels"] == 0 and lines[1]["cpu_s"] > 0.0
+    assert lines[3]["end"] is True
 
 
 def _njit_kind(fn: ast.FunctionDef) -> str | None:
