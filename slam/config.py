@@ -341,17 +341,17 @@ class RbpfConfig(Validated):
     """See :attr:`smooth_odometry` (m)."""
     smooth_sigma_th: float = bounded(0.005, gt=0.0, le=math.pi)
     """See :attr:`smooth_odometry` (rad)."""
-    smooth_scales: tuple[float, ...] = bounded((1.0,), min_length=1, gt=0.0, le=1e4)
+    smooth_scales: tuple[float, ...] = bounded((1.0, 10.0, 50.0), min_length=1, gt=0.0, le=1e4)
     """The registration's sigmas (``smooth_sigma_xy``, ``smooth_sigma_th``) are tried at these
     multiples, and the map-quality score (``slam eval``, no reference: the share of returns that
     agree with the map of the other stretches; :func:`slam.eval.quality.map_quality`) of each
     smoothed trajectory picks one, in the first round of :attr:`register_rounds`: the best,
     unless it beats the first scale's score by less than :attr:`smooth_choice_margin`, then the
     first. A larger multiple trusts the odometry's shape more, which a log whose odometry is
-    locally better than its registration (fr-clinic) scores better on. One value (the default):
-    no choice. ``[1, 10, 50]`` improves fr-clinic on two seeds of four and changes no other
-    benchmark log, but puts the score's kernels on a cold first run's path (compilation 12 →
-    15.4 s) and costs 0.3–1.2 s a run: measured, not the default (docs/slam.md)."""
+    locally better than its registration (fr-clinic) scores better on. One value: no choice
+    (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` improves
+    fr-clinic on two seeds of four, changes no other benchmark log and costs 0.3–1.2 s a run
+    (docs/slam.md, "How far to trust the odometry's shape")."""
     smooth_choice_margin: float = bounded(0.005, ge=0.0, le=1.0)
     """See :attr:`smooth_scales` (a share of the judged returns)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)

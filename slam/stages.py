@@ -206,8 +206,8 @@ def choose_smoothing(
     ]
     values = np.nan_to_num(np.array(scores), nan=-np.inf)  # NaN: nothing judged
     best = int(np.argmax(values))
-    if not values[best] - values[0] >= rc.smooth_choice_margin:
-        best = 0
+    if not np.isfinite(values[best]) or values[best] - values[0] < rc.smooth_choice_margin:
+        best = 0  # (nothing judged at all: the first scale)
     return rc.smooth_scales[best], scores, trials[best]
 
 

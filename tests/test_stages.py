@@ -262,3 +262,27 @@ def test_one_smoothing_scale_is_no_choice(long_room):
         poses, seq.odometry, (rc.smooth_sigma_xy, rc.smooth_sigma_th), (0.004, 0.002), one.loops
     )
     assert scale == 1.0 and scores == [] and got.tobytes() == want.tobytes()
+
+
+def test_nothing_judged_keeps_the_first_smoothing_scale(long_room):
+    """When the score judges nothing (one stretch: no other stretches' map to judge it
+    against, NaN for every scale), the first scale is kept, without a warning."""
+    import warnings
+
+    from slam.stages import choose_smoothing
+
+    seq, config = long_room
+    quality = dataclasses.replace(config.quality, stretch_m=1000.0)
+    alone = dataclasses.replace(config, quality=quality)
+    rng = np.random.default_rng(3)
+    poses = seq.odometry + rng.normal(0.0, 0.01, seq.odometry.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scale, scores, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), alone)
+    assert len(scores) == 3 and all(np.isnan(v) for v in scores)
+    assert scale == 1.0
+    _, _, first = choose_smoothing(
+        poses, seq.odometry, seq, (0.004, 0.002),
+        dataclasses.replace(alone, rbpf=dataclasses.replace(alone.rbpf, smooth_scales=(1.0,))),
+    )  # fmt: skip
+    np.testing.assert_array_equal(got, first)
