@@ -346,14 +346,20 @@ class RbpfConfig(Validated):
     multiples, and the map-quality score (``slam eval``, no reference: the share of returns that
     agree with the map of the other stretches; :func:`slam.eval.quality.map_quality`) of each
     smoothed trajectory picks one, in the first round of :attr:`register_rounds`: the best,
-    unless it beats the first scale's score by less than :attr:`smooth_choice_margin`, then the
-    first. A larger multiple trusts the odometry's shape more, which a log whose odometry is
-    locally better than its registration (fr-clinic) scores better on. One value: no choice
+    unless it beats the first scale's score by less than :attr:`smooth_choice_margin` or
+    :attr:`smooth_choice_z` standard errors, then the first. A larger multiple trusts the
+    odometry's shape more, which a log whose odometry is locally better than its registration
+    (fr-clinic) scores better on. One value: no choice
     (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` improves
     fr-clinic on two seeds of four, changes no other benchmark log and costs 0.3–1.2 s a run
     (docs/slam.md, "How far to trust the odometry's shape")."""
     smooth_choice_margin: float = bounded(0.005, ge=0.0, le=1.0)
     """See :attr:`smooth_scales` (a share of the judged returns)."""
+    smooth_choice_z: float = bounded(2.0, ge=0.0, le=100.0)
+    """... and the best must also beat the first scale's score by this many standard errors of
+    the difference of the two shares (binomial, from the returns each judged; 0: the margin
+    alone): a choice that rests on a few hundred judged returns (a log that seldom comes back
+    to a place) is a draw, and keeps the first scale (docs/slam.md)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)
     """The score that chooses among :attr:`smooth_scales` judges every this-many-th scan only
     (and builds its maps from those): the choice costs a quarter of a full score per scale ..."""

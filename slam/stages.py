@@ -160,8 +160,11 @@ class OdometrySmoothing:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
         if self.measured.get("choice_of") is not seq:  # the first round chooses the scale
-            scale, scores, poses = choose_smoothing(output.poses, odometry, seq, odo, config)
-            self.measured.update(choice_of=seq, scale=scale, scores=scores)
+            choice = choose_smoothing(output.poses, odometry, seq, odo, config)
+            scale, poses = choice.scale, choice.poses
+            self.measured.update(
+                choice_of=seq, scale=scale, scores=choice.scores, judged=choice.judged
+            )
         else:
             scale = self.measured["scale"]
             reg = (scale * rc.smooth_sigma_xy, scale * rc.smooth_sigma_th)
@@ -176,18 +179,54 @@ class OdometrySmoothing:
             stats["smooth_scale_scores"] = [
                 round(v, 4) if np.isfinite(v) else None for v in self.measured["scores"]
             ]
+            stats["smooth_scale_judged"] = list(self.measured["judged"])
         return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps], stats=stats)
+
+
+class SmoothingChoice(NamedTuple):
+    """What :func:`choose_smoothing` chose, and on what."""
+
+    scale: float
+    """The multiple of the registration's sigmas kept."""
+    scores: list[float]
+    """The map-quality score of each multiple of ``rbpf.smooth_scales`` (NaN: nothing judged;
+    empty with one multiple: nothing scored)."""
+    judged: list[int]
+    """The returns each score judged (``checked`` of :meth:`~slam.eval.quality.QualityResult.totals`)."""
+    poses: F64
+    """The trajectory smoothed at ``scale``."""
+
+
+def smoothing_pick(scores: list[float], judged: list[int], margin: float, z: float) -> int:
+    """Which of ``scores`` (shares of ``judged`` returns that agree) :func:`choose_smoothing`
+    keeps: the best, when it beats the first by at least ``margin`` and by at least ``z``
+    standard errors of the difference of the two shares (each a binomial share of its judged
+    returns, the two taken as independent: an upper bound on the error, since both judge the
+    same returns); else the first. A NaN score (nothing judged) never wins."""
+    values = np.nan_to_num(np.array(scores, dtype=np.float64), nan=-np.inf)
+    best = int(np.argmax(values))
+    if best == 0 or not np.isfinite(values[best]):
+        return 0
+    gain = values[best] - values[0]
+    if gain < margin:
+        return 0
+    if np.isfinite(values[0]) and z > 0.0:
+        p, q = values[best], values[0]
+        se = np.sqrt(p * (1.0 - p) / max(judged[best], 1) + q * (1.0 - q) / max(judged[0], 1))
+        if gain < z * se:
+            return 0
+    return best
 
 
 def choose_smoothing(
     poses: F64, odometry: F64, seq: ScanSequence, odo: tuple[float, float], config: Config
-) -> tuple[float, list[float], F64]:
+) -> SmoothingChoice:
     """The multiple of the registration's sigmas :attr:`~slam.config.RbpfConfig.smooth_scales`
     picks for ``poses`` (every scan's, registered) and the odometry's sigmas ``odo``: each
     scale's smoothed trajectory (:func:`slam.graph.smooth_with_odometry`) scored by the map
     quality (:func:`slam.eval.quality.map_quality`) of every ``smooth_choice_every``-th scan,
-    the best unless it beats the first by less than ``smooth_choice_margin``. Returns the scale,
-    the scores (empty with one scale: nothing scored) and the chosen trajectory."""
+    the best unless it beats the first by less than ``smooth_choice_margin`` or by less than
+    ``smooth_choice_z`` standard errors (:func:`smoothing_pick`)."""
     from slam.eval.quality import map_quality
     from slam.graph import smooth_with_odometry
 
@@ -197,18 +236,17 @@ def choose_smoothing(
         reg = (scale * rc.smooth_sigma_xy, scale * rc.smooth_sigma_th)
         trials.append(smooth_with_odometry(poses, odometry, reg, odo, config.loops))
     if len(trials) == 1:
-        return rc.smooth_scales[0], [], trials[0]
+        return SmoothingChoice(rc.smooth_scales[0], [], [], trials[0])
     picks = np.arange(0, len(seq), rc.smooth_choice_every)
     rays = quality_rays(seq, picks, config)
     times = seq.times[picks]
-    scores = [
-        map_quality(times, trial[picks], rays, config.quality, config.map).score for trial in trials
+    results = [
+        map_quality(times, trial[picks], rays, config.quality, config.map) for trial in trials
     ]
-    values = np.nan_to_num(np.array(scores), nan=-np.inf)  # NaN: nothing judged
-    best = int(np.argmax(values))
-    if not np.isfinite(values[best]) or values[best] - values[0] < rc.smooth_choice_margin:
-        best = 0  # (nothing judged at all: the first scale)
-    return rc.smooth_scales[best], scores, trials[best]
+    scores = [r.score for r in results]
+    judged = [r.totals()["checked"] for r in results]
+    best = smoothing_pick(scores, judged, rc.smooth_choice_margin, rc.smooth_choice_z)
+    return SmoothingChoice(rc.smooth_scales[best], scores, judged, trials[best])
 
 
 def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) -> Rays:

@@ -231,7 +231,8 @@ def test_the_map_quality_picks_the_odometry_where_it_is_the_better_shape(long_ro
     bent = truth.copy()
     bent[:, 1] += 0.3 * np.sin(k / 10.0)
     bent[:, 2] += 0.03 * np.cos(k / 10.0)
-    scale, scores, poses = choose_smoothing(bent, truth, seq, (0.002, 0.001), config)
+    scale, scores, judged, poses = choose_smoothing(bent, truth, seq, (0.002, 0.001), config)
+    assert len(judged) == 3 and min(judged) > 1000
     assert scale == 10.0 and len(scores) == 3  # 10 and 50 score alike (1.0): the first of them
     assert scores[0] < 0.9 and scores[1] - scores[0] >= config.rbpf.smooth_choice_margin
     bent_err = np.abs(bent[:, 1] - truth[:, 1]).mean()  # 0.195 m
@@ -241,7 +242,7 @@ def test_the_map_quality_picks_the_odometry_where_it_is_the_better_shape(long_ro
     steps = relative(truth[:-1], truth[1:])
     steps[:, 2] += 0.02  # the odometry turns 1.1° a step too far
     curved = accumulate(steps, truth[0])
-    scale, scores, poses = choose_smoothing(truth, curved, seq, (0.002, 0.001), config)
+    scale, scores, _, poses = choose_smoothing(truth, curved, seq, (0.002, 0.001), config)
     assert scale == 1.0 and scores[0] > 0.95 and max(scores[1:]) < 0.5
     assert np.abs(poses[:, :2] - truth[:, :2]).max() < 0.03
 
@@ -256,7 +257,8 @@ def test_one_smoothing_scale_is_no_choice(long_room):
     one = dataclasses.replace(config, rbpf=dataclasses.replace(config.rbpf, smooth_scales=(1.0,)))
     rng = np.random.default_rng(2)
     poses = seq.odometry + rng.normal(0.0, 0.01, seq.odometry.shape)
-    scale, scores, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), one)
+    scale, scores, judged, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), one)
+    assert judged == []
     rc = config.rbpf
     want = smooth_with_odometry(
         poses, seq.odometry, (rc.smooth_sigma_xy, rc.smooth_sigma_th), (0.004, 0.002), one.loops
@@ -278,11 +280,30 @@ def test_nothing_judged_keeps_the_first_smoothing_scale(long_room):
     poses = seq.odometry + rng.normal(0.0, 0.01, seq.odometry.shape)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        scale, scores, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), alone)
-    assert len(scores) == 3 and all(np.isnan(v) for v in scores)
+        scale, scores, judged, got = choose_smoothing(
+            poses, seq.odometry, seq, (0.004, 0.002), alone
+        )
+    assert len(scores) == 3 and all(np.isnan(v) for v in scores) and judged == [0, 0, 0]
     assert scale == 1.0
-    _, _, first = choose_smoothing(
+    _, _, _, first = choose_smoothing(
         poses, seq.odometry, seq, (0.004, 0.002),
         dataclasses.replace(alone, rbpf=dataclasses.replace(alone.rbpf, smooth_scales=(1.0,))),
     )  # fmt: skip
     np.testing.assert_array_equal(got, first)
+
+
+def test_a_smoothing_choice_needs_a_gain_beyond_the_scores_noise():
+    """smoothing_pick keeps the first scale unless the best beats it by the margin and by z
+    standard errors of the difference of the two shares: 0.84 against 0.80 of 500 judged
+    returns each is within two standard errors (0.049), of 24,000 each it is far beyond them
+    (0.007); NaN never wins; the first is kept on a tie or a loss."""
+    from slam.stages import smoothing_pick
+
+    assert smoothing_pick([0.80, 0.84, 0.83], [500, 500, 500], 0.005, 2.0) == 0
+    assert smoothing_pick([0.80, 0.84, 0.83], [24000, 24000, 24000], 0.005, 2.0) == 1
+    assert smoothing_pick([0.80, 0.84, 0.83], [500, 500, 500], 0.005, 0.0) == 1  # margin alone
+    assert smoothing_pick([0.80, 0.803, 0.79], [10**6] * 3, 0.005, 2.0) == 0  # under the margin
+    assert smoothing_pick([float("nan"), 0.9, 0.8], [0, 5000, 5000], 0.005, 2.0) == 1
+    assert smoothing_pick([0.9, float("nan"), float("nan")], [5000, 0, 0], 0.005, 2.0) == 0
+    assert smoothing_pick([float("nan")] * 3, [0, 0, 0], 0.005, 2.0) == 0
+    assert smoothing_pick([0.95, 0.95, 0.94], [5000] * 3, 0.0, 0.0) == 0  # a tie: the first
