@@ -404,6 +404,18 @@ class ScanSequence:
         """Rays of scan ``k`` for an occupancy update (:meth:`Scan.rays`)."""
         return self._scans[k].rays(free_range_no_return, stride)
 
+    def readings(self, steps: ArrayLike, width: int = 0) -> tuple[F64, F64]:
+        """The ranges and beam angles of scans ``steps`` as ``(S, W)`` float64 rows, ``W`` the
+        widest of them (at least ``width``), NaN where a scan has no beam."""
+        scans = [self._scans[int(k)] for k in np.asarray(steps, dtype=np.int64)]
+        width = max(width, max((scan.num_beams for scan in scans), default=0))
+        r = np.full((len(scans), width), np.nan)
+        a = np.full((len(scans), width), np.nan)
+        for i, scan in enumerate(scans):
+            r[i, : scan.num_beams] = scan.ranges
+            a[i, : scan.num_beams] = scan.angles
+        return r, a
+
     def ray_table(
         self, steps: ArrayLike, free_range_no_return: float, stride: int = 1
     ) -> tuple[F64, NDArray[np.bool_], NDArray[np.int64]]:
@@ -417,17 +429,12 @@ class ScanSequence:
         """
         steps = np.asarray(steps, dtype=np.int64)
         scans = [self._scans[int(k)] for k in steps]
-        for scan in scans:
-            scan._require_resolved()
-        width = max((scan.num_beams for scan in scans), default=0)
-        r = np.full((len(scans), width), np.nan)
-        a = np.full((len(scans), width), np.nan)
         limits = np.empty((len(scans), 6))  # range_min, range_max, no_return, laser x, y, yaw
         for i, scan in enumerate(scans):
-            r[i, : scan.num_beams] = scan.ranges
-            a[i, : scan.num_beams] = scan.angles
+            scan._require_resolved()
             limits[i, :3] = scan.range_min, scan.range_max, scan.no_return
             limits[i, 3:] = scan.laser_offset
+        r, a = self.readings(steps)
         range_min, range_max, no_return, lx, ly, lt = (limits[:, j, None] for j in range(6))
         keep, hit, length = ray_kinds(
             r, a, range_min, range_max, no_return, free_range_no_return, stride

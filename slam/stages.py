@@ -251,18 +251,13 @@ def choose_smoothing(
 
 def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) -> Rays:
     """The rays of scans ``picks`` of ``seq`` as the map-quality score reads them
-    (:func:`slam.eval.quality.scan_rays`: the scans padded to one width with NaN readings, each
-    with its own beam angles, at most ``rbpf.smooth_choice_beams`` of them; the range limits
-    and laser pose of the first scan)."""
+    (:func:`slam.eval.quality.scan_rays`: the scans padded to the run's widest with NaN
+    readings (:meth:`ScanSequence.readings`), each with its own beam angles, at most
+    ``rbpf.smooth_choice_beams`` of them; the range limits and laser pose of the first scan)."""
     from slam.eval.quality import scan_rays
 
     first = seq.scan(0)
-    ranges = np.full((picks.size, seq.num_beams), np.nan)
-    angles = np.zeros((picks.size, seq.num_beams))
-    for i, k in enumerate(picks):
-        scan = seq.scan(int(k))
-        ranges[i, : scan.num_beams] = scan.ranges
-        angles[i, : scan.num_beams] = scan.angles
+    ranges, angles = seq.readings(picks, seq.num_beams)
     most = config.rbpf.smooth_choice_beams
     if seq.num_beams > most:  # evenly spread, as Scan.hits thins
         beams = np.linspace(0, seq.num_beams - 1, most).round().astype(np.int64)

@@ -108,3 +108,19 @@ def test_scan_sequence_grows_and_keeps_every_scan():
 def test_nominal_scan_period_ignores_steps_back_in_time():
     assert nominal_scan_period([0.0, 0.1, 0.2, 0.15, 0.3, 0.4]) == pytest.approx(0.1)
     assert nominal_scan_period([1.0]) == 0.0
+
+
+def test_readings_pad_the_scans_to_one_width_with_nan():
+    """ScanSequence.readings: each scan's ranges and angles in its row, NaN beyond its beams,
+    as wide as the widest scan asked for, or ``width`` when that is wider."""
+    seq = ScanSequence()
+    for k, n in enumerate((3, 5, 2)):
+        ranges = np.arange(1.0, n + 1.0)
+        seq.append(Scan(0.1 * k, ranges, np.linspace(-1.0, 1.0, n)).resolved(LIDAR), [k, 0, 0])
+    r, a = seq.readings([2, 0])
+    assert r.shape == a.shape == (2, 3) and r.dtype == a.dtype == np.float64
+    assert r[0, :2].tolist() == [1.0, 2.0] and np.isnan(r[0, 2]) and np.isnan(a[0, 2])
+    assert r[1].tolist() == [1.0, 2.0, 3.0] and a[1].tolist() == [-1.0, 0.0, 1.0]
+    r, a = seq.readings([0], width=5)
+    assert r.shape == (1, 5) and np.isnan(r[0, 3:]).all() and np.isnan(a[0, 3:]).all()
+    assert seq.readings([], width=4)[0].shape == (0, 4)
