@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import slam.jit_background as jit_background
+from slam.budget import release_free_memory
 from slam.config import Config, dumps, load_config
 from slam.errors import UsageError
 from slam.io import sources
@@ -121,7 +122,7 @@ def render_map(
 
     from slam.rowwise import grid_image
 
-    img = cv2.cvtColor(grid_image(grid), cv2.COLOR_GRAY2BGR)  # grid.to_image(), by blocks
+    img = grid_image(grid, channels=3)  # grid.to_image() in three channels, by blocks
     scale = max(1, int(round(800 / max(img.shape[:2]))))
     if scale > 1:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
@@ -177,6 +178,7 @@ def execute(request: RunRequest) -> Result:
             recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
             observers = [recorder] if recorder is not None else []
             result = _estimate(source, config, request.progress, observers)
+            release_free_memory()  # the filter's and the stages' freed blocks, before the outputs
             from slam.texture import run_stage
 
             reach_stage("texture")
@@ -185,6 +187,7 @@ def execute(request: RunRequest) -> Result:
 
             reach_stage("quality")
             result.metrics.update(quality_stage(source.log, result.trajectory, config, tmp))
+            release_free_memory()
         reach_stage("outputs")
         messages = doubts + sorted({str(w.message) for w in caught})
         clock = clock_warning(result.trajectory.times)
@@ -198,6 +201,7 @@ def execute(request: RunRequest) -> Result:
             result.grid.save_npz(tmp / "map.npz")
             grid = result.grid
             write_map_files(tmp, grid.log_odds, grid.resolution, grid.origin)  # map_server, clean
+            release_free_memory()  # the pictures' blocks, before map.png's three channels
             gt = None if source.ground_truth is None else source.ground_truth.poses
             write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
         if recorder is not None:  # last: the recording logs the texture when there is one

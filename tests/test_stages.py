@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import cv2
 import numpy as np
 import pytest
 from synthetic_logs import carmen_lines, write_carmen
@@ -87,6 +88,10 @@ def test_pictures_by_blocks_of_rows_equal_the_whole(monkeypatch):
     assert np.array_equal(whole[4], grid.to_image())
     for a, b in zip(blocks, whole, strict=True):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+    monkeypatch.setattr(rowwise, "BLOCK_CELLS", 1000)
+    colour = rowwise.grid_image(grid, channels=3)  # what map.png draws on
+    assert colour.flags.c_contiguous
+    assert np.array_equal(colour, cv2.cvtColor(grid.to_image(), cv2.COLOR_GRAY2BGR))
 
 
 def test_the_room_map_grows_many_times(room):

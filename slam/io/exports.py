@@ -92,7 +92,7 @@ def clean_image(log_odds: Any) -> NDArray[np.uint8]:
         p = 1.0 - 1.0 / (1.0 + np.exp(np.asarray(lo, dtype=np.float64)))
         return (255.0 * (1.0 - p)).astype(np.uint8)
 
-    return np.ascontiguousarray(by_rows(block, np.asarray(log_odds), np.uint8)[::-1])
+    return by_rows(block, np.asarray(log_odds), np.uint8, flip=True)
 
 
 def write_png(path: Path, image: NDArray[np.uint8]) -> None:
