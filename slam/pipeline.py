@@ -31,7 +31,7 @@ import resource
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -114,10 +114,23 @@ def default_run_dir(name: str) -> Path:
     return candidate
 
 
+WORST_COLOUR = (160, 0, 160)
+"""BGR of the worst stretches' marks on ``map.png`` (the purple of ``quality.png``)."""
+
+
 def render_map(
-    grid: OccupancyGrid, trajectory: F64, ground_truth: F64 | None = None
+    grid: OccupancyGrid,
+    trajectory: F64,
+    ground_truth: F64 | None = None,
+    worst: list[dict[str, Any]] | None = None,
+    times: F64 | None = None,
 ) -> NDArray[np.uint8]:
-    """``map.png``: occupancy in grey, the estimated trajectory in red, ground truth in green."""
+    """``map.png``: occupancy in grey, the estimated trajectory in red, ground truth in green;
+    with ``worst`` (the map-quality score's worst stretches, the ``worst`` entries of its report:
+    :func:`slam.eval.quality.summary`) each of them too, in purple: its part of the path
+    (``times``: the trajectory's, to find it by its ``log_time``), a circle where its returns
+    conflict with the rest of the map (``place_xy``) and a label with its rank, its time since
+    the start and its score, as ``quality.png`` marks them."""
     import cv2
 
     from slam.rowwise import grid_image
@@ -127,16 +140,56 @@ def render_map(
     if scale > 1:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
 
+    def pixels(xy: F64) -> NDArray[np.int32]:
+        return (grid.world_to_pixel(np.asarray(xy)[..., :2]) * scale + scale // 2).astype(np.int32)
+
     def polyline(poses: F64, colour: tuple[int, int, int]) -> None:
-        px = (grid.world_to_pixel(poses[:, :2]) * scale + scale // 2).astype(np.int32)
-        cv2.polylines(img, [px.reshape(-1, 1, 2)], False, colour, 1, cv2.LINE_AA)
+        cv2.polylines(img, [pixels(poses).reshape(-1, 1, 2)], False, colour, 1, cv2.LINE_AA)
 
     if ground_truth is not None:
         polyline(ground_truth, (60, 170, 60))
     polyline(trajectory, (40, 40, 220))
-    start = (grid.world_to_pixel(trajectory[0, :2]) * scale + scale // 2).astype(int)
+    start = pixels(trajectory[0])
     cv2.circle(img, (int(start[0]), int(start[1])), 4, (220, 120, 20), -1)
+    if worst:
+        _mark_worst(img, pixels, trajectory, times, worst)
     return img
+
+
+def _mark_worst(
+    img: NDArray[np.uint8],
+    pixels: Callable[[F64], NDArray[np.int32]],
+    trajectory: F64,
+    times: F64 | None,
+    worst: list[dict[str, Any]],
+) -> None:
+    """:func:`render_map`'s marks of the worst stretches (path, circle, label on top);
+    ``pixels``: world ``(..., 2)`` to the picture's pixels."""
+    import cv2
+
+    from slam.eval.quality_run import draw_label
+
+    unit = max(1, int(round(max(img.shape[:2]) / 1000)))  # line and letter size
+    radius = 18 * unit
+    for mark in worst:
+        if times is not None:
+            lo, hi = mark["log_time"]
+            stretch = pixels(trajectory[(times >= lo) & (times <= hi)])
+            if len(stretch) > 1:
+                cv2.polylines(
+                    img, [stretch.reshape(-1, 1, 2)], False, WORST_COLOUR, 2 * unit, cv2.LINE_AA
+                )
+        cx, cy = (int(v) for v in pixels(np.array(mark["place_xy"])))
+        cv2.circle(img, (cx, cy), radius, (255, 255, 255), 3 * unit + 2, cv2.LINE_AA)
+        cv2.circle(img, (cx, cy), radius, WORST_COLOUR, 2 * unit, cv2.LINE_AA)
+    placed: list[tuple[int, int, int, int]] = []
+    for mark in worst:  # labels last, on top of every mark
+        cx, cy = (int(v) for v in pixels(np.array(mark["place_xy"])))
+        a, b = mark["time_s"]
+        score = mark["score"]
+        text = f"#{mark['rank']} {a:.0f}-{b:.0f} s" + ("" if score is None else f"  {score:.2f}")
+        org = (cx + radius + 6, cy + 5 * unit)
+        draw_label(img, text, org, WORST_COLOUR, unit, placed, flip_gap=2 * radius + 12)
 
 
 def _peak_rss_mb() -> float:
@@ -203,7 +256,10 @@ def execute(request: RunRequest) -> Result:
             write_map_files(tmp, grid.log_odds, grid.resolution, grid.origin)  # map_server, clean
             release_free_memory()  # the pictures' blocks, before map.png's three channels
             gt = None if source.ground_truth is None else source.ground_truth.poses
-            write_png(tmp / "map.png", render_map(result.grid, result.poses, gt))
+            worst = metrics.get("quality", {}).get("worst")  # the score's worst stretches, marked
+            picture = render_map(result.grid, result.poses, gt, worst, result.trajectory.times)
+            write_png(tmp / "map.png", picture)
+            del picture
         if recorder is not None:  # last: the recording logs the texture when there is one
             metrics["recording"] = recorder.finish(result.trajectory, result.grid, tmp)
         metrics["compile_s"] = round(compile_seconds() - compiled, 3)

@@ -61,6 +61,51 @@ def test_slam_run_scores_its_map(run_folder):
     assert image is not None and max(image.shape[:2]) >= 1200
 
 
+def test_map_png_marks_the_worst_stretches(run_folder):
+    """map.png circles each of the score's worst stretches where its returns conflict, in the
+    purple of quality.png, and draws its part of the path; a picture without them has none."""
+    from slam.config import MapConfig
+    from slam.io.exports import read_run_map
+    from slam.io.tum import read_tum
+    from slam.mapping import OccupancyGrid
+    from slam.pipeline import WORST_COLOUR, render_map
+
+    worst = json.loads((run_folder / "metrics.json").read_text())["quality"]["worst"]
+    assert len(worst) == 2
+    image = cv2.imread(str(run_folder / "map.png"))
+    purple = np.all(image == WORST_COLOUR, axis=2)
+    log_odds, resolution, origin = read_run_map(run_folder)
+    grid = OccupancyGrid.from_arrays(log_odds, resolution, origin, MapConfig())
+    scale = image.shape[0] // grid.shape[0]
+    for mark in worst:
+        cx, cy = grid.world_to_pixel(np.array(mark["place_xy"])) * scale + scale // 2
+        r = 18 * max(1, round(max(image.shape[:2]) / 1000))
+        ring = purple[max(cy - r - 3, 0) : cy + r + 4, max(cx - r - 3, 0) : cx + r + 4]
+        assert ring.sum() > 3 * r, mark  # a circle of radius r there
+    run = read_tum(run_folder / "trajectory.tum")
+    plain = render_map(grid, run.poses)
+    assert not np.all(plain == WORST_COLOUR, axis=2).any()
+    again = np.all(render_map(grid, run.poses, None, worst, run.times) == WORST_COLOUR, axis=2)
+    assert (again & purple).sum() > 0.9 * purple.sum()  # the marks slam run drew
+    inside = (run.times >= worst[0]["log_time"][0]) & (run.times <= worst[0]["log_time"][1])
+    px = grid.world_to_pixel(run.poses[inside][len(run.poses[inside]) // 2, :2]) * scale
+    assert purple[px[1] - 3 : px[1] + 4, px[0] - 3 : px[0] + 4].any()  # the stretch's path
+
+
+def test_a_label_at_the_right_edge_moves_to_the_left_of_its_mark():
+    from slam.eval.quality_run import draw_label
+
+    image = np.zeros((200, 300, 3), np.uint8)
+    placed: list = []
+    draw_label(image, "#1 100-200 s  0.50", (250, 50), (0, 0, 255), 1, placed, flip_gap=40)
+    draw_label(image, "#2 300-400 s  0.60", (250, 50), (0, 0, 255), 1, placed, flip_gap=40)
+    (a0, a1, a2, a3), (b0, b1, b2, b3) = placed
+    assert a2 <= 250 - 40 + 3 and a0 >= 0  # ends left of the mark, inside the picture
+    assert b1 >= a3  # the second one below the first, not over it
+    draw_label(image, "legend", (10, 180), (0, 0, 0), 1, placed)
+    assert placed[-1][0] == 7  # room on the right: where it was put
+
+
 def test_eval_without_reference_prints_writes_and_draws(run_folder, capsys):
     (run_folder / "quality.png").unlink()
     assert main(["eval", str(run_folder)]) == 0

@@ -278,23 +278,10 @@ def render_quality(result: QualityResult) -> NDArray[np.uint8]:
     start = pixels(result.poses[0, :2])
     cv2.circle(image, (int(start[0]), int(start[1])), 4 * unit, (200, 110, 20), -1)
     t0 = float(result.times[0])
-    font, fscale, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.55 * unit, max(1, unit)
-
     placed: list[tuple[int, int, int, int]] = []
 
     def label(text: str, org: tuple[int, int], colour: tuple[int, int, int]) -> None:
-        """A label on a white box, moved down until it overlaps no earlier label."""
-        (tw, th), base = cv2.getTextSize(text, font, fscale, thick)
-        x, y = org
-        box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
-        while any(
-            box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed
-        ):
-            y += th + base + 6
-            box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
-        placed.append(box)
-        cv2.rectangle(image, box[:2], box[2:], (255, 255, 255), -1)
-        cv2.putText(image, text, (x, y), font, fscale, colour, thick, cv2.LINE_AA)
+        draw_label(image, text, org, colour, unit, placed, flip_gap=36 * unit + 12)
 
     worst = result.worst()
     for s in worst:
@@ -320,6 +307,35 @@ def render_quality(result: QualityResult) -> NDArray[np.uint8]:
         text = f"#{rank} {s.t_start - t0:.0f}-{s.t_end - t0:.0f} s  {s.score:.2f}"
         label(text, (cx + 18 * unit + 6, cy + 5 * unit), (120, 0, 120))
     return image
+
+
+def draw_label(
+    image: NDArray[np.uint8],
+    text: str,
+    org: tuple[int, int],
+    colour: tuple[int, int, int],
+    unit: int,
+    placed: list[tuple[int, int, int, int]],
+    flip_gap: int = 0,
+) -> None:
+    """``text`` on a white box at ``org`` (its baseline's left end) in ``image``, letters of
+    size ``unit``, moved down until it overlaps no box in ``placed`` (to which its own is added).
+    A label that would leave the picture on the right ends ``flip_gap`` pixels left of ``org``
+    instead (the other side of the mark it labels; never left of the picture)."""
+    import cv2
+
+    font, fscale, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.55 * unit, max(1, unit)
+    (tw, th), base = cv2.getTextSize(text, font, fscale, thick)
+    x, y = org
+    if x + tw + 3 > image.shape[1]:
+        x = max(3, org[0] - flip_gap - tw)
+    box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
+    while any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
+        y += th + base + 6
+        box = (x - 3, y - th - 3, x + tw + 3, y + base + 2)
+    placed.append(box)
+    cv2.rectangle(image, box[:2], box[2:], (255, 255, 255), -1)
+    cv2.putText(image, text, (x, y), font, fscale, colour, thick, cv2.LINE_AA)
 
 
 def _fmt(value: Any, digits: int = 3) -> str:
