@@ -51,7 +51,12 @@ class StepRecord:
 
 
 class Observer(Protocol):
-    """Receives the filter's progress: progress bars, the rerun recorder, tests."""
+    """Receives the filter's progress: progress bars, the rerun recorder, tests.
+
+    An observer may also define ``on_filter_end()``, called once when the filter has seen its
+    last scan, before the stages after it run (:meth:`slam.online.Slam.finish`): the place to
+    let go of what only the filter's steps needed (the recorder's preview map).
+    """
 
     detail_every: int
     """Steps between records carrying particles and endpoints (0: never)."""
@@ -140,3 +145,10 @@ class CompositeObserver:
         for observer in self.observers:
             if observer.map_every and step % observer.map_every == 0:
                 observer.on_map(step, time, grid)
+
+    def on_filter_end(self) -> None:
+        """Tell the observers that define ``on_filter_end`` that the filter has ended."""
+        for observer in self.observers:
+            end = getattr(observer, "on_filter_end", None)
+            if end is not None:
+                end()

@@ -330,6 +330,8 @@ class Slam:
         output = self._filter.finish()
         # the particles' maps are not needed after the filter: the stages build their own
         self._filter = None
+        if self._observer is not None:
+            self._observer.on_filter_end()
         self._seconds["filter"] += time.perf_counter() - start
         output = run_stages(output, self.stages, self.config, self._seconds)
         if output.poses is None:

@@ -261,6 +261,7 @@ def execute(request: RunRequest) -> Result:
             write_png(tmp / "map.png", picture)
             del picture
         if recorder is not None:  # last: the recording logs the texture when there is one
+            release_free_memory()  # the pictures' blocks, before the final map's snapshot
             metrics["recording"] = recorder.finish(result.trajectory, result.grid, tmp)
         metrics["compile_s"] = round(compile_seconds() - compiled, 3)
         metrics["compile_background"] = jit_background.report()

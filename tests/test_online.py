@@ -156,6 +156,48 @@ def test_estimates_and_observers_follow_every_step(small):
     np.testing.assert_allclose(moving.particles[np.argmax(moving.weights)], moving.pose)
 
 
+def test_observers_hear_the_filter_end_before_the_stages(small, tmp_path):
+    """on_filter_end, where an observer defines it, comes once, after the last step and before
+    the stages after the filter; observers without it (the progress bar) are passed over; the
+    rerun recorder lets go of its preview map there."""
+    from slam.observers import ProgressObserver
+    from slam.viz.recorder import RunRecorder
+
+    config = slam.load_config("", None, ["filter.particles=8", "viz.map_every=20"])
+    log = _log(str(small), config)
+    events: list[str] = []
+
+    class Ends(Recorder):
+        def on_step(self, record) -> None:
+            super().on_step(record)
+            events.append("step")
+
+        def on_filter_end(self) -> None:
+            events.append("end")
+
+    class Stage:
+        name = "probe"
+
+        def run(self, output, config):
+            events.append("stage")
+            return output
+
+    recorder = RunRecorder(tmp_path / "r.rrd", config.viz, map_config=config.map)
+    recorder.detail_every = 10
+    s = slam.Slam(config, seed=0, observers=[Ends(detail_every=10, map_every=0),
+                                             ProgressObserver(60, enabled=False), recorder])  # fmt: skip
+    s.stages = [*s.stages[:-1], Stage(), s.stages[-1]]
+    odometry, scans = scan_odometry(log, config.robot), log.scans
+    for k in range(60):
+        scan = slam.Scan(scans.time[k], scans.ranges[k], scans.angles, no_return=scans.no_return)
+        s.update(scan, odometry=odometry[k])
+    assert recorder._preview is not None and recorder.maps >= 1  # snapshots during the filter
+    result = s.finish()
+    assert events == ["step"] * 60 + ["end", "stage"]
+    assert recorder._preview is None
+    assert recorder.finish(result.trajectory, result.grid)["maps"] == recorder.maps
+
+
 def test_custom_stages_replace_the_default_ones(small):
     config = slam.load_config("", None, ["filter.particles=8", "filter.max_scans=200"])
     no_loops = slam.load_config("", None, ["filter.particles=8", "loops.enabled=false"])
