@@ -25,6 +25,7 @@ on its result. :func:`run_dataset` (``slam.run``) is the same pipeline as one Py
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import resource
@@ -219,7 +220,10 @@ def execute(request: RunRequest) -> Result:
     check_output_dir(out, "run", request.force, inputs)  # before loading anything
     wall_start, compiled = time.perf_counter(), compile_seconds()
     jit_background.start()  # the later stages' kernels compile while the log loads
-    with atomic_dir(out, overwrite=request.force, kind="run", inputs=inputs) as tmp:
+    with (
+        atomic_dir(out, overwrite=request.force, kind="run", inputs=inputs) as tmp,
+        contextlib.ExitStack() as on_failure,  # runs before the partial folder is removed
+    ):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             reach_stage("load")
@@ -229,6 +233,8 @@ def execute(request: RunRequest) -> Result:
             from slam.viz.recorder import start_recording
 
             recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
+            if recorder is not None:  # a failed run closes its recording before it goes
+                on_failure.push(lambda kind, *_: recorder.abort() if kind is not None else None)
             observers = [recorder] if recorder is not None else []
             result = _estimate(source, config, request.progress, observers)
             release_free_memory()  # the filter's and the stages' freed blocks, before the outputs

@@ -442,6 +442,38 @@ def _mount_tmpfs(folder: Path, size: str) -> bool:
     return done.returncode == 0
 
 
+def test_a_failed_run_closes_its_recording_before_its_folder_goes(small, tmp_path, monkeypatch,
+                                                                 capsys):  # fmt: skip
+    """A run that fails after its recorder started (here: writing its outputs) disconnects the
+    recording while its partial folder still exists, once; a run that succeeds never aborts.
+    Before, rerun's threads kept the file open until the interpreter's exit and flushed into a
+    removed folder or a full disk then: an ERROR line, or a process that never exited."""
+    import slam.pipeline
+    from slam.viz.recorder import RunRecorder
+
+    seen: list[bool] = []
+    real_abort = RunRecorder.abort
+
+    def abort(self) -> None:
+        seen.append(self.path.parent.is_dir())  # the partial folder is still there
+        real_abort(self)
+
+    monkeypatch.setattr(RunRecorder, "abort", abort)
+    good = tmp_path / "good"
+    assert main(["run", str(small), "--out", str(good), "--max-scans", SCANS, "--quiet"]) == 0
+    assert seen == [] and (good / "recording.rrd").is_file()
+
+    def full(path, text):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(slam.pipeline, "write_text", full)
+    out = tmp_path / "out"
+    assert main(["run", str(small), "--out", str(out), "--max-scans", SCANS, "--quiet"]) == 2
+    assert seen == [True]
+    capsys.readouterr()
+    assert not out.exists() and not list(tmp_path.glob(".out.*"))
+
+
 def test_a_really_full_disk_is_one_line_without_rerun_errors(small, tmp_path):
     """Item 10 on a real 64 KiB tmpfs (fails on main: tracebacks plus coloured rerun ERROR
     lines). Needs root and ``mount``; skipped otherwise (the monkeypatched test above covers

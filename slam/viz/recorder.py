@@ -38,6 +38,7 @@ map, logged by :meth:`RunRecorder.finish`, is the run's own map (``map.npz``).
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections import deque
@@ -370,6 +371,15 @@ class RunRecorder:
             out["file"] = self.path.name
             out["size_mb"] = round(self.path.stat().st_size / 2**20, 2)
         return out
+
+    def abort(self) -> None:
+        """Close the stream of a run that failed (its folder is about to be removed): without
+        this rerun's threads kept the file open and, at the interpreter's exit, flushed into a
+        folder that no longer existed or a full disk — an ERROR line on stderr, or a process
+        that never exited (seen once in 300 s on a full 64 KiB tmpfs). Errors of the flush are
+        the run's failure already, not news."""
+        with contextlib.suppress(RuntimeError):
+            self.rec.disconnect()
 
 
 _LIVE_VIEWERS: list = []
