@@ -159,6 +159,10 @@ def send_track(
         rec.send_columns(path, indexes=index, columns=rr.Scalars.columns(scalars=rows[:, column]))
 
 
+ABORT_FLUSH_S = 2.0
+"""Longest wait for rerun to flush the recording of a failed run (:meth:`RunRecorder.abort`)."""
+
+
 class RunRecorder:
     """Observer that records a run for the rerun viewer (file and/or live viewer).
 
@@ -376,9 +380,11 @@ class RunRecorder:
         """Close the stream of a run that failed (its folder is about to be removed): without
         this rerun's threads kept the file open and, at the interpreter's exit, flushed into a
         folder that no longer existed or a full disk — an ERROR line on stderr, or a process
-        that never exited (seen once in 300 s on a full 64 KiB tmpfs). Errors of the flush are
-        the run's failure already, not news."""
-        with contextlib.suppress(RuntimeError):
+        that never exited (seen once in 300 s on a full 64 KiB tmpfs). The flush is bounded
+        (:data:`ABORT_FLUSH_S`), and its errors are the run's failure already, not news."""
+        with contextlib.suppress(Exception):
+            self.rec.flush(timeout_sec=ABORT_FLUSH_S)
+        with contextlib.suppress(Exception):
             self.rec.disconnect()
 
 
