@@ -1,7 +1,5 @@
 """``python -m slam``: the same entry point as the ``slam`` console script."""
 
-import sys
+from slam.cli import entry
 
-from slam.cli import main
-
-sys.exit(main())
+entry()

@@ -39,7 +39,7 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator, Sequence
-from typing import NamedTuple
+from typing import NamedTuple, NoReturn
 
 from slam import __version__
 from slam.commands._common import add_actions, add_command
@@ -253,5 +253,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     return int(code or 0)
 
 
+def entry() -> NoReturn:
+    """The ``slam`` command (and ``python -m slam``): :func:`main`, then exit with its code.
+
+    A rerun stream that could not be closed (:func:`slam.viz.stream.wedged`: rerun 0.41 blocks
+    for ever in ``disconnect`` once its file writer died on a full disk) would block the
+    interpreter's exit the same way; the process then ends with ``os._exit`` after flushing its
+    output, with the same code. Tests call :func:`main`, which never exits."""
+    code = main()
+    viz_stream = sys.modules.get("slam.viz.stream")
+    if viz_stream is not None and viz_stream.wedged():
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

@@ -58,7 +58,14 @@ from slam.observers import StepRecord
 from slam.trajectory import Trajectory
 from slam.viz import blueprint as bp
 from slam.viz.images import PlacedImage, as_image, occupancy_image, texture_image
-from slam.viz.stream import close_stream, open_stream, set_time, spawn_viewer, time_columns
+from slam.viz.stream import (
+    close_stream,
+    disconnect,
+    open_stream,
+    set_time,
+    spawn_viewer,
+    time_columns,
+)
 
 F64 = NDArray[np.float64]
 
@@ -381,11 +388,11 @@ class RunRecorder:
         this rerun's threads kept the file open and, at the interpreter's exit, flushed into a
         folder that no longer existed or a full disk — an ERROR line on stderr, or a process
         that never exited (seen once in 300 s on a full 64 KiB tmpfs). The flush is bounded
-        (:data:`ABORT_FLUSH_S`), and its errors are the run's failure already, not news."""
+        (:data:`ABORT_FLUSH_S`), the disconnect too (:func:`slam.viz.stream.disconnect`), and
+        their errors are the run's failure already, not news."""
         with contextlib.suppress(Exception):
             self.rec.flush(timeout_sec=ABORT_FLUSH_S)
-        with contextlib.suppress(Exception):
-            self.rec.disconnect()
+        disconnect(self.rec, raising=False)
 
 
 _LIVE_VIEWERS: list = []
