@@ -106,9 +106,14 @@ def close_stream(rec: rr.RecordingStream, path: Path | None = None) -> None:
     """
     try:
         rec.flush()
+    except RuntimeError as exc:
+        disconnect(rec, raising=False)  # the write's failure is the news, not the disconnect's
+        if path is None:
+            raise
+        raise _write_error(Path(path), exc) from None
+    try:
         disconnect(rec)
     except RuntimeError as exc:
-        disconnect(rec, raising=False)
         if path is None:
             raise
         raise _write_error(Path(path), exc) from None
@@ -126,8 +131,9 @@ def disconnect(rec: rr.RecordingStream, wait: float | None = None, raising: bool
     :data:`DISCONNECT_WAIT_S`); ``False`` when it did not return.
 
     rerun 0.41 can block for ever in ``disconnect`` once its file writer has stopped on a failed
-    write: on a full 64 KiB file system 2 of 15 trials of a bare stream blocked, and so did, once,
-    a ``slam run`` in CI (the interpreter's exit, or the disconnect after the failure). The call
+    write: on a full 64 KiB file system 2 of 15 trials of a bare stream blocked, and so did a
+    ``slam run`` in two of three CI runs (at the interpreter's exit, then in the disconnect after
+    the failure). The call
     runs on a daemon thread; a stream that does not come back is kept in a list (its drop would
     block the same way) and :func:`wedged` says so, for :func:`slam.cli.entry` to end the
     process without the interpreter's clean-up. ``raising``: re-raise the ``RuntimeError`` the
