@@ -24,6 +24,23 @@ def _wrap(theta: np.float64) -> np.float64:
     return (theta + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def row_trig(angles: Array) -> tuple[Array, Array]:
+    """Cosines and sines of ``angles`` ``(S, B)`` (the beam directions of ``S`` scans), each
+    the value ``np.cos`` / ``np.sin`` gives that angle, computed once for the rows whose angles
+    have the very bits of the first row's (the beams of one laser) and row by row for the
+    others: ``(1, B)`` arrays, which broadcast over the rows, when every row shares them, else
+    ``(S, B)``."""
+    bits = angles.view(np.int64)
+    shared = np.all(bits == bits[:1], axis=1)
+    if shared.all():
+        return np.cos(angles[:1]), np.sin(angles[:1])
+    cos, sin = np.empty_like(angles), np.empty_like(angles)
+    if shared.any():
+        cos[shared], sin[shared] = np.cos(angles[0]), np.sin(angles[0])
+    cos[~shared], sin[~shared] = np.cos(angles[~shared]), np.sin(angles[~shared])
+    return cos, sin
+
+
 def compose(a: ArrayLike, b: ArrayLike) -> Array:
     """Return ``a ⊕ b``: pose ``b`` (expressed in the frame of ``a``) mapped to the world frame."""
     a = np.asarray(a, dtype=np.float64)

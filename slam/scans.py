@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.config import Config, LidarConfig
 from slam.errors import DataError, UsageError
+from slam.geometry import row_trig
 from slam.io.log import Log
 
 if TYPE_CHECKING:
@@ -241,6 +242,33 @@ def ray_kinds(
     return keep, hit, length
 
 
+def endpoint_rows(scans: list[Scan], width: int) -> tuple[F32, F32]:
+    """The endpoints of ``scans`` (resolved) as ``(S, width)`` float32 rows, NaN where no
+    return or no beam: :meth:`Scan.endpoints` of each, to the bit, in one pass.
+
+    Every element meets the operations of :meth:`Scan.endpoints` in the same precision: the
+    float32 ranges against each scan's limits in float32 (as numpy compares a float32 array
+    with a Python float), the laser pose and the trigonometry in float64. The cosines and sines,
+    most of the cost, are computed once for all the rows whose beam directions (laser heading
+    plus beam angles) have the bits of the first row's, as in a log of one laser, and row by
+    row for the others (:func:`slam.geometry.row_trig`)."""
+    r = np.full((len(scans), width), np.nan, dtype=np.float32)
+    a = np.full((len(scans), width), np.nan)
+    limits = np.empty((len(scans), 5))  # range_min, range_max, laser x, y, yaw
+    for i, scan in enumerate(scans):
+        scan._require_resolved()
+        r[i, : scan.num_beams] = scan.ranges
+        a[i, : scan.num_beams] = scan.angles
+        limits[i, :2] = scan.range_min, scan.range_max
+        limits[i, 2:] = scan.laser_offset
+    low, high = limits[:, 0:1].astype(np.float32), limits[:, 1:2].astype(np.float32)
+    r[~(np.isfinite(r) & np.isfinite(a) & (r >= low) & (r < high))] = np.nan
+    cos, sin = row_trig(limits[:, 4:5] + a)
+    ex = (limits[:, 2:3] + r * cos).astype(np.float32)
+    ey = (limits[:, 3:4] + r * sin).astype(np.float32)
+    return ex, ey
+
+
 def odometry_pose(scan: Scan, odometry: ArrayLike) -> NDArray[np.float64]:
     """``odometry``, the pose the robot's odometry gave at ``scan``, as ``(3,)`` float64;
     :class:`DataError` naming the scan's time when it is not a finite ``(x, y, theta)``."""
@@ -416,6 +444,32 @@ class ScanSequence:
             a[i, : scan.num_beams] = scan.angles
         return r, a
 
+    def endpoint_table(self, steps: ArrayLike) -> tuple[F32, F32]:
+        """Robot-frame endpoints of scans ``steps`` as ``(S, W)`` float32 rows, ``W`` the widest
+        of them, NaN where no return or no beam: :meth:`Scan.endpoints` scan by scan, to the
+        bit.
+
+        The scans whose endpoints are known are copied; the others are computed in one pass
+        (:func:`endpoint_rows`), and each keeps its row as its endpoints (later calls, and
+        :meth:`Scan.endpoints`, return it)."""
+        scans = [self._scans[int(k)] for k in np.asarray(steps, dtype=np.int64)]
+        width = max((scan.num_beams for scan in scans), default=0)
+        todo = [i for i, scan in enumerate(scans) if scan._ends is None]
+        if len(todo) == len(scans):
+            ex, ey = endpoint_rows(scans, width)
+        else:
+            ex = np.full((len(scans), width), np.nan, dtype=np.float32)
+            ey = np.full((len(scans), width), np.nan, dtype=np.float32)
+            if todo:
+                ex[todo], ey[todo] = endpoint_rows([scans[i] for i in todo], width)
+            for i, scan in enumerate(scans):
+                if scan._ends is not None:
+                    ex[i, : scan.num_beams], ey[i, : scan.num_beams] = scan._ends
+        for i in todo:
+            scan = scans[i]
+            object.__setattr__(scan, "_ends", (ex[i, : scan.num_beams], ey[i, : scan.num_beams]))
+        return ex, ey
+
     def ray_table(
         self, steps: ArrayLike, free_range_no_return: float, stride: int = 1
     ) -> tuple[F64, NDArray[np.bool_], NDArray[np.int64]]:
@@ -440,8 +494,8 @@ class ScanSequence:
             r, a, range_min, range_max, no_return, free_range_no_return, stride
         )
         rows = np.nonzero(keep)[0]
-        angle = (lt + a)[keep]
-        c, s = np.cos(angle), np.sin(angle)
+        cos, sin = row_trig(lt + a)  # once for the scans of one laser
+        c, s = np.broadcast_to(cos, keep.shape)[keep], np.broadcast_to(sin, keep.shape)[keep]
         reach = length[keep]
         ends = np.stack([lx[rows, 0] + reach * c, ly[rows, 0] + reach * s], axis=1)
         offsets = np.zeros(len(scans) + 1, dtype=np.int64)

@@ -498,14 +498,12 @@ def registration_beams(
     # every scan's endpoints side by side (NaN where no return or no beam); each row's returns
     # in beam order, thinned to ``width`` evenly spread as Scan.hits thins them (the same
     # np.linspace positions, row by row): the values Scan.hits gives, without a copy per scan
-    all_x = np.full((len(scans), seq.num_beams), np.nan, dtype=np.float32)
-    all_y = np.full((len(scans), seq.num_beams), np.nan, dtype=np.float32)
-    for i, k in enumerate(scans):
-        hx, hy = seq.scan(int(k)).endpoints()
-        all_x[i, : hx.size], all_y[i, : hy.size] = hx, hy
+    all_x, all_y = seq.endpoint_table(scans)
     hit = ~np.isnan(all_x)
     counts = np.count_nonzero(hit, axis=1).astype(np.int64)
-    order = np.argsort(~hit, axis=1, kind="stable")  # the returns first, in beam order
+    found_x, found_y = all_x[hit], all_y[hit]  # row by row, each in beam order
+    first = np.zeros(len(scans), dtype=np.int64)
+    np.cumsum(counts[:-1], out=first[1:])
     pos = np.tile(np.arange(width, dtype=np.int64), (len(scans), 1))
     thin = np.flatnonzero(counts > width)
     if thin.size and width > 1:
@@ -516,10 +514,12 @@ def registration_beams(
     elif thin.size:
         pos[thin] = 0
     counts[thin] = width
-    front = np.take_along_axis(order, pos, axis=1)
-    ex = np.take_along_axis(all_x, front, axis=1).astype(np.float64)
-    ey = np.take_along_axis(all_y, front, axis=1).astype(np.float64)
     beyond = np.arange(width)[None, :] >= counts[:, None]
+    if found_x.size == 0:
+        return np.zeros(pos.shape), np.zeros(pos.shape), counts
+    index = np.where(beyond, 0, first[:, None] + pos)
+    ex = found_x[index].astype(np.float64)
+    ey = found_y[index].astype(np.float64)
     ex[beyond] = 0.0
     ey[beyond] = 0.0
     return ex, ey, counts

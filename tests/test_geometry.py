@@ -11,6 +11,7 @@ from slam.geometry import (
     inverse,
     quaternion_to_yaw,
     relative,
+    row_trig,
     transform_points,
     wrap_angle,
     yaw_to_quaternion,
@@ -143,3 +144,23 @@ def test_spread_corrections_equals_the_stretch_by_stretch_definition_to_the_bit(
         progress = np.concatenate([[0.0], np.cumsum(steps)])
         expected = _spread_anchor_by_anchor(old, anchors, new_anchors, progress)
         assert np.array_equal(spread_corrections(old, anchors, new_anchors, progress), expected)
+
+
+def test_row_trig_is_numpys_cos_and_sin_computed_once_for_shared_rows():
+    """Rows with the first row's very angles share one computation ((1, B) when all do); the
+    values are np.cos / np.sin of each angle, bit for bit, whatever the mix (-0.0 against 0.0
+    is not the same row: its sine differs)."""
+    rng = np.random.default_rng(2)
+    row = rng.uniform(-np.pi, np.pi, 37)
+    same = np.tile(row, (5, 1))
+    cos, sin = row_trig(same)
+    assert cos.shape == sin.shape == (1, 37)
+    assert np.broadcast_to(cos, same.shape).tobytes() == np.cos(same).tobytes()
+    mixed = np.vstack([same, rng.uniform(-np.pi, np.pi, (3, 37)), row[None, :]])
+    mixed[1, 4] = np.nan
+    mixed[0, 0] = mixed[2, 0] = 0.0
+    mixed[3, 0] = -0.0
+    cos, sin = row_trig(mixed)
+    assert cos.shape == mixed.shape
+    assert cos.tobytes() == np.cos(mixed).tobytes() and sin.tobytes() == np.sin(mixed).tobytes()
+    assert np.signbit(sin[3, 0]) and not np.signbit(sin[2, 0])

@@ -87,6 +87,53 @@ def test_the_ray_table_is_every_scans_rays_to_the_bit():
     assert hit.any() and not hit.all()
 
 
+def _scans_for_endpoints(seed: int) -> list[Scan]:
+    """Scans of one laser (shared beam angles) and some of another (their own angles, width,
+    limits or laser pose), with every kind of reading, ranges exactly at the limits among them."""
+    rng = np.random.default_rng(seed)
+    shared = np.linspace(-2.0, 2.0, 12)
+    out = []
+    for k in range(30):
+        n = 12 if k % 5 else int(rng.integers(0, 15))
+        ranges = rng.uniform(0.05, 10.0, n)
+        ranges[rng.random(n) < 0.15] = np.nan
+        ranges[rng.random(n) < 0.1] = 0.2  # exactly range_min: a return
+        ranges[rng.random(n) < 0.1] = 5.0  # exactly range_max: not one
+        angles = shared.copy() if n == 12 else np.sort(rng.uniform(-2.0, 2.0, n))
+        own: dict = {"laser_offset": rng.normal(0.0, 0.2, 3)} if k % 7 == 3 else {}
+        if k % 4 == 1:  # 5.1 as float32 is below 5.1: not a return, compared in float32
+            own["range_max"] = 5.1
+            ranges[rng.random(n) < 0.2] = 5.1
+        out.append(Scan(0.1 * k, ranges, angles, **own).resolved(LIDAR))
+    return out
+
+
+def test_the_endpoint_table_is_every_scans_endpoints_to_the_bit():
+    """ScanSequence.endpoint_table (the registration's one pass over its scans) gives what
+    Scan.endpoints gives scan by scan, and leaves each scan its row: scans sharing their beam
+    directions (computed once) and scans with their own, of other widths (none at all among
+    them), some already computed before the call."""
+    want = [scan.endpoints() for scan in _scans_for_endpoints(5)]
+    seq = ScanSequence()
+    for k, scan in enumerate(_scans_for_endpoints(5)):
+        seq.append(scan, [k, 0.0, 0.0])
+    seq.scan(4).endpoints(), seq.scan(9).endpoints()  # known before: copied
+    steps = np.array([4, 0, 1, 1, 5, 10, *range(11, 30), 9])
+    ex, ey = seq.endpoint_table(steps)
+    assert ex.dtype == ey.dtype == np.float32
+    assert ex.shape == (len(steps), max(seq.scan(int(k)).num_beams for k in steps))
+    for i, k in enumerate(steps):
+        wx, wy = want[k]
+        assert ex[i, : wx.size].tobytes() == wx.tobytes()
+        assert ey[i, : wy.size].tobytes() == wy.tobytes()
+        assert np.isnan(ex[i, wx.size :]).all() and np.isnan(ey[i, wy.size :]).all()
+        got = seq.scan(int(k)).endpoints()  # the scan keeps the row (or its own)
+        assert got[0].tobytes() == wx.tobytes() and got[1].tobytes() == wy.tobytes()
+    assert np.isfinite(ex).sum() > 100 and np.isnan(ex[:, :12]).any()
+    empty = seq.endpoint_table(np.array([], dtype=np.int64))
+    assert empty[0].shape == (0, 0)
+
+
 def test_scan_sequence_grows_and_keeps_every_scan():
     seq = ScanSequence(capacity=2)
     for k in range(5):

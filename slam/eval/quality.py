@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from slam.config import MapConfig, QualityConfig
 from slam.errors import DataError
 from slam.eval.relations import DEFAULT_TOLERANCE_S, match_times, relation_errors
-from slam.geometry import path_along
+from slam.geometry import path_along, row_trig
 from slam.io.relations import Relations
 from slam.kernels.quality import (
     AGREE,
@@ -121,8 +121,9 @@ def scan_rays(
     kind = np.where(hit, HIT, np.where(ray, FREE, NO_RAY)).astype(np.int8)
     lx, ly, lt = (float(v) for v in laser_offset)
     length = np.where(ray, length, np.nan)
-    ex = (lx + length * np.cos(lt + a)).astype(np.float32)
-    ey = (ly + length * np.sin(lt + a)).astype(np.float32)
+    cos, sin = row_trig(lt + a)  # once for the scans of one laser
+    ex = (lx + length * cos).astype(np.float32)
+    ey = (ly + length * sin).astype(np.float32)
     return Rays(ex, ey, kind, (lx, ly))
 
 
