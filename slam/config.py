@@ -687,6 +687,12 @@ class VizConfig(Validated):
     """At most this many endpoints (evenly spread) of a logged scan."""
     map_levels: int = bounded(16, ge=2, le=256)
     """Grey levels of the logged map images (fewer levels make smaller recordings)."""
+    preview_cells: int = bounded(8_000_000, ge=1)
+    """At most this many cells in the live map the snapshots are drawn from: a larger one is
+    coarsened, its cells doubled (:meth:`slam.mapping.OccupancyGrid.coarsened`), so a large
+    building's recording holds neither a full-size preview grid nor full-size snapshots
+    (mit-killian: 32.8 M cells at 5 cm, docs/viz.md "Memory"); the final map is logged at full
+    size."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ Both refuse (one :class:`~slam.errors.UsageError` line) to grow an array past th
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -196,6 +197,25 @@ class OccupancyGrid:
         return OccupancyGrid.from_arrays(
             self.log_odds[r0:r1, c0:c1].copy(), self.resolution, origin, self.config
         )
+
+    def coarsened(self, factor: int = 2) -> OccupancyGrid:
+        """This grid with cells ``factor`` times as large (same lower-left corner; rows and
+        columns padded with unknown cells to a multiple of ``factor``), for pictures that need
+        not be fine: a cell holds its block's largest log-odds when that is positive (any
+        occupied cell keeps the wall), else its smallest (the freest). Later rays integrate at
+        the coarse resolution (``config.resolution`` is the new cell)."""
+        if factor < 1:
+            raise ValueError(f"coarsened: expected a factor of at least 1, found {factor}")
+        rows, cols = self.shape
+        pad = ((0, -rows % factor), (0, -cols % factor))
+        blocks = np.pad(self.log_odds, pad).reshape(
+            (rows + pad[0][1]) // factor, factor, (cols + pad[1][1]) // factor, factor
+        )
+        high, low = blocks.max(axis=(1, 3)), blocks.min(axis=(1, 3))
+        log_odds = np.where(high > 0, high, low).astype(np.float32)
+        resolution = self.resolution * factor
+        config = dataclasses.replace(self.config, resolution=resolution)
+        return OccupancyGrid.from_arrays(log_odds, resolution, self.origin, config)
 
     def occupied(self) -> NDArray[np.bool_]:
         """Cells whose log-odds exceed the occupied threshold."""

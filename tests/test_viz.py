@@ -143,6 +143,60 @@ def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_pat
     assert pixels.min() < 60 and pixels.max() > 200
 
 
+def test_a_coarsened_grid_keeps_walls_and_free_space_in_place():
+    """OccupancyGrid.coarsened: a block takes its largest positive log-odds (a wall), else its
+    smallest (free space); odd sides are padded with unknown cells; the lower-left corner stays;
+    rays integrate at the coarse cell afterwards."""
+    from slam.config import MapConfig
+    from slam.mapping import OccupancyGrid
+
+    lo = np.zeros((5, 3), dtype=np.float32)
+    lo[0, 0], lo[0, 1] = 2.0, -1.5  # a wall beside free space: the wall wins
+    lo[1, 1] = -0.5
+    lo[2, 0], lo[3, 1] = -0.4, -2.0  # free space only: the freest
+    lo[4, 2] = 3.0  # the padded last row and column
+    grid = OccupancyGrid.from_arrays(lo, 0.05, np.array([1.0, -2.0]), MapConfig())
+    coarse = grid.coarsened(2)
+    assert coarse.shape == (3, 2) and coarse.log_odds.dtype == np.float32
+    np.testing.assert_array_equal(coarse.log_odds, [[2.0, 0.0], [-2.0, 0.0], [0.0, 3.0]])
+    assert coarse.resolution == coarse.config.resolution == 0.1
+    np.testing.assert_array_equal(coarse.origin, [1.0, -2.0])
+    coarse.integrate(np.array([1.05, -1.95]), np.array([[1.55, -1.95]]), np.array([True]))
+    assert coarse.log_odds[0, 5] > 0 and coarse.log_odds[0, 2] < 0  # a ray at 0.1 m cells
+    with pytest.raises(ValueError, match="factor of at least 1"):
+        grid.coarsened(0)
+
+
+@pytest.mark.parametrize(("budget", "cell"), [(8_000_000, 0.05), (200_000, 0.1), (50_000, 0.2)])
+def test_the_preview_map_is_coarsened_to_its_cell_budget(tmp_path, budget, cell):
+    """viz.preview_cells: a live map over the budget (800 × 800 cells of 5 cm at first) has its
+    cells doubled until it fits; the snapshots say so (their scale) and still show the wall."""
+    from slam.observers import StepRecord
+    from slam.trajectory import Trajectory
+    from slam.viz.recorder import RunRecorder
+
+    config = VizConfig(map_every=4, detail_every=2, preview_cells=budget)
+    recorder = RunRecorder(tmp_path / "r.rrd", config)
+    wall = np.stack([np.linspace(-1, 1, 50), np.full(50, 2.0)], axis=1)
+    for k in range(9):
+        record = StepRecord(k, k, float(k), np.array([0.0, 0.0, 0.0]), 5.0, 0.2, True, False)
+        if k % 2 == 0:
+            record.endpoints = wall
+        recorder.on_step(record)
+    assert recorder._preview.log_odds.size <= budget
+    assert recorder._preview.resolution == pytest.approx(cell)
+    recorder.finish(Trajectory(np.arange(9.0), np.zeros((9, 3))), None)
+    scales = rows(tmp_path / "r.rrd", bp.MAP, "Transform3D:scale")
+    assert [i for i, _ in scales] == [4, 8]
+    for _, scale in scales:
+        np.testing.assert_allclose(scale[0], [cell, cell, 1.0])
+    (_, buffer) = rows(tmp_path / "r.rrd", bp.MAP, "Image:buffer")[-1]
+    fmt = rows(tmp_path / "r.rrd", bp.MAP, "Image:format")[-1][1][0]
+    pixels = np.frombuffer(bytes(buffer[0]), dtype=np.uint8).reshape(fmt["height"], fmt["width"])
+    assert pixels.min() < 60 and pixels.max() > 200
+    assert fmt["width"] * cell == pytest.approx(2.0 + 2 * cell, abs=2 * cell)  # the wall's span
+
+
 def test_texture_is_rgba_with_unseen_cells_transparent(scripted):
     (_, buffer) = rows(scripted, bp.TEXTURE, "Image:buffer", timeline=None)[0]
     (_, fmt) = rows(scripted, bp.TEXTURE, "Image:format", timeline=None)[0]

@@ -296,18 +296,21 @@ class RunRecorder:
             )
 
     def _integrate(self, pose: F64, endpoints: F64) -> None:
-        """Add one logged scan (rays from the robot to its endpoints) to the preview map."""
+        """Add one logged scan (rays from the robot to its endpoints) to the preview map;
+        coarsen the map while it has more than ``viz.preview_cells`` cells."""
         if self._preview is None:
             self._preview = OccupancyGrid(self._map_config, center=(pose[0], pose[1]))
         hit = np.ones(endpoints.shape[0], dtype=np.bool_)
         self._preview.integrate(np.asarray(pose[:2], dtype=np.float64), endpoints, hit)
+        while self._preview.log_odds.size > self.config.preview_cells:
+            self._preview = self._preview.coarsened(2)
 
     def _log_map(self, step: int, time_s: float, grid: OccupancyGrid) -> None:
         """Log a snapshot of ``grid``; then hand the heap's freed pages back: on a large
         building each snapshot's picture and its serialised copy are tens of MB, which the C
         heap would otherwise keep (mit-killian's default run: peak 952 → 848–865 MB with this,
-        :meth:`on_filter_end` and the pipeline's own trims; 0.1 s for its 88 snapshots;
-        docs/viz.md)."""
+        :meth:`on_filter_end` and the pipeline's own trims; 0.1 s for its 88 snapshots; then
+        769–846 MB with the preview's cell budget, ``viz.preview_cells``; docs/viz.md)."""
         image = occupancy_image(grid, self.config.map_levels)
         if image is not None:
             set_time(self.rec, step, time_s)
