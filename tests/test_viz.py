@@ -213,6 +213,8 @@ def test_viz_config_rejects_bad_cadences():
         VizConfig(map_levels=1)
     with pytest.raises(ConfigError, match="viz.scan_points"):
         VizConfig(scan_points=0)
+    with pytest.raises(ConfigError, match="viz.preview_cells"):
+        VizConfig(preview_cells=0)
 
 
 @pytest.fixture(scope="module")
