@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import release_free_memory
 from slam.config import Config, MapConfig
 from slam.geometry import compose, relative, spread_corrections
 from slam.mapping import (
@@ -278,6 +279,7 @@ class FinalMap:
         """The grid (:func:`build_map`)."""
         if output.poses is None:
             raise ValueError("final map: the scans have no poses yet (run BetweenUpdates first)")
+        release_free_memory()  # the stages' freed heap, before the run's largest array
         grid = build_map(output.scans, output.poses, output.steps, config)
         return dataclasses.replace(output, grid=grid)
 

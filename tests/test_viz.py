@@ -8,6 +8,7 @@ import math
 import subprocess
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from rerun.chunk import RrdReader
@@ -39,6 +40,15 @@ def rows(
     return sorted(out, key=lambda r: r[0])
 
 
+def map_pictures(path: Path, entity: str = bp.MAP) -> list[tuple[int, np.ndarray]]:
+    """``(scan, pixels)`` of every map picture logged at ``entity`` (PNG blobs, decoded)."""
+    out = []
+    for i, blob in rows(path, entity, "EncodedImage:blob"):
+        pixels = cv2.imdecode(np.frombuffer(bytes(blob[0]), np.uint8), cv2.IMREAD_UNCHANGED)
+        out.append((i, pixels))
+    return out
+
+
 @pytest.fixture(scope="module")
 def scripted(tmp_path_factory) -> Path:
     """The golden scripted run (tools/make_viz_reference.py) written to a temporary file."""
@@ -60,7 +70,7 @@ def test_scripted_recording_has_every_entity_with_the_documented_row_counts(scri
     assert s[f"/{bp.SCANS_PER_S}"].rows == 7
     # map every 10 scans (10, 20, 30) and the final map
     assert s[f"/{bp.MAP}"].rows == 4
-    assert {"Image:buffer", "Transform3D:translation", "Transform3D:scale"} <= s[
+    assert {"EncodedImage:blob", "Transform3D:translation", "Transform3D:scale"} <= s[
         f"/{bp.MAP}"
     ].fields
     assert s[f"/{bp.TRAJECTORY_FINAL}"].rows == 1
@@ -109,9 +119,12 @@ def test_map_image_is_placed_at_its_lower_left_corner(scripted):
     # of margin: x from about -2.6, y from about -0.1
     corner = np.asarray(translations[-1][1][0])
     assert -2.8 < corner[0] < -2.4 and -0.3 < corner[1] < 0.1
-    formats = rows(scripted, bp.MAP, "Image:format")
-    final = formats[-1][1][0]
-    assert final["width"] * 0.1 > 5.0 and final["height"] * 0.1 > 2.6
+    pictures = map_pictures(scripted)
+    assert [i for i, _ in pictures] == [10, 20, 30, 39]
+    height, width = pictures[-1][1].shape
+    assert width * 0.1 > 5.0 and height * 0.1 > 2.6
+    media = rows(scripted, bp.MAP, "EncodedImage:media_type")
+    assert {m[0] for _, m in media} == {"image/png"}
 
 
 def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_path):
@@ -134,12 +147,15 @@ def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_pat
     recorder.on_map(9, 9.0, grid)  # not due: the last snapshot was at 8
     recorder.on_map(13, 13.0, grid)  # due (≥ 12)
     recorder.finish(Trajectory(np.arange(9.0), np.zeros((9, 3))), None)
-    snapshots = rows(tmp_path / "r.rrd", bp.MAP, "Image:format")
+    snapshots = map_pictures(tmp_path / "r.rrd")
     assert [i for i, _ in snapshots] == [4, 8, 13]
+    from slam.viz.images import occupancy_image
+
+    # the PNG is lossless: the snapshot of step 13 is the grid's picture to the pixel
+    np.testing.assert_array_equal(snapshots[2][1], occupancy_image(grid, 16).pixels)
     # the preview holds the wall: occupied (dark) pixels in the top rows of the image
-    (_, buffer) = rows(tmp_path / "r.rrd", bp.MAP, "Image:buffer")[0]
-    fmt = snapshots[0][1][0]
-    pixels = np.frombuffer(bytes(buffer[0]), dtype=np.uint8).reshape(fmt["height"], fmt["width"])
+    pixels = snapshots[0][1]
+    assert pixels.dtype == np.uint8 and pixels.ndim == 2
     assert pixels.min() < 60 and pixels.max() > 200
 
 
@@ -190,11 +206,9 @@ def test_the_preview_map_is_coarsened_to_its_cell_budget(tmp_path, budget, cell)
     assert [i for i, _ in scales] == [4, 8]
     for _, scale in scales:
         np.testing.assert_allclose(scale[0], [cell, cell, 1.0])
-    (_, buffer) = rows(tmp_path / "r.rrd", bp.MAP, "Image:buffer")[-1]
-    fmt = rows(tmp_path / "r.rrd", bp.MAP, "Image:format")[-1][1][0]
-    pixels = np.frombuffer(bytes(buffer[0]), dtype=np.uint8).reshape(fmt["height"], fmt["width"])
+    pixels = map_pictures(tmp_path / "r.rrd")[-1][1]
     assert pixels.min() < 60 and pixels.max() > 200
-    assert fmt["width"] * cell == pytest.approx(2.0 + 2 * cell, abs=2 * cell)  # the wall's span
+    assert pixels.shape[1] * cell == pytest.approx(2.0 + 2 * cell, abs=2 * cell)  # the wall's span
 
 
 def test_texture_is_rgba_with_unseen_cells_transparent(scripted):

@@ -57,7 +57,7 @@ from slam.mapping import OccupancyGrid
 from slam.observers import StepRecord
 from slam.trajectory import Trajectory
 from slam.viz import blueprint as bp
-from slam.viz.images import PlacedImage, as_image, occupancy_image, texture_image
+from slam.viz.images import PlacedImage, as_image, as_png, occupancy_image, texture_image
 from slam.viz.stream import (
     close_stream,
     disconnect,
@@ -95,12 +95,15 @@ def log_placed(
     draw_order: float,
     static: bool = False,
 ) -> None:
-    """Log ``image`` at ``path`` with the transform that places its pixels in the world."""
+    """Log ``image`` at ``path`` with the transform that places its pixels in the world: a grey
+    picture (an occupancy map) as a PNG (:func:`~slam.viz.images.as_png`), a colour one (the
+    texture) as it is."""
     x, y = image.corner
+    grey = image.pixels.ndim == 2
     rec.log(
         path,
         rr.Transform3D(translation=[x, y, 0.0], scale=[image.cell, image.cell, 1.0]),
-        as_image(image.pixels, draw_order),
+        as_png(image.pixels, draw_order) if grey else as_image(image.pixels, draw_order),
         static=static,
     )
 
