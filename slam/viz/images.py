@@ -2,12 +2,13 @@
 
 Both follow the map convention (:mod:`slam.mapping`): ``array[iy, ix]`` is the cell whose lower-left
 corner is ``origin + (ix, iy)·resolution``. A recording logs such an array *unflipped* as an
-``rr.Image`` with a ``Transform3D`` (translation = the lower-left corner of the cropped array,
+image (the grey occupancy map a PNG, :func:`as_png`; the colour texture an ``rr.Image``,
+:func:`as_image`) with a ``Transform3D`` (translation = the lower-left corner of the cropped array,
 scale = the cell size): pixel ``(u, v)`` lands on world ``origin + (u, v)·resolution``. The parent
 ``world`` entity flips the y axis once (see :mod:`slam.viz.blueprint`), so +y points up on screen.
 
 The occupancy picture is cropped to the cells that have been observed (log-odds ≠ 0), and its
-grey values are quantised to a few levels: both keep recordings small (rerun compresses rows).
+grey values are quantised to a few levels: both keep recordings small (PNG compresses the runs).
 """
 
 from __future__ import annotations

@@ -313,7 +313,8 @@ class RunRecorder:
         building each snapshot's picture and its serialised copy are tens of MB, which the C
         heap would otherwise keep (mit-killian's default run: peak 952 → 848–865 MB with this,
         :meth:`on_filter_end` and the pipeline's own trims; 0.1 s for its 88 snapshots; then
-        769–846 MB with the preview's cell budget, ``viz.preview_cells``; docs/viz.md)."""
+        769–846 MB with the preview's cell budget, ``viz.preview_cells``, and 719–729 MB with
+        the maps logged as PNG; docs/viz.md)."""
         image = occupancy_image(grid, self.config.map_levels)
         if image is not None:
             set_time(self.rec, step, time_s)
