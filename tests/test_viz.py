@@ -127,21 +127,29 @@ def test_map_image_is_placed_at_its_lower_left_corner(scripted):
     assert {m[0] for _, m in media} == {"image/png"}
 
 
-def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_path):
-    from slam.config import MapConfig
-    from slam.mapping import OccupancyGrid
+def _nine_steps_before_a_wall(recorder) -> np.ndarray:
+    """Feed ``recorder`` nine steps at the origin, every other one with the endpoints of a wall
+    2 m ahead (returned)."""
     from slam.observers import StepRecord
-    from slam.trajectory import Trajectory
-    from slam.viz.recorder import RunRecorder
 
-    recorder = RunRecorder(tmp_path / "r.rrd", VizConfig(map_every=4, detail_every=2))
-    assert recorder.map_every == 0  # the filter's own live map is not requested
     wall = np.stack([np.linspace(-1, 1, 50), np.full(50, 2.0)], axis=1)
     for k in range(9):
         record = StepRecord(k, k, float(k), np.array([0.0, 0.0, 0.0]), 5.0, 0.2, True, False)
         if k % 2 == 0:
             record.endpoints = wall
         recorder.on_step(record)
+    return wall
+
+
+def test_map_snapshots_preview_the_logged_scans_and_on_map_logs_when_due(tmp_path):
+    from slam.config import MapConfig
+    from slam.mapping import OccupancyGrid
+    from slam.trajectory import Trajectory
+    from slam.viz.recorder import RunRecorder
+
+    recorder = RunRecorder(tmp_path / "r.rrd", VizConfig(map_every=4, detail_every=2))
+    assert recorder.map_every == 0  # the filter's own live map is not requested
+    wall = _nine_steps_before_a_wall(recorder)
     grid = OccupancyGrid(MapConfig(), center=(0.0, 0.0))
     grid.integrate(np.zeros(2), wall, np.ones(50, dtype=bool))
     recorder.on_map(9, 9.0, grid)  # not due: the last snapshot was at 8
@@ -187,18 +195,12 @@ def test_a_coarsened_grid_keeps_walls_and_free_space_in_place():
 def test_the_preview_map_is_coarsened_to_its_cell_budget(tmp_path, budget, cell):
     """viz.preview_cells: a live map over the budget (800 × 800 cells of 5 cm at first) has its
     cells doubled until it fits; the snapshots say so (their scale) and still show the wall."""
-    from slam.observers import StepRecord
     from slam.trajectory import Trajectory
     from slam.viz.recorder import RunRecorder
 
     config = VizConfig(map_every=4, detail_every=2, preview_cells=budget)
     recorder = RunRecorder(tmp_path / "r.rrd", config)
-    wall = np.stack([np.linspace(-1, 1, 50), np.full(50, 2.0)], axis=1)
-    for k in range(9):
-        record = StepRecord(k, k, float(k), np.array([0.0, 0.0, 0.0]), 5.0, 0.2, True, False)
-        if k % 2 == 0:
-            record.endpoints = wall
-        recorder.on_step(record)
+    _nine_steps_before_a_wall(recorder)
     assert recorder._preview.log_odds.size <= budget
     assert recorder._preview.resolution == pytest.approx(cell)
     recorder.finish(Trajectory(np.arange(9.0), np.zeros((9, 3))), None)
