@@ -508,6 +508,9 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "localize.step_least_ms": _figure(
         "localize.histogram_step_intel", "step_wall_ms_min", digits=1
     ),
+    "viz.recorder_pct": _figure("viz.demo_overhead", "recorder_pct", digits=1),
+    "viz.wall_difference_pct": _figure("viz.demo_overhead", "wall_difference_pct", digits=1),
+    "viz.recording_mb": _figure("viz.demo_overhead", "recording_mb", digits=1),
     "texture.colour_mae": _figure(TEXTURE, "colour_mae", digits=2),
     "texture.coverage": _percent(TEXTURE, "coverage"),
     "texture.frames_per_s": _figure(TEXTURE, "frames_per_s", digits=0),
