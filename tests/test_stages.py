@@ -203,12 +203,20 @@ def test_registration_beams_give_what_each_scan_gives(most):
         seq.append(scan, np.array([0.1 * k, 0.0, 0.0]))
     config = load_config("", None, [f"rbpf.refine_beams={most}"])
     scans = np.array([3, 0, 24, 7, 7, 11, 19, 2], dtype=np.int64)
-    got = registration_beams(seq, scans, config)
     width = max(1, min(most or seq.num_beams, seq.num_beams))
-    want = _beams_scan_by_scan(seq, scans, width)
-    for a, b in zip(got, want, strict=True):
-        assert a.dtype == b.dtype and a.shape == b.shape
-        np.testing.assert_array_equal(a, b)
+
+    def check(chosen):  # the selection and thinning (the endpoints' values: test_scans.py)
+        got = registration_beams(seq, chosen, config)
+        want = _beams_scan_by_scan(seq, chosen, width)
+        for a, b in zip(got, want, strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape
+            np.testing.assert_array_equal(a, b)
+
+    check(scans)  # endpoints computed by the batch
+    check(scans)  # known: copied
+    empty = np.array([k for k in range(25) if not np.isfinite(seq.scan(k).endpoints()[0]).any()])
+    assert empty.size > 0
+    check(empty)  # a batch of scans with no return at all
 
 
 @pytest.fixture(scope="module")
