@@ -13,7 +13,9 @@
   batch pipeline feeds them to the same :class:`~slam.online.Slam` object an online user has.
 
 Ranges are stored as float32 (the :class:`~slam.io.log.Log`'s convention: a laser's millimetres
-are far above float32's precision), angles and poses as float64.
+are far above float32's precision), angles and poses as float64. A scan copies the arrays it is
+given, except read-only ones of those dtypes: :class:`LogScans` hands its scans read-only views
+of the log's arrays, so a run holds no copy of them per scan.
 """
 
 from __future__ import annotations
@@ -46,6 +48,20 @@ def nominal_scan_period(times: ArrayLike) -> float:
     return float(np.median(steps)) if steps.size else 0.0
 
 
+def _kept(values: ArrayLike, dtype: type) -> NDArray:
+    """``values`` as the 1-D ``dtype`` array a :class:`Scan` keeps: a read-only one of that
+    dtype as it is (a log's own arrays, shared by its scans: :class:`LogScans`), anything else
+    copied (a driver may reuse its buffer)."""
+    if (
+        isinstance(values, np.ndarray)
+        and values.dtype == dtype
+        and values.ndim == 1
+        and not values.flags.writeable
+    ):
+        return values
+    return np.array(values, dtype=dtype).reshape(-1)
+
+
 @dataclass(frozen=True, eq=False)
 class Scan:
     """One 2D laser scan (see the module docstring)."""
@@ -74,8 +90,8 @@ class Scan:
         time = float(self.time)
         if not np.isfinite(time):
             raise DataError(f"scan: time must be a finite number of seconds, found {self.time!r}")
-        ranges = np.array(self.ranges, dtype=np.float32).reshape(-1)
-        angles = np.array(self.angles, dtype=np.float64).reshape(-1)
+        ranges = _kept(self.ranges, np.float32)
+        angles = _kept(self.angles, np.float64)
         if ranges.shape != angles.shape:
             raise DataError(
                 f"scan at t={time:.6f}: {ranges.size} ranges for {angles.size} beam angles"
@@ -643,10 +659,12 @@ class LogScans:
         """Selected scan ``i`` as a resolved :class:`Scan` (laser offset: the log's)."""
         scans = self.log.scans
         k = int(self.indices[i])
+        ranges, angles = scans.ranges[k].view(), scans.scan_angles(k).view()  # type: ignore[union-attr]
+        ranges.flags.writeable = angles.flags.writeable = False  # shared with the log, not copied
         return Scan(
             time=float(scans.time[k]),  # type: ignore[union-attr]
-            ranges=scans.ranges[k],  # type: ignore[union-attr]
-            angles=scans.scan_angles(k),  # type: ignore[union-attr]
+            ranges=ranges,
+            angles=angles,
             range_min=self.range_min,
             range_max=self.range_max,
             no_return=self.no_return,

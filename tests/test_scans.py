@@ -31,6 +31,45 @@ def test_scan_keeps_a_copy_of_the_callers_arrays():
     np.testing.assert_array_equal(scan.ranges, [1.0, 2.0])
 
 
+def test_a_read_only_array_of_the_scans_dtype_is_kept_not_copied():
+    """A read-only float32 ranges / float64 angles array (a log's own, shared by its scans) is
+    kept as it is; one of another dtype is converted, a writeable one copied."""
+    ranges = np.array([1.0, 2.0], dtype=np.float32)
+    angles = np.array([0.0, 0.5])
+    ranges.flags.writeable = angles.flags.writeable = False
+    scan = Scan(0.0, ranges, angles)
+    assert scan.ranges is ranges and scan.angles is angles
+    as_f64 = ranges.astype(np.float64)
+    as_f64.flags.writeable = False
+    converted = Scan(0.0, as_f64, angles)
+    assert converted.ranges.dtype == np.float32 and not np.shares_memory(converted.ranges, as_f64)
+
+
+def test_the_scans_of_a_log_share_its_arrays_read_only():
+    """LogScans gives each scan read-only views of the log's ranges and beam angles: no copy
+    per scan (the demo's 4960 scans of 1081 beams held 64 MB of copies), and no way to change
+    the log through a scan."""
+    from slam.config import load_config
+    from slam.io.log import Log, ScanStream
+    from slam.scans import LogScans
+
+    n, beams = 6, 30
+    ranges = np.full((n, beams), 2.0, dtype=np.float32)
+    angles = np.linspace(-1.0, 1.0, beams)
+    odometry = np.c_[np.arange(n) * 0.1, np.zeros(n), np.zeros(n)]
+    stream = ScanStream(np.arange(n, dtype=np.float64), ranges, angles, 0.1, 5.0, 8.0,
+                        odometry=odometry)  # fmt: skip
+    config = load_config("", None, ['robot.odometry_sync="scan"'])
+    scans = LogScans.from_log(Log("t", "carmen", scans=stream), config)
+    scan = scans.scan(3)
+    assert np.shares_memory(scan.ranges, ranges) and np.shares_memory(scan.angles, angles)
+    assert not scan.ranges.flags.writeable and not scan.angles.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        scan.ranges[0] = 1.0
+    assert ranges.flags.writeable  # the log's own array is untouched
+    np.testing.assert_array_equal(scan.ranges, ranges[3])
+
+
 def test_resolved_fills_what_the_scan_leaves_out_from_the_lidar_section():
     scan = Scan(0.0, [1.0], [0.0], range_max=12.0).resolved(LIDAR)
     assert (scan.range_min, scan.range_max, scan.no_return) == (0.2, 8.0, 8.0)  # capped
