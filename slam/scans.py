@@ -174,14 +174,8 @@ class Scan:
         Computed once and kept (the scan is immutable).
         """
         if self._ends is None:
-            self._require_resolved()
-            r, a = self.ranges, self.angles
-            ok = np.isfinite(r) & np.isfinite(a) & (r >= self.range_min) & (r < self.range_max)
-            lx, ly, lt = self.laser_offset  # type: ignore[misc]
-            rr = np.where(ok, r, np.nan).astype(np.float32)
-            ex = (lx + rr * np.cos(lt + a)).astype(np.float32)
-            ey = (ly + rr * np.sin(lt + a)).astype(np.float32)
-            object.__setattr__(self, "_ends", (ex, ey))
+            ex, ey = endpoint_rows([self], self.num_beams)  # the one formula, for one scan
+            object.__setattr__(self, "_ends", (ex[0], ey[0]))
         return self._ends  # type: ignore[return-value]
 
     def hits(self, max_beams: int = 0) -> tuple[F64, F64]:
@@ -259,15 +253,16 @@ def ray_kinds(
 
 
 def endpoint_rows(scans: list[Scan], width: int) -> tuple[F32, F32]:
-    """The endpoints of ``scans`` (resolved) as ``(S, width)`` float32 rows, NaN where no
-    return or no beam: :meth:`Scan.endpoints` of each, to the bit, in one pass.
+    """The robot-frame endpoints of ``scans`` (resolved) as ``(S, width)`` float32 rows, NaN
+    where no return or no beam, in one pass: the formula :meth:`Scan.endpoints` uses too (one
+    scan, one row), so a row is that scan's endpoints to the bit.
 
-    Every element meets the operations of :meth:`Scan.endpoints` in the same precision: the
-    float32 ranges against each scan's limits in float32 (as numpy compares a float32 array
-    with a Python float), the laser pose and the trigonometry in float64. The cosines and sines,
-    most of the cost, are computed once for all the rows whose beam directions (laser heading
-    plus beam angles) have the bits of the first row's, as in a log of one laser, and row by
-    row for the others (:func:`slam.geometry.row_trig`)."""
+    A return is a finite reading in ``[range_min, range_max)``, the float32 ranges compared with
+    each scan's limits in float32; its endpoint is the laser pose plus the range along the beam,
+    in float64, then float32. The cosines and sines, most of the cost, are computed once for all
+    the rows whose beam directions (laser heading plus beam angles) have the bits of the first
+    row's, as in a log of one laser, and row by row for the others
+    (:func:`slam.geometry.row_trig`)."""
     r = np.full((len(scans), width), np.nan, dtype=np.float32)
     a = np.full((len(scans), width), np.nan)
     limits = np.empty((len(scans), 5))  # range_min, range_max, laser x, y, yaw

@@ -147,12 +147,26 @@ def _scans_for_endpoints(seed: int) -> list[Scan]:
     return out
 
 
+def _endpoints_one_by_one(scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+    """Scan.endpoints as it was written before the batch formula: one scan, its limits as
+    Python floats (numpy compares a float32 array with them in float32)."""
+    r, a = scan.ranges, scan.angles
+    ok = np.isfinite(r) & np.isfinite(a) & (r >= scan.range_min) & (r < scan.range_max)
+    lx, ly, lt = scan.laser_offset
+    rr = np.where(ok, r, np.nan).astype(np.float32)
+    return (
+        (lx + rr * np.cos(lt + a)).astype(np.float32),
+        (ly + rr * np.sin(lt + a)).astype(np.float32),
+    )
+
+
 def test_the_endpoint_table_is_every_scans_endpoints_to_the_bit():
-    """ScanSequence.endpoint_table (the registration's one pass over its scans) gives what
-    Scan.endpoints gives scan by scan, and leaves each scan its row: scans sharing their beam
-    directions (computed once) and scans with their own, of other widths (none at all among
-    them), some already computed before the call."""
-    want = [scan.endpoints() for scan in _scans_for_endpoints(5)]
+    """ScanSequence.endpoint_table (the registration's one pass over its scans) and
+    Scan.endpoints give the endpoints of the one-scan formula, bit for bit, and the table
+    leaves each scan its row: scans sharing their beam directions (computed once) and scans
+    with their own, of other widths (none at all among them), some already computed before
+    the call."""
+    want = [_endpoints_one_by_one(scan) for scan in _scans_for_endpoints(5)]
     seq = ScanSequence()
     for k, scan in enumerate(_scans_for_endpoints(5)):
         seq.append(scan, [k, 0.0, 0.0])

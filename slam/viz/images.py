@@ -47,7 +47,7 @@ def as_image(pixels: NDArray[np.uint8], draw_order: float | None = None) -> rr.I
     h, w = pixels.shape[:2]
     model = {2: "L"}.get(pixels.ndim) or {3: "RGB", 4: "RGBA"}[pixels.shape[2]]
     return rr.Image(
-        bytes=pixels.reshape(-1),  # a view: no copy of a large map before rerun's own
+        bytes=pixels.reshape(-1),  # a view: no copy of a large picture before rerun's own
         width=w,
         height=h,
         color_model=model,
