@@ -97,16 +97,20 @@ def pair_motions(
     pairs: NDArray[np.int64],
     config: Config,
     settings: CalibrationSettings,
+    match_beams: int = 0,
 ) -> tuple[F64, NDArray[np.int64]]:
     """The motions ``(K', 3)`` from scan ``i`` to scan ``j`` of the ``pairs`` that fit, in the
     frame ``hits_of`` gives the returns in (scan ``j`` registered onto a one-scan distance field
     of scan ``i`` by the filter's matcher, from the odometry's motion), and which pairs those are
-    (rows of ``pairs``). Ranges of pairs are matched on the kernel threads
-    (:func:`slam.kernels.threads.in_threads`); the result does not depend on their number."""
+    (rows of ``pairs``). ``match_beams``: at most this many of scan ``j``'s returns (evenly
+    spread; 0: all) are matched, the field keeping every return of scan ``i``. Ranges of pairs
+    are matched on the kernel threads (:func:`slam.kernels.threads.in_threads`); the result
+    does not depend on their number."""
     cuts = np.linspace(0, len(pairs), 4 * threads() + 1).round().astype(np.int64)
+    work = partial(_pair_range, config=config, settings=settings, match_beams=match_beams)
     parts = in_threads(
         [
-            partial(_pair_range, hits_of, odometry, pairs, int(a), int(b), config, settings)
+            partial(work, hits_of, odometry, pairs, int(a), int(b))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
             if b > a
         ]
@@ -124,6 +128,7 @@ def _pair_range(
     stop: int,
     config: Config,
     settings: CalibrationSettings,
+    match_beams: int = 0,
 ) -> tuple[list[F64], list[int]]:
     """:func:`pair_motions` for rows ``first`` to ``stop - 1`` of ``pairs``."""
     rc, lc = config.rbpf, config.loops
@@ -136,6 +141,9 @@ def _pair_range(
         ex, ey = _near(hits_of(int(j)), settings.max_range)
         if hx.size < lc.min_beams or ex.size < lc.min_beams:
             continue
+        if match_beams and ex.size > match_beams:  # evenly spread, as Scan.hits thins
+            pick = np.linspace(0, ex.size - 1, match_beams).round().astype(np.int64)
+            ex, ey = np.ascontiguousarray(ex[pick]), np.ascontiguousarray(ey[pick])
         maps = ParticleMaps(
             1, rc.resolution or config.map.resolution, rc.dmax, tile=rc.tile,
             size_m=2.0 * settings.max_range + 2.0, capacity=256,
@@ -267,13 +275,16 @@ def odometry_disagreement(
     """How far the odometry's motion between consecutive scans is from the matcher's: trimmed
     RMS (``trim``) of the translation (m) and rotation (rad) differences over ``pairs`` evenly
     spread pairs, and the pairs that fitted (0: nothing measured, the sizes are NaN). It holds
-    the matcher's own noise too, so it bounds the odometry's error from above."""
+    the matcher's own noise too, so it bounds the odometry's error from above. Scan ``j`` of
+    a pair is matched with at most ``rbpf.register_beams`` of its returns, as the registration
+    that the smoothing weighs against the odometry matches a scan (:func:`pair_motions`)."""
     settings = settings or CalibrationSettings()
     n = odometry.shape[0]
     if n < 2:
         return float("nan"), float("nan"), 0
     pairs = _consecutive_pairs(n, settings.pairs)
-    laser, kept = pair_motions(hits_of, odometry, pairs, config, settings)
+    beams = config.rbpf.register_beams  # scan j matched as the registration matches a scan
+    laser, kept = pair_motions(hits_of, odometry, pairs, config, settings, beams)
     if len(kept) == 0:
         return float("nan"), float("nan"), 0
     pairs = pairs[kept]

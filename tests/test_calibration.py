@@ -13,6 +13,7 @@ from slam.calibration import (
     CalibrationSettings,
     check_beam_geometry,
     estimate_mount,
+    odometry_disagreement,
     pair_motions,
     synchronise_odometry,
     turning_pairs,
@@ -109,6 +110,52 @@ def test_the_mount_is_found_from_the_turns():
     assert est.std_x < 0.01 and est.residual_m < 0.5 * est.residual_stated_m
     with pytest.raises(ValueError, match="at least 10"):
         estimate_mount(laser[:5], odo[:5], np.zeros(3), settings)
+
+
+def test_the_disagreement_matches_as_many_returns_as_the_registration(turning_robot, monkeypatch):
+    """``pair_motions(..., match_beams)`` matches at most that many of scan ``j``'s returns,
+    evenly spread, on a field of every return of scan ``i``; ``odometry_disagreement`` matches
+    with ``rbpf.register_beams`` of them (the registration the smoothing weighs against the
+    odometry), and fewer beams measure a larger disagreement (more of the matcher's noise)."""
+    import slam.calibration as calibration
+
+    times, hits, _ = turning_robot
+    robot = truth(times)
+    counts = np.array([h[0].size for h in hits])
+    assert counts.min() > 120  # every scan has more returns than the caps below
+    seen: dict[str, list[int]] = {"field": [], "matched": []}
+    insert, match = calibration.ParticleMaps.insert_scans, calibration.match_one
+
+    def spy_insert(self, poses, scan_hits, *args):
+        seen["field"].append(scan_hits.shape[1])
+        return insert(self, poses, scan_hits, *args)
+
+    def spy_match(view, pose, ex, ey, *args):
+        seen["matched"].append(ex.size)
+        return match(view, pose, ex, ey, *args)
+
+    monkeypatch.setattr(calibration.ParticleMaps, "insert_scans", spy_insert)
+    monkeypatch.setattr(calibration, "match_one", spy_match)
+    pairs = np.stack([np.arange(0, 398, 7), np.arange(1, 399, 7)], axis=1)
+    settings = CalibrationSettings()
+    every, _ = pair_motions(lambda k: hits[k], robot, pairs, load_config(), settings)
+    assert sorted(seen["field"]) == sorted(counts[pairs[:, 0]])  # (ranges of pairs on threads:
+    assert sorted(seen["matched"]) == sorted(counts[pairs[:, 1]])  # in any order)
+    seen["field"].clear(), seen["matched"].clear()
+    fewer, _ = pair_motions(lambda k: hits[k], robot, pairs, load_config(), settings, 100)
+    assert sorted(seen["field"]) == sorted(counts[pairs[:, 0]])
+    assert seen["matched"] == [100] * len(pairs)
+    true = relative(robot[pairs[:, 0]], robot[pairs[:, 1]])
+    errors = []
+    for found in (every, fewer):  # both the true motions, up to the matcher's noise
+        errors.append(np.median(np.hypot(*(found - true)[:, :2].T)))
+        errors.append(np.median(np.abs(found - true)[:, 2]))
+    assert max(errors[0], errors[2]) < 0.01 and max(errors[1], errors[3]) < 0.005  # m, rad
+
+    seen["matched"].clear()
+    config = load_config(None, None, ["rbpf.register_beams=120"])
+    odometry_disagreement(lambda k: hits[k], robot, config, CalibrationSettings(pairs=40))
+    assert seen["matched"] == [120] * 40
 
 
 def odom_line(pose: np.ndarray, t: float) -> str:
