@@ -344,3 +344,36 @@ def test_only_returns_within_range_are_judged(demo_loop):
     assert t["returns"] == int((near.kind == HIT).sum())
     assert t["checked"] + t["unknown"] + t["isolated"] == t["returns"]
     assert t["isolated"] == int((result.verdict == ISOLATED).sum()) > 0
+
+
+def test_touched_tiles_are_exactly_the_tiles_of_the_walked_cells():
+    """:func:`touched_tiles` marks exactly the tiles of the cells the counting walk counts: rays
+    in every direction, long and short, of zero length, from inside and outside the grid,
+    leaving it or passing by it."""
+    rng = np.random.default_rng(11)
+    n, beams = 12, 10
+    poses = np.column_stack([rng.uniform(-1.5, 5.5, n), rng.uniform(-4.5, 4.5, n),
+                             rng.uniform(-np.pi, np.pi, n)])  # fmt: skip
+    reach = rng.choice([0.0, 0.01, 0.3, 1.0, 4.0, 9.0], (n, beams))
+    angle = rng.uniform(-np.pi, np.pi, (n, beams))
+    ex = (reach * np.cos(angle)).astype(np.float32)
+    ey = (reach * np.sin(angle)).astype(np.float32)
+    kind = rng.choice(np.array([0, HIT, 2], np.int8), (n, beams))
+    rays = ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+    full = empty_counts(120, 80)
+    count_rays(_at(full), rays, 0, n, 1)
+    hits, misses = to_rows(*full)
+    walked = (hits + misses) > 0
+    expected = walked.reshape(8, 16, 5, 16).any(axis=(1, 3))  # (the tiles hold 128 rows)
+    touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, rays)
+    assert 5 < expected.sum() < expected.size  # some tiles touched, some not
+    assert np.array_equal(touched, expected)
+    for x0, y0, x1, y1 in [(3, 5, 3, 5), (0, 0, 40, 17), (40, 17, 0, 0), (5, 70, 9, -30)]:
+        one = ScanRays(np.array([[ORIGIN[0] + (x0 + 0.5) * RES, ORIGIN[1] + (y0 + 0.5) * RES, 0]]),
+                       0.0, 0.0, np.array([[(x1 - x0) * RES]], np.float32),
+                       np.array([[(y1 - y0) * RES]], np.float32), np.array([[HIT]], np.int8))  # fmt: skip
+        mask = np.zeros((8, 5), np.bool_)
+        for cx, cy in bresenham(x0, y0, x1, y1):
+            if 0 <= cx < 80 and 0 <= cy < 128:
+                mask[cy // 16, cx // 16] = True
+        assert np.array_equal(touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, one), mask)
