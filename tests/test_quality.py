@@ -35,6 +35,7 @@ from slam.kernels.quality import (
     UNKNOWN,
     CountMap,
     ScanRays,
+    add_kept,
     classify_beams,
     count_rays,
     counts_for,
@@ -377,3 +378,47 @@ def test_touched_tiles_are_exactly_the_tiles_of_the_walked_cells():
             if 0 <= cx < 80 and 0 <= cy < 128:
                 mask[cy // 16, cx // 16] = True
         assert np.array_equal(touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, one), mask)
+
+
+def test_kept_patches_give_back_a_window_without_walking_it_again():
+    """``count_rays(..., cuts, kept)`` cuts its blocks at ``cuts`` too and keeps their patches;
+    :func:`add_kept` adds them back: the same counts as walking the rays again, block by
+    block, and only whole kept blocks."""
+    rng = np.random.default_rng(9)
+    n, beams = 400, 16
+    poses = np.column_stack([rng.uniform(-0.5, 2.5, n), rng.uniform(-2.5, 2.5, n),
+                             rng.uniform(-3, 3, n)])  # fmt: skip
+    reach = rng.uniform(0.2, 3.0, (n, beams))
+    angle = np.linspace(-2.0, 2.0, beams)[None, :]
+    ex = (reach * np.cos(angle)).astype(np.float32)
+    ey = (reach * np.sin(angle)).astype(np.float32)
+    kind = rng.choice(np.array([0, HIT, 2], np.int8), (n, beams))
+    rays = ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+    touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, rays)
+
+    def counted(*ranges: tuple[int, int]) -> list[np.ndarray]:
+        counts = counts_for(touched)
+        for k0, k1 in ranges:
+            count_rays(_at(counts), rays, k0, k1, 1)
+        return to_rows(*counts)
+
+    counts = counts_for(touched)
+    count_rays(_at(counts), rays, 0, n, 1)
+    kept: dict = {}
+    count_rays(_at(counts), rays, 40, 300, -1, cuts=[0, 100, 250, 300, 350], kept=kept)
+    assert sorted(kept) == [40, 100, 228, 250]  # cut at 100 and 250, and 128 scans at most
+    assert [kept[a][0] for a in sorted(kept)] == [100, 228, 250, 300]
+    for a, b in zip(to_rows(*counts), counted((0, 40), (300, n)), strict=True):
+        assert np.array_equal(a, b)
+    add_kept(_at(counts), kept, 40, 100, 1)
+    for a, b in zip(to_rows(*counts), counted((0, 100), (300, n)), strict=True):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="scans 100..227 runs past scan 200"):
+        add_kept(_at(counts), kept, 100, 200, 1)
+    with pytest.raises(KeyError):
+        add_kept(_at(counts), kept, 101, 228, 1)
+    add_kept(_at(counts), kept, 250, 300, 1)  # (the failed calls gave back nothing)
+    add_kept(_at(counts), kept, 100, 250, 1)
+    assert not kept
+    for a, b in zip(to_rows(*counts), counted((0, n)), strict=True):
+        assert np.array_equal(a, b) and a.sum() > 0

@@ -24,8 +24,9 @@ its last scan, so a stretch is never judged against the scans it was matched to.
 
 **Cost.** The others' map is integer counts (hits, misses) per cell of all rays; the stretches
 are visited in order and the scans within ``separation_m`` of the current one are subtracted
-from the counts (and added back when the window moves on), so every ray is cast about four
-times in all (:mod:`slam.kernels.quality`). The definition and its parameters are in
+from the counts (and added back, from the counts kept when they were subtracted, when the window
+moves on), so every ray is cast three times in all: for the tiles to allocate, for the counts,
+and to subtract it (:mod:`slam.kernels.quality`). The definition and its parameters are in
 docs/evaluation.md, "Map quality without ground truth".
 """
 
@@ -34,6 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -56,7 +58,9 @@ from slam.kernels.quality import (
     UNKNOWN,
     CountMap,
     Judging,
+    KeptPatches,
     ScanRays,
+    add_kept,
     classify_beams,
     count_rays,
     counts_for,
@@ -388,25 +392,33 @@ def map_quality(
 
     bounds = stretch_bounds(poses, config.stretch_m)
     path = path_along(poses)
+    windows = [
+        (
+            int(np.searchsorted(path, path[a] - config.separation_m, side="left")),
+            int(np.searchsorted(path, path[b - 1] + config.separation_m, side="right")),
+        )
+        for a, b in pairwise(bounds.tolist())
+    ]
+    cuts = [end for window in windows for end in window]
     verdict = np.empty(kind.shape, dtype=np.int8)
     offset = np.empty(kind.shape, dtype=np.float32)
     disc = _disc(config.tolerance_m, res)
     judging = judging_for(config, map_config)
     removed = (0, 0)  # rows currently subtracted from the counts
+    kept: KeptPatches = {}  # their counts, to give back without walking their rays again
     stretches: list[StretchScore] = []
-    for index in range(bounds.shape[0] - 1):
+    for index, (w0, w1) in enumerate(windows):
         a, b = int(bounds[index]), int(bounds[index + 1])
-        w0 = int(np.searchsorted(path, path[a] - config.separation_m, side="left"))
-        w1 = int(np.searchsorted(path, path[b - 1] + config.separation_m, side="right"))
         c0, c1 = removed
-        # Window ends only move forward: give back what it left, take out what it reached.
-        count_rays(counts, scan_rays, c0, min(c1, w0), 1)
-        count_rays(counts, scan_rays, max(c1, w0), w1, -1)
+        # Window ends only move forward: give back what it left, take out what it reached
+        # (cut at every window's ends, so what a window gives back is whole kept blocks).
+        add_kept(counts, kept, c0, min(c1, w0), 1)
+        count_rays(counts, scan_rays, max(c1, w0), w1, -1, cuts, kept)
         removed = (w0, w1)
         classify_beams(counts, scan_rays, a, b, disc, judging, verdict, offset)
         stretches.append(_stretch(index, a, b, times, poses, path, verdict, offset, rays))
     c0, c1 = removed
-    count_rays(counts, scan_rays, c0, c1, 1)
+    add_kept(counts, kept, c0, c1, 1)
     shades = map_shades(
         table, pool, map_config.log_odds_hit, map_config.log_odds_miss, UNSEEN_SHADE
     )

@@ -34,7 +34,9 @@ laser's position in the robot frame. The robot poses are ``poses[k] = (x, y, θ)
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import partial
+from itertools import pairwise
 from typing import NamedTuple
 
 import numpy as np
@@ -280,7 +282,20 @@ def _touch(tiles_y, tiles_x, ox, oy, res, rays, k0, k1, mask):
         _walk_scan(rays, k, ox, oy, res, tiles_x * TILE, tiles_y * TILE, no_patch, zero, zero, mask)
 
 
-def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) -> None:
+KeptPatches = dict[int, tuple[int, int, int, np.ndarray]]
+"""The patches :func:`count_rays` keeps: ``kept[a] = (b, x0, y0, patch)``, the counts of the
+rays of scans ``a .. b − 1`` in a dense patch whose cell ``(0, 0)`` is grid cell ``(x0, y0)``."""
+
+
+def count_rays(
+    counts: CountMap,
+    rays: ScanRays,
+    k0: int,
+    k1: int,
+    sign: int,
+    cuts: Sequence[int] = (),
+    kept: KeptPatches | None = None,
+) -> None:
     """Add ``sign`` (+1 or −1) to the counts of the rays of scans ``k0 .. k1 − 1``.
 
     Every cell a ray passes through gets a miss (Bresenham, end cell excluded); the end cell gets
@@ -288,24 +303,50 @@ def count_rays(counts: CountMap, rays: ScanRays, k0: int, k1: int, sign: int) ->
     Cells outside the grid are skipped (the caller sizes the grid to hold every ray; the cells
     inside must lie in allocated tiles, :func:`touched_tiles`).
 
-    Parallel without races: the scans are cut into blocks of :data:`BLOCK_SCANS`; a round gives
-    one block to each thread, which counts its rays in a dense patch of its own covering them
-    (:func:`_block_box`: the robot's path over the block and the sensor's reach, not the map);
-    the patches are then added to the tiles one after the other, in block order. Counts are
-    integers, so the result is exact and the same whatever the number of threads.
+    Parallel without races: the scans are cut into blocks of at most :data:`BLOCK_SCANS`, also
+    at every scan number of ``cuts``; a round gives one block to each thread, which counts its
+    rays in a dense patch of its own covering them (:func:`_block_box`: the robot's path over the
+    block and the sensor's reach, not the map); the patches are then added to the tiles one
+    after the other, in block order. Counts are integers, so the result is exact and the same
+    whatever the number of threads. With ``kept`` each block's patch is kept there, so that
+    :func:`add_kept` can add it again (or take it out again) without walking its rays: what the
+    map-quality score does with the scans of a window it gives back.
     """
     table, pool, ox, oy, res = counts
     h = table.shape[0] * TILE
     w = table.shape[1] * TILE
-    starts = list(range(k0, k1, BLOCK_SCANS))
+    inner = sorted({int(c) for c in cuts if k0 < c < k1})
+    starts = [a for lo, hi in pairwise([k0, *inner, k1]) for a in range(lo, hi, BLOCK_SCANS)]
+    stops = [*starts[1:], k1]
     per_round = threads()
     for r0 in range(0, len(starts), per_round):
         blocks = [
-            partial(_count_block, rays, a, min(a + BLOCK_SCANS, k1), ox, oy, res, w, h)
-            for a in starts[r0 : r0 + per_round]
+            partial(_count_block, rays, a, b, ox, oy, res, w, h)
+            for a, b in zip(starts[r0 : r0 + per_round], stops[r0 : r0 + per_round], strict=True)
         ]
-        for x0, y0, patch in in_threads(blocks):  # serial: a patch is small next to its walk
+        done = in_threads(blocks)
+        # serially, in block order: a patch is small next to its walk
+        for a, b, (x0, y0, patch) in zip(starts[r0:], stops[r0:], done, strict=False):
             _add_patch(table, pool, patch, x0, y0, sign)
+            if kept is not None:
+                kept[a] = (b, x0, y0, patch)
+
+
+def add_kept(counts: CountMap, kept: KeptPatches, k0: int, k1: int, sign: int) -> None:
+    """Add ``sign`` times the counts of scans ``k0 .. k1 − 1`` from the patches :func:`count_rays`
+    kept (and forget them): the same counts as ``count_rays(counts, rays, k0, k1, sign)``
+    without walking the rays again. ``k0`` and ``k1`` must be ends of kept blocks (``cuts``
+    of :func:`count_rays`); else a :class:`KeyError` (the scan where no kept block starts) or
+    a :class:`ValueError` (a block that runs past ``k1``), the blocks before it given back."""
+    table, pool = counts.table, counts.pool
+    k = k0
+    while k < k1:
+        b, x0, y0, patch = kept[k]
+        if b > k1:
+            raise ValueError(f"add_kept: the block of scans {k}..{b - 1} runs past scan {k1}")
+        _add_patch(table, pool, patch, x0, y0, sign)
+        del kept[k]
+        k = b
 
 
 @njit(cache=True, nogil=True)
