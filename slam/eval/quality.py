@@ -392,13 +392,7 @@ def map_quality(
 
     bounds = stretch_bounds(poses, config.stretch_m)
     path = path_along(poses)
-    windows = [
-        (
-            int(np.searchsorted(path, path[a] - config.separation_m, side="left")),
-            int(np.searchsorted(path, path[b - 1] + config.separation_m, side="right")),
-        )
-        for a, b in pairwise(bounds.tolist())
-    ]
+    windows = _windows(bounds, path, config.separation_m)
     cuts = [end for window in windows for end in window]
     verdict = np.empty(kind.shape, dtype=np.int8)
     offset = np.empty(kind.shape, dtype=np.float32)
@@ -437,6 +431,18 @@ def map_quality(
         wall_s=time.perf_counter() - start_clock,
         cpu_s=time.process_time() - start_cpu,
     )
+
+
+def _windows(bounds: NDArray[np.int64], path: F64, separation: float) -> list[tuple[int, int]]:
+    """``(w0, w1)`` of each stretch of ``bounds``: its scans and those within ``separation`` of
+    path before and after it, whose rays the score takes out of the others' map."""
+    return [
+        (
+            int(np.searchsorted(path, path[a] - separation, side="left")),
+            int(np.searchsorted(path, path[b - 1] + separation, side="right")),
+        )
+        for a, b in pairwise(bounds.tolist())
+    ]
 
 
 def _stretch(
