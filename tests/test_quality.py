@@ -422,3 +422,29 @@ def test_kept_patches_give_back_a_window_without_walking_it_again():
     assert not kept
     for a, b in zip(to_rows(*counts), counted((0, n)), strict=True):
         assert np.array_equal(a, b) and a.sum() > 0
+
+
+def test_a_small_grid_allocated_whole_scores_as_the_touched_tiles_do(
+    scored, demo_loop, monkeypatch
+):
+    """:func:`counts_over` allocates every tile of a grid up to ``DENSE_BYTES`` and only the
+    touched ones above it: the same verdicts, picture and scores either way."""
+    import slam.kernels.quality as kq
+
+    times, _, rays = demo_loop
+    _, opened, poses = scored  # (computed with the defaults: the demo's grid is allocated whole)
+    monkeypatch.setattr(kq, "DENSE_BYTES", 0)
+    sparse = map_quality(times, poses, rays)
+    assert np.array_equal(sparse.verdict, opened.verdict)
+    timing = ("wall_s", "cpu_s")
+    assert {k: v for k, v in summary(sparse).items() if k not in timing} == {
+        k: v for k, v in summary(opened).items() if k not in timing
+    }
+    assert np.array_equal(sparse.shades, opened.shades)
+    assert [s.score for s in sparse.stretches] == [s.score for s in opened.stretches]
+    monkeypatch.setattr(kq, "DENSE_BYTES", 8 * 5 * 16 * 16 * 2 * 4)  # just the 8 x 5 tiles
+    rays_one = ScanRays(np.zeros((1, 3)), 0.0, 0.0, *(a[:1] for a in wall_scan(1.0, 0.5, 9)))
+    assert (kq.counts_over(8, 5, ORIGIN[0], ORIGIN[1], RES, rays_one)[0] >= 0).all()
+    monkeypatch.setattr(kq, "DENSE_BYTES", 8 * 5 * 16 * 16 * 2 * 4 - 1)
+    table, pool = kq.counts_over(8, 5, ORIGIN[0], ORIGIN[1], RES, rays_one)
+    assert 0 < (table >= 0).sum() == pool.shape[0] < 8 * 5  # only what the rays touch

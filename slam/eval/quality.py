@@ -63,10 +63,9 @@ from slam.kernels.quality import (
     add_kept,
     classify_beams,
     count_rays,
-    counts_for,
+    counts_over,
     map_shades,
     ray_bounds,
-    touched_tiles,
 )
 
 F64 = NDArray[np.float64]
@@ -386,7 +385,7 @@ def map_quality(
     ox, oy = float(origin[0]), float(origin[1])
     tiles = (-(-shape[0] // TILE), -(-shape[1] // TILE))
     scan_rays = ScanRays(poses, float(lx), float(ly), ex, ey, kind)
-    table, pool = counts_for(touched_tiles(*tiles, ox, oy, res, scan_rays))
+    table, pool = counts_over(*tiles, ox, oy, res, scan_rays)
     counts = CountMap(table, pool, ox, oy, res)
     count_rays(counts, scan_rays, 0, n, 1)
 

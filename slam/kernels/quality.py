@@ -8,13 +8,14 @@ Cells follow the project's convention: cell ``(ix, iy)`` has its lower-left corn
 ``(ox + ix·res, oy + iy·res)``.
 
 **Layout.** Square tiles of ``T`` × ``T`` cells (``T`` = :data:`TILE`) with both counts side by
-side, allocated only where some ray passes: ``table[iy // T, ix // T]`` is the tile's index in
-``pool`` (−1: no ray came there, every count 0), and ``pool[t, iy % T, ix % T, layer]`` holds
+side, on a large grid allocated only where some ray passes: ``table[iy // T, ix // T]`` is the
+tile's index in ``pool`` (−1: no ray came there, every count 0), and ``pool[t, iy % T, ix % T, layer]`` holds
 the hits (layer 0) and misses (layer 1). A ray walks through neighbouring cells; in a plain
 row-major grid every step in y lands on another memory page, in tiles the cells it visits share a
 few pages; and a building's corridors fill a small part of its bounding box, so the pool is a
-fraction of a full grid. :func:`touched_tiles` finds the tiles to allocate, :func:`to_rows`
-returns plain ``(H, W)`` grids, :func:`map_shades` a one-byte picture.
+fraction of a full grid. :func:`counts_over` allocates every tile of a small grid and, on a
+large one, the tiles :func:`touched_tiles` finds; :func:`to_rows` returns plain ``(H, W)`` grids,
+:func:`map_shades` a one-byte picture.
 
 **Threads.** :func:`touched_tiles`, :func:`count_rays` and :func:`classify_beams` run serial
 ``nogil`` kernels on a few threads (:func:`~slam.kernels.threads.in_threads`): as
@@ -126,6 +127,25 @@ def empty_counts(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     tx = -(-width // TILE)
     table = np.arange(ty * tx, dtype=np.int32).reshape(ty, tx)
     return table, np.zeros((ty * tx, TILE, TILE, 2), dtype=np.int32)
+
+
+DENSE_BYTES = 32 << 20
+"""A grid whose counts take at most this many bytes is allocated whole (:func:`counts_over`):
+finding the tiles some ray touches (:func:`touched_tiles`) walks every ray once more, which on a
+small grid costs more time than the memory it saves is worth."""
+
+
+def counts_over(
+    tiles_y: int, tiles_x: int, ox: float, oy: float, res: float, rays: ScanRays
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(table, pool)`` of zero counts for ``rays`` over a grid of ``tiles_y × tiles_x`` tiles:
+    every tile when that takes at most :data:`DENSE_BYTES`, else only the tiles some ray passes
+    through or ends in (:func:`touched_tiles`). Every count the rays add lands in an allocated
+    tile either way, and a tile no ray touched counts nothing, as a missing one does: the same
+    verdicts and pictures."""
+    if tiles_y * tiles_x * TILE * TILE * 2 * 4 <= DENSE_BYTES:
+        return counts_for(np.ones((tiles_y, tiles_x), dtype=np.bool_))
+    return counts_for(touched_tiles(tiles_y, tiles_x, ox, oy, res, rays))
 
 
 def counts_for(touched: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
