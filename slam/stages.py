@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from slam.budget import release_free_memory
 from slam.config import Config, MapConfig
 from slam.geometry import compose, relative, spread_corrections
+from slam.kernels.scan import thin_returns
 from slam.mapping import (
     OccupancyGrid,
     ParticleMaps,
@@ -498,32 +499,14 @@ def registration_beams(
     most = config.rbpf.refine_beams if most is None else most
     width = max(1, min(most or seq.num_beams, seq.num_beams))
     # every scan's endpoints side by side (NaN where no return or no beam); each row's returns
-    # in beam order, thinned to ``width`` evenly spread as Scan.hits thins them (the same
-    # np.linspace positions, row by row): the values Scan.hits gives, without a copy per scan
+    # in beam order, thinned to ``width`` evenly spread as Scan.hits thins them: the values
+    # Scan.hits gives, without a copy per scan
     all_x, all_y = seq.endpoint_table(scans)
-    hit = ~np.isnan(all_x)
-    counts = np.count_nonzero(hit, axis=1).astype(np.int64)
-    found_x, found_y = all_x[hit], all_y[hit]  # row by row, each in beam order
-    first = np.zeros(len(scans), dtype=np.int64)
-    np.cumsum(counts[:-1], out=first[1:])
-    pos = np.tile(np.arange(width, dtype=np.int64), (len(scans), 1))
-    thin = np.flatnonzero(counts > width)
-    if thin.size and width > 1:
-        step = (counts[thin] - 1).astype(np.float64) / (width - 1)
-        at = np.arange(width, dtype=np.float64)[None, :] * step[:, None]
-        at[:, -1] = counts[thin] - 1
-        pos[thin] = at.round().astype(np.int64)
-    elif thin.size:
-        pos[thin] = 0
-    counts[thin] = width
-    beyond = np.arange(width)[None, :] >= counts[:, None]
-    if found_x.size == 0:
-        return np.zeros(pos.shape), np.zeros(pos.shape), counts
-    index = np.where(beyond, 0, first[:, None] + pos)
-    ex = found_x[index].astype(np.float64)
-    ey = found_y[index].astype(np.float64)
-    ex[beyond] = 0.0
-    ey[beyond] = 0.0
+    ex = np.empty((len(scans), width))
+    ey = np.empty((len(scans), width))
+    counts = np.empty(len(scans), dtype=np.int64)
+    if len(scans):
+        thin_returns(all_x, all_y, np.int64(width), ex, ey, counts)
     return ex, ey, counts
 
 

@@ -320,3 +320,28 @@ def test_a_smoothing_choice_needs_a_gain_beyond_the_scores_noise():
     assert smoothing_pick([0.9, float("nan"), float("nan")], [5000, 0, 0], 0.005, 2.0) == 0
     assert smoothing_pick([float("nan")] * 3, [0, 0, 0], 0.005, 2.0) == 0
     assert smoothing_pick([0.95, 0.95, 0.94], [5000] * 3, 0.0, 0.0) == 0  # a tie: the first
+
+
+@pytest.mark.parametrize("width", [1, 2, 3, 5, 7])
+def test_thin_returns_rounds_half_to_even_as_linspace_does(width):
+    """The thinning kernel keeps the returns at ``np.linspace(0, n - 1, width).round()``, ties
+    (n - 1 = 3, width - 1 = 2: position 1.5) rounded half to even as numpy rounds them."""
+    from slam.kernels.scan import thin_returns
+
+    rows = []
+    for n in range(0, 12):
+        row = np.full(14, np.nan, dtype=np.float32)
+        where = np.sort(np.random.default_rng(n).choice(14, n, replace=False))
+        row[where] = np.arange(1, n + 1, dtype=np.float32)  # the return's rank + 1
+        rows.append(row)
+    all_x = np.array(rows)
+    ex = np.empty((len(rows), width))
+    ey = np.empty((len(rows), width))
+    counts = np.empty(len(rows), dtype=np.int64)
+    thin_returns(all_x, -all_x, np.int64(width), ex, ey, counts)
+    for n, (x, y, c) in enumerate(zip(ex, ey, counts, strict=True)):
+        want = np.arange(n) if n <= width else np.linspace(0, n - 1, width).round().astype(int)
+        assert c == len(want)
+        np.testing.assert_array_equal(x[:c], want + 1.0)
+        np.testing.assert_array_equal(y[:c], -(want + 1.0))
+        assert not x[c:].any() and not y[c:].any()

@@ -1,4 +1,5 @@
-"""Scan kernels: map correlation with a local pose search (the course's classic sensor model)."""
+"""Scan kernels: map correlation with a local pose search (the course's classic sensor model), and
+the returns of many scans thinned at once (the registration's beams)."""
 
 from __future__ import annotations
 
@@ -92,3 +93,43 @@ def correlation_search(
         out_offsets[p, 0] = bx
         out_offsets[p, 1] = by
         out_offsets[p, 2] = bt
+
+
+@njit(cache=True, nogil=True)
+def thin_returns(
+    all_x: np.ndarray,
+    all_y: np.ndarray,
+    width: int,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    counts: np.ndarray,
+) -> None:
+    """Each row's returns (the entries of ``all_x``, ``all_y`` ``(S, W)`` that are not NaN), in
+    beam order, at most ``width`` of them, into ``ex``, ``ey`` ``(S, width)`` float64 (zero
+    beyond the row's ``counts``). A row with more returns keeps those at
+    ``np.linspace(0, n − 1, width).round()`` (``j · (n − 1) / (width − 1)`` rounded half to
+    even, the last exactly ``n − 1``; one return, the first, when ``width`` is 1): the returns
+    :meth:`slam.scans.Scan.hits` keeps, in one pass instead of a dozen array operations."""
+    found = np.empty(all_x.shape[1], dtype=np.int64)
+    for s in range(all_x.shape[0]):
+        n = 0
+        for j in range(all_x.shape[1]):
+            if not np.isnan(all_x[s, j]):
+                found[n] = j
+                n += 1
+        kept = min(n, width)
+        for j in range(kept):
+            if n <= width:
+                k = found[j]
+            elif j == width - 1 and width > 1:
+                k = found[n - 1]
+            elif width > 1:
+                k = found[np.int64(np.rint(j * ((n - 1) / (width - 1))))]
+            else:
+                k = found[0]
+            ex[s, j] = all_x[s, k]
+            ey[s, j] = all_y[s, k]
+        for j in range(kept, width):
+            ex[s, j] = 0.0
+            ey[s, j] = 0.0
+        counts[s] = kept
