@@ -31,7 +31,8 @@ What the generators read from ``docs/bench/slam.json`` (``benches`` of ``tools/b
   ``scans``: it is then ``scans_per_s × estimate_wall_s``, rounded)); ``gmapping_published``
   and ``gmapping_measured`` ("MEAN ± STD m in SECONDS s" or a word such as "diverges") give the
   GMapping row. Every log present gets its rows (known logs in ``LOG_ORDER`` first).
-* ``slam.demo_*`` with ``ate_rmse``: a performance row of the simulated demo.
+* ``slam.demo_*`` with ``ate_rmse``: a performance row of the simulated demo (its peak memory
+  ``run_peak_rss_mb``, one run's, where the bench ran several).
 * ``estimate_parts_s`` (seconds by part: the filter, then each post-filter stage) of
   ``slam.demo_100``, of every accuracy bench's method block and of ``quality.rbpf``: the
   ``performance.parts`` table, one column per part.
@@ -252,8 +253,9 @@ def parts_table(benches: Benches) -> str:
 
 
 def _speed(b: dict, where: str) -> list[str]:
+    peak = "run_peak_rss_mb" if "run_peak_rss_mb" in b else "peak_rss_mb"  # (one run of several)
     try:
-        keys = (("wall_s", 1), ("scans_per_s", 0), ("real_time_factor", 1), ("peak_rss_mb", 0))
+        keys = (("wall_s", 1), ("scans_per_s", 0), ("real_time_factor", 1), (peak, 0))
         return [fixed(b[key], digits) for key, digits in keys]
     except KeyError as exc:
         raise BenchError(f"bench JSON: {where}.{exc.args[0]} is missing") from None
