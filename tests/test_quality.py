@@ -144,19 +144,26 @@ def _reference_counts(rays: ScanRays, height: int, width: int) -> tuple[np.ndarr
     return hits, misses
 
 
-def test_parallel_counts_and_verdicts_equal_a_reference_whatever_the_threads():
-    """:func:`count_rays` over several blocks of scans (rays leaving the grid too) counts what a
-    ray-by-ray walk counts, and counts and verdicts are the same on one thread and on all."""
-    rng = np.random.default_rng(7)
-    n, beams = 2 * BLOCK_SCANS + 37, 24
+def _random_rays(seed: int, n: int, beams: int, kinds: list[int]) -> ScanRays:
+    """``n`` scans of ``beams`` rays from random poses around the test grid (some outside it),
+    0.2–3 m long over ±2 rad, of random ``kinds``."""
+    rng = np.random.default_rng(seed)
     poses = np.column_stack([rng.uniform(-0.5, 2.5, n), rng.uniform(-2.5, 2.5, n),
                              rng.uniform(-3, 3, n)])  # fmt: skip
     reach = rng.uniform(0.2, 3.0, (n, beams))
     angle = np.linspace(-2.0, 2.0, beams)[None, :]
     ex = (reach * np.cos(angle)).astype(np.float32)
     ey = (reach * np.sin(angle)).astype(np.float32)
-    kind = rng.choice(np.array([0, HIT, HIT, 2], np.int8), (n, beams))
-    rays = ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+    kind = rng.choice(np.array(kinds, np.int8), (n, beams))
+    return ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+
+
+def test_parallel_counts_and_verdicts_equal_a_reference_whatever_the_threads():
+    """:func:`count_rays` over several blocks of scans (rays leaving the grid too) counts what a
+    ray-by-ray walk counts, and counts and verdicts are the same on one thread and on all."""
+    n = 2 * BLOCK_SCANS + 37
+    rays = _random_rays(7, n, 24, [0, HIT, HIT, 2])
+    kind = rays.kind
     expected = _reference_counts(rays, 120, 80)
     assert expected[0].sum() > 0 and expected[1].sum() > 0
     disc = np.array([[dx, dy] for dx in range(-3, 4) for dy in range(-3, 4)
@@ -384,16 +391,8 @@ def test_kept_patches_give_back_a_window_without_walking_it_again():
     """``count_rays(..., cuts, kept)`` cuts its blocks at ``cuts`` too and keeps their patches;
     :func:`add_kept` adds them back: the same counts as walking the rays again, block by
     block, and only whole kept blocks."""
-    rng = np.random.default_rng(9)
-    n, beams = 400, 16
-    poses = np.column_stack([rng.uniform(-0.5, 2.5, n), rng.uniform(-2.5, 2.5, n),
-                             rng.uniform(-3, 3, n)])  # fmt: skip
-    reach = rng.uniform(0.2, 3.0, (n, beams))
-    angle = np.linspace(-2.0, 2.0, beams)[None, :]
-    ex = (reach * np.cos(angle)).astype(np.float32)
-    ey = (reach * np.sin(angle)).astype(np.float32)
-    kind = rng.choice(np.array([0, HIT, 2], np.int8), (n, beams))
-    rays = ScanRays(poses, 0.1, 0.05, ex, ey, kind)
+    n = 400
+    rays = _random_rays(9, n, 16, [0, HIT, 2])
     touched = touched_tiles(8, 5, ORIGIN[0], ORIGIN[1], RES, rays)
 
     def counted(*ranges: tuple[int, int]) -> list[np.ndarray]:
