@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from numba import njit
 
 from slam import jit
@@ -84,7 +86,6 @@ def test_the_compile_report_is_written_at_exit(tmp_path) -> None:
     import json
     import os
     import subprocess
-    import sys
 
     report = tmp_path / "compiled.json"
     code = "from numba import njit\nimport slam.jit\nf = njit(lambda x: x + 1)\nassert f(1) == 2\n"
@@ -123,3 +124,27 @@ def test_compile_sources_writes_missing_bytecode_once_and_skips_what_it_may_not_
             assert compile_sources([locked]) == 0
         finally:
             locked.chmod(0o755)
+
+
+@pytest.mark.parametrize(
+    ("given", "wait_policy", "spin"),
+    [
+        ({}, "PASSIVE", "10000"),  # the package's defaults
+        ({"OMP_WAIT_POLICY": "ACTIVE"}, "ACTIVE", None),  # the user's policy: no spin count set
+        ({"GOMP_SPINCOUNT": "5"}, "PASSIVE", "5"),  # the user's spin count kept
+    ],
+)
+def test_openmp_threads_sleep_after_a_short_spin_unless_the_user_says_otherwise(
+    given, wait_policy, spin
+) -> None:
+    """``import slam`` sets OpenMP's wait policy to passive with a short spin
+    (``GOMP_SPINCOUNT``, docs/slam.md) before numba loads OpenMP; a user's setting of either
+    wins."""
+    import os
+    import subprocess
+
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
+    code = "import os, slam; print(os.environ.get('OMP_WAIT_POLICY'), os.environ.get('GOMP_SPINCOUNT'))"
+    out = subprocess.run([sys.executable, "-c", code], env={**env, **given}, check=True,
+                         capture_output=True, text=True).stdout.split()  # fmt: skip
+    assert out == [wait_policy, str(spin)]
