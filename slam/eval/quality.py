@@ -26,8 +26,8 @@ its last scan, so a stretch is never judged against the scans it was matched to.
 are visited in order and the scans within ``separation_m`` of the current one are subtracted
 from the counts (and added back, from the counts kept when they were subtracted, when the window
 moves on), so every ray is cast twice: for the counts and to subtract it (and, on a grid too
-large to allocate whole, first to find the tiles to allocate: :mod:`slam.kernels.quality`). The definition and its parameters are in
-docs/evaluation.md, "Map quality without ground truth".
+large to allocate whole, first to find the tiles to allocate: :mod:`slam.kernels.quality`). The
+definition and its parameters are in docs/evaluation.md, "Map quality without ground truth".
 """
 
 from __future__ import annotations

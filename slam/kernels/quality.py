@@ -9,13 +9,13 @@ Cells follow the project's convention: cell ``(ix, iy)`` has its lower-left corn
 
 **Layout.** Square tiles of ``T`` × ``T`` cells (``T`` = :data:`TILE`) with both counts side by
 side, on a large grid allocated only where some ray passes: ``table[iy // T, ix // T]`` is the
-tile's index in ``pool`` (−1: no ray came there, every count 0), and ``pool[t, iy % T, ix % T, layer]`` holds
-the hits (layer 0) and misses (layer 1). A ray walks through neighbouring cells; in a plain
-row-major grid every step in y lands on another memory page, in tiles the cells it visits share a
-few pages; and a building's corridors fill a small part of its bounding box, so the pool is a
-fraction of a full grid. :func:`counts_over` allocates every tile of a small grid and, on a
-large one, the tiles :func:`touched_tiles` finds; :func:`to_rows` returns plain ``(H, W)`` grids,
-:func:`map_shades` a one-byte picture.
+tile's index in ``pool`` (−1: no ray came there, every count 0), and
+``pool[t, iy % T, ix % T, layer]`` holds the hits (layer 0) and misses (layer 1). A ray walks
+through neighbouring cells; in a plain row-major grid every step in y lands on another memory
+page, in tiles the cells it visits share a few pages; and a building's corridors fill a small
+part of its bounding box, so the pool is a fraction of a full grid. :func:`counts_over`
+allocates every tile of a small grid and, on a large one, the tiles :func:`touched_tiles` finds;
+:func:`to_rows` returns plain ``(H, W)`` grids, :func:`map_shades` a one-byte picture.
 
 **Threads.** :func:`touched_tiles`, :func:`count_rays` and :func:`classify_beams` run serial
 ``nogil`` kernels on a few threads (:func:`~slam.kernels.threads.in_threads`): as
@@ -321,7 +321,7 @@ def count_rays(
     Every cell a ray passes through gets a miss (Bresenham, end cell excluded); the end cell gets
     a hit for a :data:`HIT` ray and a miss for a :data:`FREE` ray, as the occupancy map does.
     Cells outside the grid are skipped (the caller sizes the grid to hold every ray; the cells
-    inside must lie in allocated tiles, :func:`touched_tiles`).
+    inside must lie in allocated tiles, :func:`counts_over`).
 
     Parallel without races: the scans are cut into blocks of at most :data:`BLOCK_SCANS`, also
     at every scan number of ``cuts``; a round gives one block to each thread, which counts its

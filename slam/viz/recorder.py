@@ -394,9 +394,10 @@ class RunRecorder:
         """Close the stream of a run that failed (its folder is about to be removed): without
         this rerun's threads kept the file open and, at the interpreter's exit, flushed into a
         folder that no longer existed or a full disk — an ERROR line on stderr, or a process
-        that did not exit in 300 s (twice in three CI runs, on a full 64 KiB tmpfs). The flush is bounded
-        (:data:`ABORT_FLUSH_S`), the disconnect too (:func:`slam.viz.stream.disconnect`), and
-        their errors are the run's failure already, not news."""
+        that did not exit in 300 s (twice in three CI runs, on a full 64 KiB tmpfs). The flush
+        is bounded (:data:`ABORT_FLUSH_S`), the disconnect too
+        (:func:`slam.viz.stream.disconnect`), and their errors are the run's failure already,
+        not news."""
         with contextlib.suppress(Exception):
             self.rec.flush(timeout_sec=ABORT_FLUSH_S)
         disconnect(self.rec, raising=False)

@@ -133,11 +133,11 @@ def disconnect(rec: rr.RecordingStream, wait: float | None = None, raising: bool
     rerun 0.41 can block for ever in ``disconnect`` once its file writer has stopped on a failed
     write: on a full 64 KiB file system 2 of 15 trials of a bare stream blocked, and so did a
     ``slam run`` in two of three CI runs (at the interpreter's exit, then in the disconnect after
-    the failure). The call
-    runs on a daemon thread; a stream that does not come back is kept in a list (its drop would
-    block the same way) and :func:`wedged` says so, for :func:`slam.cli.entry` to end the
-    process without the interpreter's clean-up. ``raising``: re-raise the ``RuntimeError`` the
-    disconnect reported (else ignore it, for a stream whose failure is already known).
+    the failure). The call runs on a daemon thread; a stream that does not come back is kept
+    in a list (its drop would block the same way) and :func:`wedged` says so, for
+    :func:`slam.cli.entry` to end the process without the interpreter's clean-up. ``raising``:
+    re-raise the ``RuntimeError`` the disconnect reported (else ignore it, for a stream whose
+    failure is already known).
     """
     import threading
 
