@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config
-from slam.geometry import interpolate_poses, relative, wrap_angle
+from slam.geometry import interpolate_poses, relative, spread_picks, wrap_angle
 from slam.kernels.field import match_one
 from slam.kernels.graph import fit_counts
 from slam.kernels.threads import in_threads, threads
@@ -142,7 +142,7 @@ def _pair_range(
         if hx.size < lc.min_beams or ex.size < lc.min_beams:
             continue
         if match_beams and ex.size > match_beams:  # evenly spread, as Scan.hits thins
-            pick = np.linspace(0, ex.size - 1, match_beams).round().astype(np.int64)
+            pick = spread_picks(ex.size, match_beams)
             ex, ey = np.ascontiguousarray(ex[pick]), np.ascontiguousarray(ey[pick])
         maps = ParticleMaps(
             1, rc.resolution or config.map.resolution, rc.dmax, tile=rc.tile,
@@ -349,7 +349,7 @@ def turning_pairs(times: F64, odometry: F64, settings: CalibrationSettings) -> N
         i += 1
     out = np.array(pairs, dtype=np.int64).reshape(-1, 2)
     if len(out) > settings.mount_pairs:
-        out = out[np.linspace(0, len(out) - 1, settings.mount_pairs).round().astype(np.int64)]
+        out = out[spread_picks(len(out), settings.mount_pairs)]
     return out
 
 

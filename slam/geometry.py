@@ -2,7 +2,8 @@
 
 Every pose function broadcasts over leading dimensions, so a whole trajectory ``(N, 3)`` or a
 particle set is handled in one call (:func:`path_along` takes one ``(N, 3)`` chain). Angles are
-radians, wrapped to ``[-pi, pi)``.
+radians, wrapped to ``[-pi, pi)``. Also the beams' trigonometry (:func:`row_trig`) and which of
+``n`` beams (or scans, or pairs) a thinning to fewer keeps (:func:`spread_picks`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
+
+
+def spread_picks(n: int, count: int) -> NDArray[np.int64]:
+    """Positions of ``count`` of ``n`` items evenly spread, the first and the last included:
+    ``np.linspace(0, n − 1, count)`` rounded half to even. The one thinning rule of the package
+    (the returns :meth:`slam.scans.Scan.hits` keeps, and every sampling that must keep the same
+    ones); callers ask for it only when ``n > count``."""
+    return np.linspace(0, n - 1, count).round().astype(np.int64)
 
 
 def wrap_angle(theta: ArrayLike) -> Array:

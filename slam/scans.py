@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.config import Config, LidarConfig
 from slam.errors import DataError, UsageError
-from slam.geometry import row_trig
+from slam.geometry import row_trig, spread_picks
 from slam.io.log import Log
 
 if TYPE_CHECKING:
@@ -186,7 +186,7 @@ class Scan:
         ex_all, ey_all = self.endpoints()
         valid = np.flatnonzero(~np.isnan(ex_all))
         if max_beams and valid.size > max_beams:
-            valid = valid[np.linspace(0, valid.size - 1, max_beams).round().astype(np.int64)]
+            valid = valid[spread_picks(valid.size, max_beams)]
         return (
             np.ascontiguousarray(ex_all[valid], dtype=np.float64),
             np.ascontiguousarray(ey_all[valid], dtype=np.float64),
@@ -201,7 +201,7 @@ class Scan:
         lx, ly, _ = self.laser_offset  # type: ignore[misc]
         nx, ny = surface_normals(ex, ey, lx, ly)
         if max_beams and ex.size > max_beams:
-            pick = np.linspace(0, ex.size - 1, max_beams).round().astype(np.int64)
+            pick = spread_picks(ex.size, max_beams)
             ex, ey, nx, ny = ex[pick], ey[pick], nx[pick], ny[pick]
         return (
             np.ascontiguousarray(ex),

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from slam.budget import release_free_memory
 from slam.config import Config, MapConfig
-from slam.geometry import compose, relative, spread_corrections
+from slam.geometry import compose, relative, spread_corrections, spread_picks
 from slam.kernels.scan import thin_returns
 from slam.mapping import (
     OccupancyGrid,
@@ -262,7 +262,7 @@ def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) ->
     ranges, angles = seq.readings(picks, seq.num_beams)
     most = config.rbpf.smooth_choice_beams
     if seq.num_beams > most:  # evenly spread, as Scan.hits thins
-        beams = np.linspace(0, seq.num_beams - 1, most).round().astype(np.int64)
+        beams = spread_picks(seq.num_beams, most)
         ranges = np.ascontiguousarray(ranges[:, beams])  # (a column pick is Fortran-ordered:
         angles = np.ascontiguousarray(angles[:, beams])  # the score's kernels would compile anew)
     return scan_rays(

@@ -12,6 +12,7 @@ from slam.geometry import (
     quaternion_to_yaw,
     relative,
     row_trig,
+    spread_picks,
     transform_points,
     wrap_angle,
     yaw_to_quaternion,
@@ -164,3 +165,13 @@ def test_row_trig_is_numpys_cos_and_sin_computed_once_for_shared_rows():
     assert cos.shape == mixed.shape
     assert cos.tobytes() == np.cos(mixed).tobytes() and sin.tobytes() == np.sin(mixed).tobytes()
     assert np.signbit(sin[3, 0]) and not np.signbit(sin[2, 0])
+
+
+def test_spread_picks_keeps_both_ends_and_rounds_half_to_even():
+    """The one thinning rule: evenly spread positions, the first and last kept, ties to even."""
+    assert spread_picks(5, 4).tolist() == [0, 1, 3, 4]  # 0, 1.33, 2.67, 4
+    assert spread_picks(6, 3).tolist() == [0, 2, 5]  # 2.5 → 2 (half to even), not 3
+    assert spread_picks(10, 4).tolist() == [0, 3, 6, 9]
+    assert spread_picks(7, 1).tolist() == [0]
+    assert spread_picks(1081, 360).dtype == np.int64
+    assert spread_picks(1081, 360)[-1] == 1080

@@ -50,7 +50,14 @@ from numpy.typing import NDArray
 
 from slam.backend.submaps import SubmapCache, stretches, world_hits
 from slam.config import Config
-from slam.geometry import compose, inverse, path_along, relative, wrap_angle
+from slam.geometry import (
+    compose,
+    inverse,
+    path_along,
+    relative,
+    spread_picks,
+    wrap_angle,
+)
 from slam.graph import (
     LoopResult,
     _edge_information,
@@ -86,7 +93,7 @@ def _search_points(seq, step: int, config: Config) -> tuple[F64, F64]:
     bc = config.backend
     hx, hy = world_hits(seq, step, np.zeros(3), bc.submap_range)
     if hx.size > bc.points:
-        pick = np.linspace(0, hx.size - 1, bc.points).round().astype(np.int64)
+        pick = spread_picks(hx.size, bc.points)
         hx, hy = hx[pick], hy[pick]
     return np.ascontiguousarray(hx), np.ascontiguousarray(hy)
 

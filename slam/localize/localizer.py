@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.config import Config, config_for
 from slam.errors import DataError, UsageError
-from slam.geometry import compose, relative
+from slam.geometry import compose, relative, spread_picks
 from slam.localize.histogram import Mode, PoseHistogram
 from slam.localize.kernels import refine_pose
 from slam.localize.kld import KldCounter
@@ -104,7 +104,7 @@ class _Beams:
 def _thin(ex: F64, ey: F64, count: int) -> tuple[F64, F64]:
     if ex.shape[0] <= count:
         return ex, ey
-    pick = np.linspace(0, ex.shape[0] - 1, count).round().astype(np.int64)
+    pick = spread_picks(ex.shape[0], count)
     return np.ascontiguousarray(ex[pick]), np.ascontiguousarray(ey[pick])
 
 
