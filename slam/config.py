@@ -496,6 +496,7 @@ class BackendConfig(Validated):
     RULES: ClassVar[tuple[Rule, ...]] = (
         Rule(("window_xy_min", "window_xy_max"), lambda a, b: a <= b, "window_xy_min <= window_xy_max"),
         Rule(("window_th_min", "window_th_max"), lambda a, b: a <= b, "window_th_min <= window_th_max"),
+        Rule(("window_xy_max", "far_window_xy_max"), lambda a, b: a <= b, "window_xy_max <= far_window_xy_max"),
     )  # fmt: skip
 
     global_search: bool = True
@@ -529,6 +530,17 @@ class BackendConfig(Validated):
     candidates: int = bounded(3, ge=1, le=1000)
     """Submaps searched per keyframe: those nearest relative to their window (see
     ``candidate_choice``)."""
+    far_drift_xy: float = bounded(0.05, ge=0.0, le=10.0)
+    """In the first round, the keyframes that no closure holds within ``agree_path`` of path
+    (none found within the window, no local one) also search beyond the window, out to
+    ``window_xy_min + far_drift_xy · path gap`` (at most ``far_window_xy_max``):
+    ``far_candidates`` of those submaps each, taken in turn. A long loop whose drift exceeds
+    the window (fr-clinic started at a third of its log: 31 m after 750 m) closes; where
+    closures already hold the place, nothing is searched (0: no such search)."""
+    far_window_xy_max: float = bounded(60.0, gt=0.0, le=1000.0)
+    """See ``far_drift_xy`` (m)."""
+    far_candidates: int = bounded(4, ge=0, le=1000)
+    """See ``far_drift_xy``: submaps beyond the window each such keyframe searches."""
     candidate_choice: str = bounded("per_pass", choices=("nearest", "per_pass"))
     """How the ``candidates`` are chosen among the submaps whose window holds the keyframe:
     ``nearest``, nearest relative to their window; ``per_pass``, the nearest of each earlier

@@ -117,6 +117,8 @@ def test_backend_config_bounds_name_the_key():
 
     with pytest.raises(ConfigError, match="window_xy_min <= window_xy_max"):
         load_config("demo", None, ["backend.window_xy_min=5", "backend.window_xy_max=1"])
+    with pytest.raises(ConfigError, match="window_xy_max <= far_window_xy_max"):
+        load_config("demo", None, ["backend.far_window_xy_max=20"])  # narrower than the window
 
 
 class _SlowScans:
@@ -285,3 +287,26 @@ def test_a_scan_that_fits_as_well_a_metre_along_a_corridor_is_not_a_unique_match
     pose = np.array([10.0, 1.0, 0.2])
     ex, ey = _scan(seen, pose, 200)
     assert unique_fit(corridor_view, pose, ex, ey, 200, off)
+
+
+def test_candidates_in_turn_cover_the_rest_keyframe_by_keyframe():
+    """After a loop that drifted tens of metres, the submaps nearest the drifted estimate are the
+    wrong stretch of the right pass: the extra candidates taken in turn search the rest, two
+    more per keyframe, so that consecutive keyframes cover every one of them (cyclically), and
+    none repeats the fixed choice."""
+    submaps = np.array([0, 1, 2, 3, 4, 5, 6])  # one pass
+    ratio = np.array([0.30, 0.28, 0.45, 0.50, 0.60, 0.35, 0.70])
+    assert candidate_order(submaps, ratio, 3, "per_pass").tolist() == [1, 0, 5]
+    assert candidate_order(submaps, ratio, 3, "per_pass", 7, 0).tolist() == [1, 0, 5]
+    rest = [2, 3, 4, 6]  # by ratio
+    seen = set()
+    for turn in range(2):
+        order = candidate_order(submaps, ratio, 3, "per_pass", turn, 2).tolist()
+        assert order[:3] == [1, 0, 5]
+        assert order[3:] == rest[2 * turn : 2 * turn + 2]
+        seen.update(order[3:])
+    assert seen == set(rest)
+    assert candidate_order(submaps, ratio, 3, "per_pass", 2, 2).tolist()[3:] == [2, 3]  # again
+    few = candidate_order(submaps[:4], ratio[:4], 3, "nearest", 5, 2)
+    assert few.tolist() == [1, 0, 2, 3]  # one left: taken once
+    assert candidate_order(submaps[:3], ratio[:3], 3, "nearest", 5, 2).tolist() == [1, 0, 2]

@@ -302,3 +302,45 @@ def test_smoothing_with_good_odometry_removes_the_registration_noise():
         1,
         3,
     )
+
+
+def test_search_beyond_the_drift_window_only_from_keyframes_no_closure_holds(small_log):
+    """The search beyond the drift window (``backend.far_drift_xy``) adds searches, from the
+    keyframes that no closure within the window holds, of submaps beyond that window only;
+    ``far=False`` (the loop closing's later rounds) and a closure that holds every keyframe
+    (``agree_path`` over the whole loop) leave the search within the window. (Whether what
+    it finds is right is the real log's test: fr-clinic from 1546 s, test_slam_regression.)"""
+    from slam.backend.global_loops import detect_global
+    from slam.config import load_config
+    from slam.geometry import path_along
+    from slam.graph import _detect
+
+    seq, truth, _ = small_log
+    narrow = [
+        "backend.keyframe_path=0.5", "backend.min_score=0.3", "backend.window_xy_min=0.2",
+        "backend.drift_xy=0", "backend.window_xy_max=0.2", "backend.agree_path=2",
+        "backend.far_drift_xy=0",
+    ]  # fmt: skip
+    steps = np.arange(0, len(seq), 8)
+    nodes = truth[steps]
+    path = path_along(nodes)
+    half = path > 0.5 * path[-1]  # the loop's second half moved rigidly: its end 3 m off
+    drifted = nodes.copy()
+    drifted[half] = compose(np.array([3.0, -1.0, 0.05]), nodes[half])
+    within, searched = detect_global(seq, steps, drifted, path, load_config("", None, narrow))
+    wide = load_config("", None, [*narrow, "backend.far_drift_xy=0.2"])
+    both, more = detect_global(seq, steps, drifted, path, wide)
+    assert [e[:2] for e in both[: len(within)]] == [e[:2] for e in within]  # the same first
+    assert more > searched and len(both) > len(within)
+    for j, i, z, _ in both[len(within) :]:
+        assert np.hypot(*(compose(drifted[j], z)[:2] - drifted[i, :2])) > 0.2  # beyond it
+    assert detect_global(seq, steps, drifted, path, wide, far=False)[1] == searched
+    # on the closed loop, local closures, and every keyframe within agree_path of one: nothing
+    # is searched beyond the window
+    held = load_config("", None, [*narrow, "backend.far_drift_xy=0.2", "backend.agree_path=1e5"])
+    local, _ = _detect(seq, steps, nodes, path, held)
+    assert local
+    base = detect_global(seq, steps, nodes, path, load_config("", None, narrow), local)[1]
+    assert detect_global(seq, steps, nodes, path, held, local)[1] == base
+    unheld = load_config("", None, [*narrow, "backend.far_drift_xy=0.2", "backend.agree_path=0.1"])
+    assert detect_global(seq, steps, nodes, path, unheld, local)[1] > base

@@ -12,7 +12,15 @@ module adds, in the same pose graph and the same rounds:
    in rotation: the drift a filter may have accumulated since it last saw that place.
    ``backend.candidates`` submaps are searched by branch-and-bound
    (:func:`slam.kernels.bnb.bnb_search`), exact over the whole window: the nearest relative to
-   its window of each earlier pass through the place first (:func:`candidate_order`).
+   its window of each earlier pass through the place first (:func:`candidate_order`). In the
+   first round, a keyframe that no closure holds within ``agree_path`` of path (no local one,
+   none found within the window) also searches beyond the window, out to
+   ``window_xy_min + far_drift_xy · path gap`` (capped by ``far_window_xy_max``):
+   ``backend.far_candidates`` of those submaps, taken in turn keyframe by keyframe. A loop long
+   enough to drift further than the window (fr-clinic started at a third of its log: 31 m
+   after 750 m of path) stays open without it, and the submaps nearest such a drifted estimate
+   are the wrong stretch of the right pass; where closures hold the place, a match tens of
+   metres away is an alias of a repeated structure, and nothing is searched.
 3. **Verification.** The best pose must score ``min_score``; refined by Levenberg-Marquardt
    against the submap's distance field it must stay within two search cells, and of the beams
    that land on the submap's known cells ``backend.min_fit`` must lie within
@@ -42,6 +50,7 @@ keyframes and the do-no-harm rule are those of :func:`slam.graph.close_loops`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
 
@@ -160,7 +169,14 @@ def _same_place(a: F64, b: F64, drift: float, config: Config) -> bool:
 
 
 def detect_global(
-    seq, steps, x: F64, path: F64, config: Config, local: list = (), table: ScanHits | None = None
+    seq,
+    steps,
+    x: F64,
+    path: F64,
+    config: Config,
+    local: list = (),
+    table: ScanHits | None = None,
+    far: bool = True,
 ) -> tuple[list, int]:
     """Verified global closures ``(j, i, z, info)`` along ``x`` and the searches made.
 
@@ -168,7 +184,9 @@ def detect_global(
     that a local closure ``local`` (edges of :func:`slam.graph._detect`) already joins to a node
     within ``keyframe_path`` of the keyframe is kept only where that closure does not already
     hold the loop (:func:`_held_locally`). ``table``: the nodes' hits (:func:`slam.graph.node_hits`;
-    computed here when not given).
+    computed here when not given). Then, with ``far`` and ``backend.far_drift_xy``, the
+    keyframes that no closure holds within ``backend.agree_path`` of path search beyond the
+    drift window (module docstring, step 2).
 
     Keyframes are independent: ranges of them are searched on the kernel threads
     (:func:`slam.kernels.threads.in_threads`), which share one :class:`SubmapCache` (a submap
@@ -179,18 +197,36 @@ def detect_global(
     if table is None:
         table = node_hits(seq, steps, config)
     frames = keyframes(path, bc.keyframe_path)
+    turns = np.arange(frames.size)
     st = _Stretches.of(x, path, bc.submap_length, list(local))
-    cuts = np.linspace(0, frames.size, 4 * threads() + 1).round().astype(np.int64)
     cache = SubmapCache(seq, steps, x, config, keep=SUBMAPS_KEPT, table=table)
+    search = partial(_search_keyframes, seq, steps, x, path, config, cache, st)
+    edges, searched = _in_ranges(search, frames, turns, False)
+    if far and bc.far_drift_xy > 0 and bc.far_candidates > 0:
+        held = np.concatenate([st.closed_node, [i for _, i, _, _ in edges]]).astype(np.int64)
+        unheld = np.array(
+            [not (np.abs(path[held] - path[i]) <= bc.agree_path).any() for i in frames], dtype=bool
+        )
+        beyond, more = _in_ranges(search, frames[unheld], turns[unheld], True)
+        edges, searched = edges + beyond, searched + more
+    return edges, searched
+
+
+def _in_ranges(
+    search: Callable, frames: NDArray[np.int64], turns: NDArray[np.int64], beyond: bool
+) -> tuple[list, int]:
+    """``search`` (:func:`_search_keyframes` but for its last three arguments) over ranges of
+    the keyframes ``frames`` on the kernel threads: the closures in keyframe order and the
+    searches made."""
+    cuts = np.linspace(0, frames.size, 4 * threads() + 1).round().astype(np.int64)
     parts = in_threads(
         [
-            partial(_search_keyframes, seq, steps, x, path, config, cache, st, frames[a:b])
+            partial(search, frames[a:b], turns[a:b], beyond)
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
             if b > a
         ]
     )
-    edges = [edge for part, _ in parts for edge in part]
-    return edges, sum(searched for _, searched in parts)
+    return [edge for part, _ in parts for edge in part], sum(n for _, n in parts)
 
 
 def _search_keyframes(
@@ -202,34 +238,27 @@ def _search_keyframes(
     cache: SubmapCache,
     st: _Stretches,
     frames: NDArray[np.int64],
+    turns: NDArray[np.int64],
+    beyond: bool,
 ) -> tuple[list, int]:
-    """:func:`detect_global`'s search from the keyframes ``frames`` (submaps from ``cache``):
-    their verified closures and the searches made."""
+    """:func:`detect_global`'s search from the keyframes ``frames`` (submaps from ``cache``;
+    ``turns``: their numbers among all keyframes, for :func:`candidate_order`): their verified
+    closures and the searches made; within the drift window (``backend.drift_xy``), or with
+    ``beyond`` the ``backend.far_candidates`` submaps beyond it (``backend.far_drift_xy``)."""
     bc, lc, rc = config.backend, config.loops, config.rbpf
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     edges, searched = [], 0
-    for i in frames:
-        eligible = np.flatnonzero(st.end_path <= path[i] - lc.min_path)
-        if eligible.size == 0:
+    for i, turn in zip(frames, turns, strict=True):
+        subs, wxy, wth = _candidates(st, x, path, int(i), int(turn), beyond, config)
+        if subs.size == 0:
             continue
-        gap = path[i] - st.mid_path[eligible]
-        wxy = np.minimum(bc.window_xy_min + bc.drift_xy * gap, bc.window_xy_max)
-        wth = np.minimum(bc.window_th_min + bc.drift_th * gap, bc.window_th_max)
-        reach = np.maximum(np.hypot(*(st.centre[eligible] - x[i, :2]).T) - st.spread[eligible], 0.0)
-        ok = reach <= wxy
-        if not ok.any():
-            continue
-        order = candidate_order(
-            eligible[ok], reach[ok] / wxy[ok], bc.candidates, bc.candidate_choice
-        )
         px, py = _search_points(seq, int(steps[i]), config)
         if px.size < lc.min_beams:
             continue
         far = float(np.sqrt((px * px + py * py).max()))
         th_step = float(np.clip(bc.resolution / max(far, 1.0), 0.002, 0.05))
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
-        for q in order:
-            s = int(eligible[ok][q])
+        for s, window_xy, window_th in zip(subs.tolist(), wxy, wth, strict=True):
             near = np.abs(path[st.closed_node] - path[i]) <= bc.keyframe_path
             joined = near & (st.closed_sub == s)
             lo, hi = st.subs[s]
@@ -239,7 +268,7 @@ def _search_keyframes(
             searched += 1
             found = bnb_search(
                 pyr.levels, pyr.origin[0], pyr.origin[1], pyr.resolution, px, py,
-                x[i, 0], x[i, 1], x[i, 2], float(wxy[ok][q]), float(wth[ok][q]), th_step,
+                x[i, 0], x[i, 1], x[i, 2], float(window_xy), float(window_th), th_step,
                 bc.min_score,
             )  # fmt: skip
             if found[3] < 0:
@@ -269,6 +298,36 @@ def _search_keyframes(
     return edges, searched
 
 
+def _candidates(
+    st: _Stretches, x: F64, path: F64, i: int, turn: int, beyond: bool, config: Config
+) -> tuple[NDArray[np.int64], F64, F64]:
+    """The submaps keyframe ``i`` (number ``turn`` among the keyframes) searches, in order, with
+    their windows in position (m) and rotation (rad): within the drift window
+    ``window_xy_min + drift_xy · path gap``, ``backend.candidates`` of them
+    (:func:`candidate_order`); with ``beyond``, ``backend.far_candidates`` of those beyond it
+    and within ``window_xy_min + far_drift_xy · path gap``, in turn (the rotation window the
+    same)."""
+    bc = config.backend
+    eligible = np.flatnonzero(st.end_path <= path[i] - config.loops.min_path)
+    gap = path[i] - st.mid_path[eligible]
+    wxy = np.minimum(bc.window_xy_min + bc.drift_xy * gap, bc.window_xy_max)
+    wth = np.minimum(bc.window_th_min + bc.drift_th * gap, bc.window_th_max)
+    reach = np.maximum(np.hypot(*(st.centre[eligible] - x[i, :2]).T) - st.spread[eligible], 0.0)
+    if beyond:
+        wfar = np.minimum(bc.window_xy_min + bc.far_drift_xy * gap, bc.far_window_xy_max)
+        pick = (reach > wxy) & (reach <= wfar)
+        wxy = wfar
+        order = candidate_order(
+            eligible[pick], reach[pick] / wxy[pick], 0, "nearest", turn, bc.far_candidates
+        )
+    else:
+        pick = reach <= wxy
+        order = candidate_order(
+            eligible[pick], reach[pick] / wxy[pick], bc.candidates, bc.candidate_choice
+        )
+    return eligible[pick][order], wxy[pick][order], wth[pick][order]
+
+
 def _held_locally(
     st: _Stretches,
     joined: NDArray[np.bool_],
@@ -296,7 +355,12 @@ def _held_locally(
 
 
 def candidate_order(
-    submaps: NDArray[np.int64], ratio: F64, count: int, choice: str = "nearest"
+    submaps: NDArray[np.int64],
+    ratio: F64,
+    count: int,
+    choice: str = "nearest",
+    turn: int = 0,
+    in_turn: int = 0,
 ) -> NDArray[np.int64]:
     """Which of the ``submaps`` (ascending indices, their keyframe's distance relative to their
     window ``ratio``) a keyframe searches, in order: at most ``count`` positions into
@@ -304,15 +368,26 @@ def candidate_order(
     each pass — a run of consecutive submap indices, one pass of the robot through the place —
     by ratio, then the other submaps by ratio. After a long loop the drifted estimate lies
     nearer the passes it made recently than the true place lies to its own (wider) window, and
-    three neighbouring submaps of one recent pass would take every search."""
+    three neighbouring submaps of one recent pass would take every search.
+
+    Then ``in_turn`` more from the submaps not chosen (nearest relative to their window first),
+    the keyframe numbered ``turn`` taking the ``turn · in_turn``-th of them on (cyclically), so
+    that consecutive keyframes search different ones: after a long loop the submaps nearest the
+    drifted estimate can be the wrong stretch of the right pass."""
     order = np.argsort(ratio, kind="stable")
     if choice == "nearest" or order.size <= 1:
-        return order[:count]
-    passes = np.cumsum(np.r_[0, np.diff(submaps) != 1])
-    _, first = np.unique(passes[order], return_index=True)
-    lead = order[np.sort(first)]
-    rest = np.setdiff1d(order, lead, assume_unique=True)
-    return np.concatenate([lead, rest[np.argsort(ratio[rest], kind="stable")]])[:count]
+        ranked = order
+    else:
+        passes = np.cumsum(np.r_[0, np.diff(submaps) != 1])
+        _, first = np.unique(passes[order], return_index=True)
+        lead = order[np.sort(first)]
+        rest = np.setdiff1d(order, lead, assume_unique=True)
+        ranked = np.concatenate([lead, rest[np.argsort(ratio[rest], kind="stable")]])
+    chosen, others = ranked[:count], ranked[count:]
+    if in_turn <= 0 or others.size == 0:
+        return chosen
+    take = (turn * in_turn + np.arange(min(in_turn, others.size))) % others.size
+    return np.concatenate([chosen, others[take]])
 
 
 def _fitting(view, pose: F64, ex: F64, ey: F64, config: Config) -> int | None:
@@ -375,11 +450,15 @@ def close_loops_global(
     if path is None:
         path = path_along(poses)
     table = node_hits(seq, steps, config)
+    rounds = [0]
 
     def one_round(
         x: F64, keys: NDArray[np.int64], key_of: NDArray[np.int64], local: list
     ) -> tuple[list, F64 | None, int]:
-        glob, searched = detect_global(seq, steps, x, path, config, local, table)
+        # beyond the drift window in the first round only: once it has pulled a long loop in,
+        # the next round finds that loop's closures within the window
+        rounds[0] += 1
+        glob, searched = detect_global(seq, steps, x, path, config, local, table, rounds[0] == 1)
         glob = consistent(glob, x, path, config)
         if not local and not glob:
             return [], None, searched
