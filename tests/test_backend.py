@@ -310,3 +310,23 @@ def test_candidates_in_turn_cover_the_rest_keyframe_by_keyframe():
     few = candidate_order(submaps[:4], ratio[:4], 3, "nearest", 5, 2)
     assert few.tolist() == [1, 0, 2, 3]  # one left: taken once
     assert candidate_order(submaps[:3], ratio[:3], 3, "nearest", 5, 2).tolist() == [1, 0, 2]
+
+
+def test_keyframes_far_from_every_closure_are_the_ones_that_search_beyond_the_window():
+    """``_far_from`` (which keyframes no closure holds): a keyframe exactly ``reach`` of path from
+    a closure's keyframe is held, one a millimetre further is not; with no closure, none is held;
+    and it is the brute-force rule it replaces, on random cases."""
+    from slam.backend.global_loops import _far_from
+
+    marks = np.array([50.0, 10.0])
+    at = np.array([0.0, 40.0, 39.999, 60.0, 60.001, 95.0])
+    assert _far_from(at, marks, 10.0).tolist() == [False, False, True, False, True, True]
+    assert _far_from(at, np.array([]), 10.0).all()
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        at, marks = (
+            rng.uniform(0, 100, rng.integers(0, 30)),
+            rng.uniform(0, 100, rng.integers(1, 9)),
+        )
+        brute = [not (np.abs(marks - a) <= 7.0).any() for a in at]
+        assert _far_from(at, marks, 7.0).tolist() == brute

@@ -344,3 +344,24 @@ def test_search_beyond_the_drift_window_only_from_keyframes_no_closure_holds(sma
     assert detect_global(seq, steps, nodes, path, held, local)[1] == base
     unheld = load_config("", None, [*narrow, "backend.far_drift_xy=0.2", "backend.agree_path=0.1"])
     assert detect_global(seq, steps, nodes, path, unheld, local)[1] > base
+
+
+def test_search_beyond_the_window_only_in_the_first_round(small_log, monkeypatch):
+    """``close_loops_global`` asks for the search beyond the drift window in its first round
+    only: once that round has pulled a long loop in, the next finds its closures within the
+    window."""
+    import slam.backend.global_loops as gl
+
+    seq, truth, config = small_log
+    steps = np.arange(0, len(seq), 8)
+    asked = []
+    detect = gl.detect_global
+
+    def recording(*args, **kwargs):
+        asked.append(args[7] if len(args) > 7 else kwargs.get("far", True))
+        return detect(*args, **kwargs)
+
+    monkeypatch.setattr(gl, "detect_global", recording)
+    gl.close_loops_global(seq, steps, opened_loop(truth[steps]), config)
+    assert len(asked) == config.loops.rounds >= 2  # the opened loop is closed: both rounds run
+    assert asked == [True] + [False] * (len(asked) - 1)

@@ -22,12 +22,12 @@ are compressed. Exit code 2, one line naming the file and line, on bad input.
 from __future__ import annotations
 
 import argparse
-import gzip
 import math
-import os
 import sys
-import tempfile
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools/log_copies.py
+from log_copies import LogFileError, read_lines, write_new  # noqa: E402
 
 UNSUPPORTED = ("ROBOTLASER1", "TRUEPOS")
 """Line types that carry poses this tool does not rewrite."""
@@ -128,47 +128,6 @@ def perturb_lines(lines: list[str], name: str, distance: float, turn: float) -> 
     return out
 
 
-def _read(path: Path) -> list[str]:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise PerturbError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise PerturbError(f"{path}: a gzip file that does not decompress: {exc}") from None
-    try:
-        return raw.decode("utf-8").splitlines()
-    except UnicodeDecodeError as exc:
-        raise PerturbError(f"{path}: not a text log (byte {exc.start} is not UTF-8)") from None
-
-
-def _write_new(path: Path, lines: list[str]) -> None:
-    """Write ``path`` whole (a temporary file in its folder, then renamed), never replacing one."""
-    if path.exists() or path.is_symlink():
-        raise PerturbError(f"{path}: exists; the output is never replaced (choose another name)")
-    if not path.parent.is_dir():
-        raise PerturbError(f"{path.parent}: no such folder for the output")
-    data = ("\n".join(lines) + "\n").encode("utf-8")
-    if path.suffix == ".gz":
-        data = gzip.compress(data, mtime=0)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # as a plain open() would create it, not mkstemp's 0600
-        os.link(tmp, path)  # fails if the output appeared meanwhile: never replaced
-    except FileExistsError:
-        raise PerturbError(
-            f"{path}: exists; the output is never replaced (choose another name)"
-        ) from None
-    finally:
-        os.unlink(tmp)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Parse the command line, write the perturbed log; 0, or 2 with one line on bad input."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -184,11 +143,11 @@ def main(argv: list[str] | None = None) -> int:
         ):
             if not (math.isfinite(value) and 0.5 <= value <= 2.0):
                 raise PerturbError(f"{flag}: expected a factor from 0.5 to 2, found {value}")
-        lines = _read(args.log)
-        _write_new(
+        lines = read_lines(args.log)
+        write_new(
             args.out, perturb_lines(lines, str(args.log), args.distance_scale, args.turn_scale)
         )
-    except PerturbError as exc:
+    except (PerturbError, LogFileError) as exc:
         print(f"perturb_odometry: error: {exc}", file=sys.stderr)
         return 2
     print(

@@ -204,12 +204,22 @@ def detect_global(
     edges, searched = _in_ranges(search, frames, turns, False)
     if far and bc.far_drift_xy > 0 and bc.far_candidates > 0:
         held = np.concatenate([st.closed_node, [i for _, i, _, _ in edges]]).astype(np.int64)
-        unheld = np.array(
-            [not (np.abs(path[held] - path[i]) <= bc.agree_path).any() for i in frames], dtype=bool
-        )
+        unheld = _far_from(path[frames], path[held], bc.agree_path)
         beyond, more = _in_ranges(search, frames[unheld], turns[unheld], True)
         edges, searched = edges + beyond, searched + more
     return edges, searched
+
+
+def _far_from(at: F64, marks: F64, reach: float) -> NDArray[np.bool_]:
+    """Whether each path position of ``at`` lies further than ``reach`` from every one of
+    ``marks`` (all of them when there is none)."""
+    if marks.size == 0:
+        return np.ones(at.shape, dtype=bool)
+    marks = np.sort(marks)
+    k = np.searchsorted(marks, at)
+    below = marks[np.maximum(k - 1, 0)]
+    above = marks[np.minimum(k, marks.size - 1)]
+    return np.minimum(np.abs(at - below), np.abs(above - at)) > reach
 
 
 def _in_ranges(
