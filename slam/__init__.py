@@ -26,7 +26,7 @@ from typing import Any as _Any
 # anything else, CI), every parallel region then waits milliseconds for a descheduled spinner.
 # Sleeping idle threads wake in ~50 µs instead, which the filter pays at each of its ~5 parallel
 # regions per update. The middle way: sleep, but after a short spin (GOMP_SPINCOUNT, about a
-# millisecond here), which catches the next region of the same update (docs/slam.md, "Parallel
+# millisecond here), which catches the next region of the same update (docs/performance.md, "Parallel
 # regions that start at once, …": the demo's estimate at 100 particles ~0.05 s faster, intel's
 # filter 4.9 → 4.2 s). Set before numba loads OpenMP; an explicit user setting of either wins.
 if "OMP_WAIT_POLICY" not in _os.environ:

@@ -172,7 +172,7 @@ def release_free_memory() -> bool:
 
     Memory a stage freed stays in the process's heap, counted in its resident size, until
     something trims it: after mit-killian's estimate 80 MB of the filter's and the stages' freed
-    blocks, which the outputs' pictures then came on top of (docs/slam.md, "Peak memory after
+    blocks, which the outputs' pictures then came on top of (docs/performance.md, "Peak memory after
     the estimate"). ``slam run`` calls it between its stages, and the final-map stage
     (:class:`slam.stages.FinalMap`) before it allocates the grid; it changes no result, and
     costs about 10 ms."""

@@ -30,7 +30,7 @@ applied by itself): for pairs of scans between which the odometry turned, the la
 ``A`` (matched as above) and the odometry's ``B`` obey ``A = L⁻¹ ⊕ B ⊕ L`` with ``L`` the laser's
 pose on the robot, which is linear in ``(x, y, cos yaw, sin yaw)``; a trimmed least-squares fit
 gives ``L`` and a bootstrap its spread. What it measures is the laser against the odometry's
-reference point; a log's ground truth may be expressed at either (docs/slam.md, "The laser's
+reference point; a log's ground truth may be expressed at either (docs/accuracy.md, "The laser's
 mount"), so the estimate is printed beside what the log states, for the user to decide.
 """
 
@@ -501,7 +501,7 @@ class BeamGeometryCheck:
 BEAM_PAIRS = 500
 """Pairs of consecutive scans (evenly spread) a run's beam measurement compares: on fr-clinic
 the centred beams beat the spread ones by 0.02–0.03° of trimmed RMS, and the two one-sided
-geometries lose by 0.1°, whether 360 or 2522 pairs fit (docs/slam.md); about 0.2 s per 100
+geometries lose by 0.1°, whether 360 or 2522 pairs fit (docs/accuracy.md); about 0.2 s per 100
 pairs for the four geometries on two cores."""
 MIN_BEAM_PAIRS = 50
 """Fewest fitted pairs on which a measured beam geometry is applied."""

@@ -292,7 +292,7 @@ class RbpfConfig(Validated):
     """Include the odometry model in the proposal's covariance (else the scan likelihood alone,
     with a unit ridge: σ 1.7 m and 1.7 rad where no beam lands on a known cell). Not the
     default: on seeds 0–3 it improves intel, aces, mit-csail and the demo, but fr-clinic seed 1
-    ends with its return to the start 55 m off (docs/slam.md)."""
+    ends with its return to the start 55 m off (docs/accuracy.md)."""
     proposal_mean: str = bounded("match", choices=("match", "fused"))
     """Where each particle's proposal is centred: ``match``, its scan-matched pose; ``fused``,
     the mean of the Gaussian product of the tempered scan likelihood at the match and the
@@ -300,7 +300,7 @@ class RbpfConfig(Validated):
     the scan constrains the pose it stays at the match, along a direction it does not (a
     corridor, a wide hall's far walls) it stays with the odometry instead of sliding. Not the
     default: on seeds 0–3 it improves fr-clinic (0.144 → 0.130 m) but worsens aces and
-    mit-csail, and intel and fr079 diverge (docs/slam.md)."""
+    mit-csail, and intel and fr079 diverge (docs/accuracy.md)."""
     refine_passes: int = bounded(3, ge=0, le=100)
     """After the filter, re-register the update scans of the final lineage against the map they
     build this many times (removes the jitter the proposal's sampling leaves; 0: off)."""
@@ -308,13 +308,13 @@ class RbpfConfig(Validated):
     """At most this many beams (evenly spread) per scan in the re-registration; 0 (the
     default): every beam. After the filter there is time for all of them: with every beam
     instead of ``match_beams``, fr079's and mit-csail's (360 beams) relation errors fall on
-    seeds 0–3 on average (docs/slam.md); logs of at most ``match_beams`` beams are unchanged."""
+    seeds 0–3 on average (docs/accuracy.md); logs of at most ``match_beams`` beams are unchanged."""
     refine_resolution: float = _cell_or_zero("the particle maps' cell")
     """Cell size (m) of the distance field the stages after the filter register scans against
     (re-registration and :attr:`register_scans`); 0 (the default): the particle maps' own.
     A coarser field (0.1 m) scores better on the benchmark's relations but worse against the
     demo's ground truth and on a synthetic room, since an unsigned field pulls each scan towards
-    its cell centres (docs/slam.md)."""
+    its cell centres (docs/accuracy.md)."""
     register_scans: bool = True
     """After the scans between updates are placed by odometry, register every scan (not only
     the update scans) against the map of the update scans at their final poses: the odometry
@@ -322,19 +322,19 @@ class RbpfConfig(Validated):
     register_beams: int = bounded(360, ge=0, le=100000)
     """At most this many beams (evenly spread) per scan in :attr:`register_scans`; 0: every
     beam. Twice what the filter matches (``match_beams``): on the demo's 1081-beam scans every
-    beam gives the same ATE (0.0469 against 0.0470 m) for 0.65 s more (docs/slam.md)."""
+    beam gives the same ATE (0.0469 against 0.0470 m) for 0.65 s more (docs/accuracy.md)."""
     register_rounds: int = bounded(2, ge=1, le=10)
     """Rounds of :attr:`register_scans` and :attr:`smooth_odometry`: each round registers every
     scan again, from the pose the previous round smoothed, against the map of the node scans at
     those poses, then smooths. The second round improves every seed of intel, aces, fr079 and
-    mit-csail (docs/slam.md); a third changes nothing measurable."""
+    mit-csail (docs/accuracy.md); a third changes nothing measurable."""
     smooth_odometry: bool = True
     """After :attr:`register_scans`, smooth every scan's pose with the odometry between
     neighbouring scans (:class:`slam.stages.OdometrySmoothing`): each registered pose is a prior
     of sigma ``smooth_sigma_xy`` / ``smooth_sigma_th``, each odometry step an edge whose sigma
     is ``smooth_factor`` times the odometry's measured disagreement with the matcher
     (:func:`slam.calibration.odometry_disagreement`), so a log's odometry counts as far as its
-    own data show it deserves (docs/slam.md)."""
+    own data show it deserves (docs/accuracy.md)."""
     smooth_factor: float = bounded(2.0, gt=0.0, le=1000.0)
     """See :attr:`smooth_odometry`."""
     smooth_sigma_xy: float = bounded(0.02, gt=0.0, le=10.0)
@@ -352,14 +352,14 @@ class RbpfConfig(Validated):
     (fr-clinic) scores better on. One value: no choice
     (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` improves
     fr-clinic on two seeds of four, changes no other benchmark log and costs 0.3–1.2 s a run
-    (docs/slam.md, "How far to trust the odometry's shape")."""
+    (docs/accuracy.md, "How far to trust the odometry's shape")."""
     smooth_choice_margin: float = bounded(0.005, ge=0.0, le=1.0)
     """See :attr:`smooth_scales` (a share of the judged returns)."""
     smooth_choice_z: float = bounded(2.0, ge=0.0, le=100.0)
     """... and the best must also beat the first scale's score by this many standard errors of
     the difference of the two shares (binomial, from the returns each judged; 0: the margin
     alone): a choice that rests on a few hundred judged returns (a log that seldom comes back
-    to a place) is a draw, and keeps the first scale (docs/slam.md)."""
+    to a place) is a draw, and keeps the first scale (docs/accuracy.md)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)
     """The score that chooses among :attr:`smooth_scales` judges every this-many-th scan only
     (and builds its maps from those): the choice costs a quarter of a full score per scale ..."""
@@ -448,7 +448,7 @@ class LoopConfig(Validated):
     unique_ratio: float = bounded(0.95, gt=0.0, le=10.0)
     """... that is, with fewer than this share of the beams that fit at the match (within
     ``fit_distance`` of a surface). A scan that fits as well a metre along a corridor says where
-    across the corridor the robot was, not where along it (docs/slam.md, "Closures that could
+    across the corridor the robot was, not where along it (docs/accuracy.md, "Closures that could
     be a metre elsewhere")."""
     sigma_xy: float = bounded(0.02, gt=0.0, le=100.0)
     """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""

@@ -1,4 +1,4 @@
-"""The analysis scripts of docs/slam.md: ``tools/short_relations.py`` and
+"""The analysis scripts of docs/accuracy.md: ``tools/short_relations.py`` and
 ``tools/beam_step_check.py``, on inputs whose answers are known."""
 
 from __future__ import annotations

@@ -138,7 +138,7 @@ def test_openmp_threads_sleep_after_a_short_spin_unless_the_user_says_otherwise(
     given, wait_policy, spin
 ) -> None:
     """``import slam`` sets OpenMP's wait policy to passive with a short spin
-    (``GOMP_SPINCOUNT``, docs/slam.md) before numba loads OpenMP; a user's setting of either
+    (``GOMP_SPINCOUNT``, docs/performance.md) before numba loads OpenMP; a user's setting of either
     wins."""
     import os
     import subprocess

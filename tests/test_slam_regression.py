@@ -125,7 +125,7 @@ def test_mit_csail_glitch_breaks_without_the_probe(carmen_dir, tmp_path):
 CUT = 0.33
 """fr-clinic from a third of its records (1546 s): its first long loop, 750 m from 1750 s back
 to the same hall at 4409 s, comes back 31 m off on seed 0 — beyond the global search's drift
-window (1 m + 3 % of the path), within the search beyond it (docs/slam.md, "A run started
+window (1 m + 3 % of the path), within the search beyond it (docs/accuracy.md, "A run started
 elsewhere")."""
 
 

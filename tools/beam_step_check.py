@@ -5,7 +5,7 @@ FLASER lines carry no beam geometry. fr-clinic alternates between 180- and 181-r
 laser; the 181-reading ones are 1° apart from −90° to +90°. For sampled neighbouring pairs (one of
 each count) this registers the 180-reading scan onto the 181-reading one by ICP (from the
 odometry's relative pose) under each hypothesis for the 180-reading beams, and compares the
-median point-to-segment residual per pair (docs/slam.md, "The beam step of the 180-reading logs").
+median point-to-segment residual per pair (docs/accuracy.md, "The beam step of the 180-reading logs").
 
 A second check uses the filter's own matcher (``--matcher``, the check ``slam data calibrate``
 prints: :func:`slam.calibration.check_beam_geometry`): every other pair of consecutive scans is

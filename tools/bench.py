@@ -60,7 +60,7 @@ def _run_one(name: str) -> dict:
 def _cpu_model() -> str:
     """The CPU's model name and whether it has AVX-512 (``/proc/cpuinfo``; ``platform`` elsewhere):
     the figures depend on the host, its speed and, in the last bits, its instruction set
-    (docs/slam.md, "Reproducible on one machine, not bit for bit across CPUs")."""
+    (docs/accuracy.md, "Reproducible on one machine, not bit for bit across CPUs")."""
     try:
         text = Path("/proc/cpuinfo").read_text()
     except OSError:

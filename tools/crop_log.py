@@ -4,7 +4,7 @@ A user's run starts wherever the robot happens to be, and its first loop is one 
 run never made in that order. This tool writes a copy of a CARMEN log without the records
 before a fraction of them (comment lines kept), so that ``slam run`` meets the same building
 from another start: the map grows in another order, the first loops are others, and a long one
-may come back tens of metres off (docs/slam.md, "A run started elsewhere"):
+may come back tens of metres off (docs/accuracy.md, "A run started elsewhere"):
 
     mkdir -p /tmp/crop
     uv run python tools/crop_log.py ../shared/data/carmen/fr-clinic.clf.gz \\

@@ -36,11 +36,11 @@ CASES = {
     # fr079's first loops (odometry leads the laser in turns)
     "fr079-start": ("fr079", 1, [(0.0, 120.0)]),
     # aces' ROS bag, seed 1: the first large loop comes back to the start 1.9 m off, where the
-    # local search closes a wrong loop; the global search must still look (docs/slam.md,
+    # local search closes a wrong loop; the global search must still look (docs/accuracy.md,
     # "Odometry a few per cent off")
     "aces-bag-return": ("aces", 1, [(0.0, 40.0), (140.0, 200.0)], "carmen/bags/aces.orig.bag"),
     # aces, seed 4, every node: global closures that fit as well a metre along a corridor
-    # (3-6 m wrong) pulled the first large loop's return to the start 0.7 m off (docs/slam.md,
+    # (3-6 m wrong) pulled the first large loop's return to the start 0.7 m off (docs/accuracy.md,
     # "Closures that could be a metre elsewhere"); a stretch alone does not show it
     "aces-seed4": ("aces", 4, [(0.0, None)]),
 }

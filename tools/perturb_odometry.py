@@ -4,7 +4,7 @@ A user's robot is one we have never seen, and its wheel calibration is rarely as
 benchmark robots'. This tool rewrites a CARMEN log's odometry with every step's distance times
 ``--distance-scale`` and every step's turn times ``--turn-scale`` (the scans, times and every
 other line as they are), so that ``slam run`` can be measured on the same building with worse
-odometry (docs/slam.md, "Odometry a few per cent off"):
+odometry (docs/accuracy.md, "Odometry a few per cent off"):
 
     uv run python tools/perturb_odometry.py ../shared/data/carmen/aces.clf.gz \\
         /tmp/perturbed/aces-d105.clf.gz --distance-scale 1.05

@@ -5,17 +5,17 @@ For a run folder and a dead-reckoning run folder of the same log (``slam run LOG
 odometry``), over the relations that span less than ``--span`` seconds: the share of each run's
 errors over ``--over`` metres, how many are over it for the SLAM run but under half of it for
 dead reckoning (and the reverse), how far the SLAM run's relative motion is from dead reckoning's
-on its bad relations, and the relations' rotation on the bad and the good ones (docs/slam.md,
+on its bad relations, and the relations' rotation on the bad and the good ones (docs/accuracy.md,
 "fr-clinic's short relations"); the mean error of both runs on the short relations; and the
 short relations at least ``--sideways-length`` long whose direction of travel, in the frame of
 their first pose, differs from dead reckoning's by more than ``--sideways`` degrees, with the
 share of the SLAM run's mean error (over all its relations) that they carry; and for the
 relations at least ``--span`` long, the SLAM run's mean error on them, the share of its mean they
-carry, and the windows of 100 s (at either end) whose relations carry the most of it (docs/slam.md,
+carry, and the windows of 100 s (at either end) whose relations carry the most of it (docs/accuracy.md,
 "fr-clinic's return to its start"). Odometry reports
 motion along the robot's heading; a relation that has the robot travel 10–20° off it for tens of
 seconds, where dead reckoning goes straight, is one to check against the scans before blaming
-the run (docs/slam.md, "fr-clinic's reference where its scans disagree").
+the run (docs/accuracy.md, "fr-clinic's reference where its scans disagree").
 
 Usage::
 

@@ -11,7 +11,7 @@ runs (:func:`slam.graph.smooth_with_odometry`) and prints the relation error bef
 The registration's sigmas are fixed (``--reg-xy``, ``--reg-th``); the odometry's are its
 disagreement with the filter's matcher over 1000 pairs of consecutive scans
 (:func:`slam.calibration.odometry_disagreement`) times each ``--factor`` (``rbpf.smooth_factor``):
-the odometry is trusted as far as the log shows it deserves. docs/slam.md, "Smoothing with the
+the odometry is trusted as far as the log shows it deserves. docs/accuracy.md, "Smoothing with the
 odometry (default, measured)".
 
 Usage::

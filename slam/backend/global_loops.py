@@ -34,7 +34,7 @@ module adds, in the same pose graph and the same rounds:
    closure puts it (:func:`_held_locally`). The local search looks only ±``loops.search_xy``
    around a drifted estimate and can close a loop wrongly; a search skipped behind such a
    closure left the loop open (aces' ROS bag, seed 1: the start's junction 1.9 m off after the
-   first large loop, docs/slam.md "Odometry a few per cent off").
+   first large loop, docs/accuracy.md "Odometry a few per cent off").
 4. **Consistency.** A closure counts only when another closure, found from a different
    keyframe within ``agree_path`` metres of path (and to a submap as near), implies the same
    correction of the trajectory (``agree_xy``, ``agree_th``, plus the drift allowed between

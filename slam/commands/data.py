@@ -82,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of its odometries (the poses written with the scans, the odometry messages at a lag) "
         'agrees with the laser (what `slam run` uses with robot.odometry_sync = "auto") and '
         "where the laser sits on the robot (a hand-eye fit over the turns), beside what the log "
-        "states (docs/slam.md).",
+        "states (docs/accuracy.md).",
     )
     add_log_argument(calibrate, "LOG")
     add_data_dir_argument(calibrate)
@@ -332,7 +332,7 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
     lines.append(
         f"          to use the measured mount: --set lidar.use_log_laser_pose=false "
         f"--set lidar.x={m['x']:.3f} --set lidar.y={m['y']:.3f} "
-        f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/slam.md: ground truth may "
+        f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/accuracy.md: ground truth may "
         f"refer to the laser or to the odometry point)"
     )
     beams = report.get("beam_geometry")
@@ -354,7 +354,7 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
             lines.append(
                 f"          {beams['best']} fits best; `slam run` measures it when the log loads "
                 f"and reads the log with lidar.beam_step_deg = {step:g} (lidar.measure_beam_step; "
-                "docs/slam.md, the beam step of the 180-reading logs)"
+                "docs/accuracy.md, the beam step of the 180-reading logs)"
             )
         elif step is not None:
             lines.append(
@@ -363,7 +363,7 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
         elif report.get("beam_step_declarable"):
             lines.append(
                 f"          centred fits best: --set lidar.beam_step_deg={beams['beam_step_deg']:g} "
-                "declares it (docs/slam.md, the beam step of the 180-reading logs)"
+                "declares it (docs/accuracy.md, the beam step of the 180-reading logs)"
             )
         else:
             lines.append(
