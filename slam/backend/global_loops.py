@@ -52,7 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -168,6 +168,20 @@ def _same_place(a: F64, b: F64, drift: float, config: Config) -> bool:
     return abs(wrap_angle(a[2] - b[2])) <= bc.agree_th + bc.drift_th * drift
 
 
+class _Search(NamedTuple):
+    """What the search from every keyframe reads (one round): the scans, the nodes at their
+    current poses and path positions, the configuration, the shared submap cache and the
+    submaps as :class:`_Stretches`."""
+
+    seq: Any
+    steps: NDArray[np.int64]
+    x: F64
+    path: F64
+    config: Config
+    cache: SubmapCache
+    st: _Stretches
+
+
 def detect_global(
     seq,
     steps,
@@ -200,7 +214,7 @@ def detect_global(
     turns = np.arange(frames.size)
     st = _Stretches.of(x, path, bc.submap_length, list(local))
     cache = SubmapCache(seq, steps, x, config, keep=SUBMAPS_KEPT, table=table)
-    search = partial(_search_keyframes, seq, steps, x, path, config, cache, st)
+    search = partial(_search_keyframes, _Search(seq, steps, x, path, config, cache, st))
     edges, searched = _in_ranges(search, frames, turns, False)
     if far and bc.far_drift_xy > 0 and bc.far_candidates > 0:
         held = np.concatenate([st.closed_node, [i for _, i, _, _ in edges]]).astype(np.int64)
@@ -240,21 +254,13 @@ def _in_ranges(
 
 
 def _search_keyframes(
-    seq,
-    steps,
-    x: F64,
-    path: F64,
-    config: Config,
-    cache: SubmapCache,
-    st: _Stretches,
-    frames: NDArray[np.int64],
-    turns: NDArray[np.int64],
-    beyond: bool,
+    search: _Search, frames: NDArray[np.int64], turns: NDArray[np.int64], beyond: bool
 ) -> tuple[list, int]:
-    """:func:`detect_global`'s search from the keyframes ``frames`` (submaps from ``cache``;
-    ``turns``: their numbers among all keyframes, for :func:`candidate_order`): their verified
-    closures and the searches made; within the drift window (``backend.drift_xy``), or with
-    ``beyond`` the ``backend.far_candidates`` submaps beyond it (``backend.far_drift_xy``)."""
+    """:func:`detect_global`'s search from the keyframes ``frames`` (``turns``: their numbers
+    among all keyframes, for :func:`candidate_order`): their verified closures and the searches
+    made; within the drift window (``backend.drift_xy``), or with ``beyond`` the
+    ``backend.far_candidates`` submaps beyond it (``backend.far_drift_xy``)."""
+    seq, steps, x, path, config, cache, st = search
     bc, lc, rc = config.backend, config.loops, config.rbpf
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     edges, searched = [], 0
