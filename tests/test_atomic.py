@@ -1,4 +1,6 @@
-"""``slam.io.atomic.write_png``: the one PNG writer (run pictures, simulated frames, plots)."""
+"""``slam.io.atomic``: the one PNG writer (run pictures, simulated frames, plots), and the
+atomic writers' promise: the file appears whole or not at all, a failure leaves no temporary
+behind and names the file the caller asked for."""
 
 from __future__ import annotations
 
@@ -6,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from slam.io.atomic import write_png
+from slam.io import atomic
+from slam.io.atomic import atomic_path, write_bytes, write_png
 from slam.sim.dataset import PNG_PARAMS
 
 
@@ -41,3 +44,37 @@ def test_a_failed_encoding_leaves_the_old_file_whole(tmp_path):
     with pytest.raises(cv2.error):
         write_png(path, np.zeros((2, 2, 2), dtype=np.uint8))  # PNG has no 2-channel pixels
     assert path.read_bytes() == b"old" and [p.name for p in tmp_path.iterdir()] == ["map.png"]
+
+
+def test_write_bytes_replaces_whole_and_a_failed_rename_names_the_asked_file(tmp_path, monkeypatch):
+    path = tmp_path / "metrics.json"
+    write_bytes(path, b"one")
+    write_bytes(path, b"two")
+    assert path.read_bytes() == b"two" and [p.name for p in tmp_path.iterdir()] == [path.name]
+
+    def refuse(src, dst):
+        raise OSError(28, "No space left on device", str(src))
+
+    monkeypatch.setattr(atomic.os, "replace", refuse)
+    with pytest.raises(OSError) as caught:
+        write_bytes(path, b"three")
+    assert caught.value.errno == 28 and caught.value.filename == str(path)
+    assert path.read_bytes() == b"two" and [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_atomic_path_renames_on_success_and_removes_its_temporary_on_failure(tmp_path):
+    path = tmp_path / "out" / "poses.npz"
+    with atomic_path(path) as tmp:
+        assert tmp.parent == path.parent and tmp.suffix == ".npz" and tmp.exists()
+        tmp.write_bytes(b"new")
+    assert path.read_bytes() == b"new" and sorted(p.name for p in path.parent.iterdir()) == [
+        "poses.npz"
+    ]
+    with pytest.raises(ValueError, match="writer failed"), atomic_path(path) as tmp:
+        tmp.write_bytes(b"half")
+        raise ValueError("writer failed")
+    assert path.read_bytes() == b"new" and [p.name for p in path.parent.iterdir()] == [path.name]
+    # an error about the temporary names the real file
+    with pytest.raises(OSError) as caught, atomic_path(path) as tmp:
+        raise OSError(13, "Permission denied", str(tmp))
+    assert caught.value.filename == str(path)

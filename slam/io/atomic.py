@@ -98,9 +98,17 @@ def write_bytes(path: Path, data: bytes) -> None:
     path = check_output_file(Path(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = _temp_file(path.parent, f".{path.name}.", ".tmp")
+    with _replacing(tmp, path), os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+
+
+@contextlib.contextmanager
+def _replacing(tmp: Path, path: Path) -> Iterator[None]:
+    """Rename ``tmp`` to ``path`` when the block succeeds (after the block's own context
+    managers have closed the file); otherwise remove ``tmp`` and raise again, an ``OSError``
+    about ``tmp`` (or about no file) then naming ``path``, the file the caller asked for."""
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        yield
         os.replace(tmp, path)
     except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
@@ -163,15 +171,8 @@ def atomic_path(path: Path) -> Iterator[Path]:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = _temp_file(path.parent, f".{path.stem}.", path.suffix)
     os.close(fd)
-    try:
+    with _replacing(tmp, path):
         yield tmp
-        os.replace(tmp, path)
-    except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
-            raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the real file
-        raise
 
 
 # --- renames that never replace ------------------------------------------------------------
