@@ -61,6 +61,44 @@ def test_slam_run_scores_its_map(run_folder):
     assert image is not None and max(image.shape[:2]) >= 1200
 
 
+def test_a_good_run_gives_no_quality_warning(run_folder):
+    metrics = json.loads((run_folder / "metrics.json").read_text())
+    assert not [w for w in metrics["warnings"] if "map quality" in w]
+
+
+def test_a_score_below_warn_below_is_a_warning_and_the_summary_line_gives_it(
+    small_log, tmp_path, capsys
+):
+    """The same run with ``quality.warn_below = 1``: its score (above 0.99, below 1) warns on
+    stderr and in metrics.json, naming the worst stretches; the summary line gives the score."""
+    out = tmp_path / "run"
+    assert main(["run", str(small_log), "--out", str(out), "--every", "2", "--quiet",
+                 "--no-record", "--set", "quality.warn_below=1.0"]) == 0  # fmt: skip
+    captured = capsys.readouterr()
+    metrics = json.loads((out / "metrics.json").read_text())
+    score, worst = metrics["quality"]["score"], metrics["quality"]["worst"]
+    assert 0.99 < score < 1.0
+    assert f"map quality {score:.3f}" in captured.out.splitlines()[-1]
+    warned = [w for w in metrics["warnings"] if w.startswith("map quality")]
+    assert len(warned) == 1 and f"slam: warning: {warned[0]}" in captured.err
+    first = f"{worst[0]['time_s'][0]:.0f}-{worst[0]['time_s'][1]:.0f} s"
+    assert f"{score:.3f} is below quality.warn_below = 1:" in warned[0] and first in warned[0]
+
+
+def test_low_score_warning_needs_a_score_below_the_threshold():
+    from slam.eval.quality_run import low_score_warning
+
+    worst = [{"time_s": [12.3, 40.9]}, {"time_s": [100.0, 131.5]}]
+    text = low_score_warning({"score": 0.1523, "worst": worst}, 0.65)
+    assert text is not None and text.startswith("map quality 0.152 is below quality.warn_below")
+    assert "the worst stretches at 12-41 s, 100-132 s (marked on map.png" in text
+    assert low_score_warning({"score": 0.65, "worst": worst}, 0.65) is None
+    assert low_score_warning({"score": float("nan"), "worst": []}, 0.65) is None
+    assert low_score_warning({"score": None, "worst": []}, 0.65) is None
+    assert low_score_warning({"score": 0.3, "worst": []}, 0.0) is None  # 0: never
+    assert "worst" not in low_score_warning({"score": 0.3, "worst": []}, 0.65)
+
+
 def test_map_png_marks_the_worst_stretches(run_folder):
     """map.png circles each of the score's worst stretches where its returns conflict, in the
     purple of quality.png, and draws its part of the path; a picture without them has none."""

@@ -98,6 +98,9 @@ def run_command(args: argparse.Namespace) -> int:
     if "scans_per_s" in metrics:
         summary.append(f"{metrics['scans_per_s']:.0f} scans/s")
         summary.append(f"{metrics['real_time_factor']:.1f}x real time")
+    score = metrics.get("quality", {}).get("score")
+    if score is not None:
+        summary.append(f"map quality {score:.3f}")
     if "ate_rmse" in metrics:
         summary.append(f"ATE RMSE {metrics['ate_rmse']:.3f} m")
     if "frames_used" in metrics.get("texture", {}):

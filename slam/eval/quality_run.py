@@ -188,7 +188,26 @@ def quality_stage(log: Log, trajectory: Trajectory, config: Config, out_dir: Pat
     write_png(out_dir / PICTURE, render_quality(result))
     report["picture"] = PICTURE
     metrics["quality"] = report
+    doubt = low_score_warning(report, config.quality.warn_below)
+    if doubt:
+        warnings.warn(doubt, stacklevel=2)
     return metrics
+
+
+def low_score_warning(report: dict[str, Any], warn_below: float) -> str | None:
+    """The warning ``slam run`` gives when its map's score (``report``, :func:`summary`'s) is
+    below ``warn_below`` (``quality.warn_below``; 0: never), naming the worst stretches' times;
+    ``None`` otherwise (also when nothing could be judged)."""
+    score = report.get("score")
+    if score is None or not math.isfinite(score) or score >= warn_below:
+        return None
+    worst = ", ".join(f"{w['time_s'][0]:.0f}-{w['time_s'][1]:.0f} s" for w in report["worst"][:3])
+    where = f"; the worst stretches at {worst} (marked on map.png and {PICTURE})" if worst else ""
+    return (
+        f"map quality {score:.3f} is below quality.warn_below = {warn_below:g}: stretches of the "
+        f"map contradict each other, the filter has probably lost track{where}; `slam eval RUN` "
+        "lists every stretch (docs/evaluation.md)"
+    )
 
 
 def as_written(trajectory: Trajectory) -> Trajectory:
