@@ -1,7 +1,7 @@
 """Reading a CARMEN log and writing a new copy of it: what the robustness tools share.
 
-``tools/perturb_odometry.py`` (the odometry rescaled) and ``tools/crop_log.py`` (the first
-records dropped) read a log as text lines, gzipped or not (by its content), and write their copy
+``tools/perturb_odometry.py`` (the odometry rescaled), ``tools/perturb_ranges.py`` (noisier
+readings) and ``tools/crop_log.py`` (the first records dropped) read a log as text lines, gzipped or not (by its content), and write their copy
 whole or not at all, never over an existing file, compressed when its name ends in ``.gz``.
 Errors are :class:`LogFileError`, one line naming the file and what was expected.
 """
@@ -59,3 +59,20 @@ def write_new(path: Path, lines: list[str]) -> None:
         ) from None
     finally:
         os.unlink(tmp)
+
+
+def flaser_size(fields: list[str], where: str) -> int:
+    """The number of readings of a ``FLASER`` line split into ``fields``, checked against the
+    line's length (the readings, then six pose numbers and the time); ``where`` names the file
+    and line in the :class:`LogFileError` a malformed line raises."""
+    try:
+        n = int(fields[1])
+    except (IndexError, ValueError):
+        raise LogFileError(
+            f"{where}: expected FLASER num_readings ..., found {fields[:2]}"
+        ) from None
+    if n < 0 or len(fields) < n + 8:
+        raise LogFileError(
+            f"{where}: expected {n + 8} fields or more for {n} readings, found {len(fields)}"
+        )
+    return n

@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools/log_copies.py
-from log_copies import LogFileError, read_lines, write_new  # noqa: E402
+from log_copies import LogFileError, flaser_size, read_lines, write_new  # noqa: E402
 
 UNSUPPORTED = ("ROBOTLASER1", "TRUEPOS")
 """Line types that carry poses this tool does not rewrite."""
@@ -101,16 +101,7 @@ def perturb_lines(lines: list[str], name: str, distance: float, turn: float) -> 
                 )
             odom.append((k, _pose(fields, 1, where)))
         elif kind == "FLASER":
-            try:
-                n = int(fields[1])
-            except (IndexError, ValueError):
-                raise PerturbError(
-                    f"{where}: expected FLASER num_readings ..., found {fields[:2]}"
-                ) from None
-            if n < 0 or len(fields) < n + 8:
-                raise PerturbError(
-                    f"{where}: expected {n + 8} fields or more for {n} readings, found {len(fields)}"
-                )
+            n = flaser_size(fields, where)
             laser.append((k, _pose(fields, n + 5, where), _pose(fields, n + 2, where)))
     if not odom and not laser:
         raise PerturbError(f"{name}: no ODOM or FLASER lines: not a CARMEN log with odometry")
