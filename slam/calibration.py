@@ -293,6 +293,36 @@ def odometry_disagreement(
     return xy, _trimmed_rms(wrap_angle(laser[:, 2] - odo[:, 2]), settings.trim), len(kept)
 
 
+RANGE_NOISE_SCANS = 2000
+"""At most this many scans (evenly spread) measure the laser's range noise."""
+
+HALF_NORMAL_RMS = 0.37770
+"""RMS of the smaller half of ``|X|`` for a standard normal ``X`` (``√(1 − 2aφ(a)/(2Φ(a) − 1))``
+at the median ``a = 0.6745``): what :func:`range_noise` divides by."""
+
+
+def range_noise(ranges: F64, near: float = 0.5, far: float = 3.0) -> tuple[float, int]:
+    """The laser's range noise (m) read from its own scans ``ranges`` ``(S, B)`` (beam order,
+    NaN where no reading), and how many triples it rests on.
+
+    Three neighbouring readings on a flat surface seen about head-on lie on a line, so the
+    second difference ``r₍ᵢ₋₁₎ − 2rᵢ + r₍ᵢ₊₁₎`` is noise alone, of standard deviation ``√6 σ``;
+    corners, edges and grazing surfaces add large values. Over the triples whose readings all
+    lie in ``[near, far)`` the RMS of the smaller half of the ``|second differences|``, divided
+    by ``√6`` and by :data:`HALF_NORMAL_RMS`, estimates ``σ`` (exact for Gaussian noise; the
+    large half, where geometry shows, is left out). NaN with no triple."""
+    r = np.asarray(ranges, dtype=np.float64)
+    if r.ndim != 2 or r.shape[1] < 3:
+        return float("nan"), 0
+    ok = np.isfinite(r) & (r >= near) & (r < far)
+    both = ok[:, :-2] & ok[:, 1:-1] & ok[:, 2:]
+    d2 = np.abs(r[:, :-2] - 2.0 * r[:, 1:-1] + r[:, 2:])[both]
+    if d2.size == 0:
+        return float("nan"), 0
+    half = np.sort(d2)[: max(1, d2.size // 2)]
+    return float(np.sqrt(np.mean(half * half)) / (np.sqrt(6.0) * HALF_NORMAL_RMS)), int(d2.size)
+
+
 # --- where the laser sits --------------------------------------------------------------------
 
 

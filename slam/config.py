@@ -353,6 +353,14 @@ class RbpfConfig(Validated):
     (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` improves
     fr-clinic on two seeds of four, changes no other benchmark log and costs 0.3–1.2 s a run
     (docs/accuracy.md, "How far to trust the odometry's shape")."""
+    smooth_noise_ref: float = bounded(0.01, ge=0.0, le=1.0)
+    """The registration's sigmas (``smooth_sigma_xy``, ``smooth_sigma_th``) hold for a laser
+    whose readings scatter by at most this much (m: about a SICK LMS's, as on intel, fr079 and
+    mit-csail). A noisier laser's, its range noise measured from its own scans
+    (:func:`slam.calibration.range_noise`), are that noise over this times larger wherever the
+    choice among :attr:`smooth_scales` keeps the first (a larger multiple that wins is kept):
+    the noisier its scans, the less a registered pose is trusted against the odometry. 0: never
+    (docs/accuracy.md, "The registration's weight from the laser's noise")."""
     smooth_choice_margin: float = bounded(0.005, ge=0.0, le=1.0)
     """See :attr:`smooth_scales` (a share of the judged returns)."""
     smooth_choice_z: float = bounded(2.0, ge=0.0, le=100.0)

@@ -162,8 +162,13 @@ class OdometrySmoothing:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
         if self.measured.get("choice_of") is not seq:  # the first round chooses the scale
+            base, self.measured["range_noise"] = noise_multiple(seq, rc.smooth_noise_ref)
             choice = choose_smoothing(output.poses, odometry, seq, odo, config)
             scale, poses = choice.scale, choice.poses
+            if scale < base:  # no multiple won: the laser's noise sets how far to trust it
+                scale = base
+                reg = (scale * rc.smooth_sigma_xy, scale * rc.smooth_sigma_th)
+                poses = smooth_with_odometry(output.poses, odometry, reg, odo, config.loops)
             self.measured.update(
                 choice_of=seq, scale=scale, scores=choice.scores, judged=choice.judged
             )
@@ -175,14 +180,33 @@ class OdometrySmoothing:
             **output.stats,
             "odometry_disagreement_m": round(sxy, 4),
             "odometry_disagreement_deg": round(float(np.degrees(sth)), 3),
-            "smooth_scale": scale,
+            "smooth_scale": round(float(scale), 4),
         }
+        if np.isfinite(self.measured["range_noise"]):
+            stats["range_noise_m"] = round(float(self.measured["range_noise"]), 4)
         if self.measured["scores"]:
             stats["smooth_scale_scores"] = [
                 round(v, 4) if np.isfinite(v) else None for v in self.measured["scores"]
             ]
             stats["smooth_scale_judged"] = list(self.measured["judged"])
         return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps], stats=stats)
+
+
+def noise_multiple(seq: ScanSequence, reference: float) -> tuple[float, float]:
+    """The multiple of the registration's sigmas that the laser's range noise asks for, and that
+    noise (m): the noise measured on at most :data:`~slam.calibration.RANGE_NOISE_SCANS` of
+    ``seq``'s scans (:func:`slam.calibration.range_noise`) over ``reference``
+    (``rbpf.smooth_noise_ref``), at least 1; 1 and NaN when ``reference`` is 0 (off) or no
+    noise could be measured."""
+    if reference <= 0 or len(seq) == 0:
+        return 1.0, float("nan")
+    from slam.calibration import RANGE_NOISE_SCANS, range_noise
+
+    picks = spread_picks(len(seq), min(len(seq), RANGE_NOISE_SCANS))
+    noise, _ = range_noise(seq.readings(picks)[0])
+    if not np.isfinite(noise):
+        return 1.0, noise
+    return max(1.0, noise / reference), noise
 
 
 class SmoothingChoice(NamedTuple):

@@ -345,3 +345,29 @@ def test_thin_returns_rounds_half_to_even_as_linspace_does(width):
         np.testing.assert_array_equal(x[:c], want + 1.0)
         np.testing.assert_array_equal(y[:c], -(want + 1.0))
         assert not x[c:].any() and not y[c:].any()
+
+
+def test_the_lasers_noise_sets_the_smoothing_multiple():
+    """noise_multiple: the range noise measured on the scans over ``rbpf.smooth_noise_ref``, at
+    least 1; off (1, NaN) with a reference of 0."""
+    from synthetic_logs import ray_cast
+
+    from slam.scans import Scan
+    from slam.stages import noise_multiple
+
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    rng = np.random.default_rng(6)
+
+    def scans(sigma: float) -> ScanSequence:
+        seq = ScanSequence()
+        for k in range(100):
+            pose = np.array([-1.0 + 0.02 * k, -0.5, 0.01 * k])
+            ranges = ray_cast(pose, angles) + rng.normal(0.0, sigma, angles.size)
+            seq.append(Scan(float(k), ranges, angles, 0.1, 20.0, 30.0, np.zeros(3)), pose)
+        return seq
+
+    noisy = scans(0.03)
+    multiple, noise = noise_multiple(noisy, 0.01)
+    assert abs(noise / 0.03 - 1.0) < 0.1 and multiple == pytest.approx(noise / 0.01)
+    assert noise_multiple(noisy, 0.0) == (1.0, pytest.approx(float("nan"), nan_ok=True))
+    assert noise_multiple(scans(0.002), 0.01)[0] == 1.0  # quieter than the reference
