@@ -448,6 +448,10 @@ def test_range_noise_reads_the_lasers_scatter():
         assert triples > 5000 and abs(noise / sigma - 1.0) < 0.1, (sigma, noise)
         noisy[rng.random(noisy.shape) < 0.2] = np.nan
         assert abs(range_noise(noisy)[0] / sigma - 1.0) < 0.1
+    # a laser that reads in steps of 5 cm: the steps alone read nothing, noise under them does
+    assert range_noise(np.round(clean / 0.05) * 0.05)[0] < 1e-9
+    dithered = np.round((clean + rng.normal(0.0, 0.01, clean.shape)) / 0.05) * 0.05
+    assert 0.012 < range_noise(dithered)[0] < 0.02
 
 
 def test_range_noise_uses_readings_of_half_a_metre_to_three_and_needs_a_triple():
