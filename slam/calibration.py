@@ -1,6 +1,7 @@
-"""How a log's odometry relates to its laser, measured from the log itself (no ground truth).
+"""How a log's odometry relates to its laser, and how good the laser is, measured from the log
+itself (no ground truth).
 
-Two things a log may state wrongly or not at all, and that the scans can check:
+Things a log may state wrongly or not at all, and that the scans can check:
 
 **When the odometry was taken** (:func:`synchronise_odometry`, run by ``slam run`` when
 ``robot.odometry_sync = "auto"``). A CARMEN log gives every scan an odometry pose, and also the
@@ -24,6 +25,11 @@ the shorter ones spread over the field of view or one step apart between the lon
 Pairs of consecutive scans are matched as above under each candidate (:func:`check_beam_geometry`);
 the geometry whose rotations agree best with the odometry's is the log's, and when that is one
 step apart and centred the log is read with that ``lidar.beam_step_deg``.
+
+**How much the laser's readings scatter** (:func:`range_noise`, run by the smoothing stage after
+the filter, :class:`slam.stages.OdometrySmoothing`): the second differences of neighbouring
+readings on flat surfaces are noise alone; a laser noisier than ``rbpf.smooth_noise_ref`` has its
+registered poses trusted that many times less against the odometry (:func:`noise_multiple`).
 
 **Where the laser sits** (:func:`calibrate_mount`, reported by ``slam data calibrate``, never
 applied by itself): for pairs of scans between which the odometry turned, the laser's motion
@@ -299,6 +305,25 @@ RANGE_NOISE_SCANS = 2000
 HALF_NORMAL_RMS = 0.37770
 """RMS of the smaller half of ``|X|`` for a standard normal ``X`` (``√(1 − 2aφ(a)/(2Φ(a) − 1))``
 at the median ``a = 0.6745``): what :func:`range_noise` divides by."""
+
+
+def noise_picks(n: int) -> NDArray[np.int64]:
+    """Which of ``n`` scans :func:`noise_multiple` reads: at most :data:`RANGE_NOISE_SCANS`,
+    evenly spread."""
+    return spread_picks(n, min(n, RANGE_NOISE_SCANS)) if n else np.zeros(0, dtype=np.int64)
+
+
+def noise_multiple(ranges: F64, reference: float) -> tuple[float, float, int]:
+    """How much less a registered pose is trusted than with a laser that scatters by
+    ``reference`` (``rbpf.smooth_noise_ref``; 0: off): the range noise of ``ranges`` (the scans
+    :func:`noise_picks` chose, :func:`range_noise`) over ``reference``, at least 1; that noise
+    (NaN when off or unmeasurable, the multiple then 1) and the triples it rests on."""
+    if reference <= 0:
+        return 1.0, float("nan"), 0
+    noise, triples = range_noise(ranges)
+    if not np.isfinite(noise):
+        return 1.0, noise, triples
+    return max(1.0, noise / reference), noise, triples
 
 
 def range_noise(ranges: F64, near: float = 0.5, far: float = 3.0) -> tuple[float, int]:

@@ -162,7 +162,10 @@ class OdometrySmoothing:
             return output
         odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
         if self.measured.get("choice_of") is not seq:  # the first round chooses the scale
-            base, self.measured["range_noise"] = noise_multiple(seq, rc.smooth_noise_ref)
+            from slam.calibration import noise_multiple, noise_picks
+
+            readings = seq.readings(noise_picks(len(seq)))[0]
+            base, self.measured["range_noise"], _ = noise_multiple(readings, rc.smooth_noise_ref)
             choice = choose_smoothing(output.poses, odometry, seq, odo, config)
             scale, poses = choice.scale, choice.poses
             if scale < base:  # no multiple won: the laser's noise sets how far to trust it
@@ -190,23 +193,6 @@ class OdometrySmoothing:
             ]
             stats["smooth_scale_judged"] = list(self.measured["judged"])
         return dataclasses.replace(output, poses=poses, node_poses=poses[output.steps], stats=stats)
-
-
-def noise_multiple(seq: ScanSequence, reference: float) -> tuple[float, float]:
-    """The multiple of the registration's sigmas that the laser's range noise asks for, and that
-    noise (m): the noise measured on at most :data:`~slam.calibration.RANGE_NOISE_SCANS` of
-    ``seq``'s scans (:func:`slam.calibration.range_noise`) over ``reference``
-    (``rbpf.smooth_noise_ref``), at least 1; 1 and NaN when ``reference`` is 0 (off) or no
-    noise could be measured."""
-    if reference <= 0 or len(seq) == 0:
-        return 1.0, float("nan")
-    from slam.calibration import RANGE_NOISE_SCANS, range_noise
-
-    picks = spread_picks(len(seq), min(len(seq), RANGE_NOISE_SCANS))
-    noise, _ = range_noise(seq.readings(picks)[0])
-    if not np.isfinite(noise):
-        return 1.0, noise
-    return max(1.0, noise / reference), noise
 
 
 class SmoothingChoice(NamedTuple):

@@ -284,6 +284,38 @@ def test_the_smoothing_stage_runs_by_default(tmp_path):
     smooth = json.loads((tmp_path / "smooth" / "metrics.json").read_text())["filter"]
     assert "odometry_disagreement_m" not in plain
     assert smooth["odometry_disagreement_m"] < 0.02  # the synthetic odometry is exact
+    assert smooth["range_noise_m"] < 0.002 and smooth["smooth_scale"] == 1.0  # millimetre ranges
+
+
+def test_a_noisy_laser_is_trusted_less_against_the_odometry(tmp_path, capsys):
+    """The turning robot's room read with 3 cm of range noise: the run measures it (``range_noise_m``) and
+    smooths with the registration's sigmas at least noise / ``rbpf.smooth_noise_ref`` times
+    larger; ``slam data calibrate`` prints the scatter and what it does."""
+    from slam.cli import main
+
+    rng = np.random.default_rng(8)
+    times = 100.0 + np.arange(300) * PERIOD
+    lines = []
+    for t, pose in zip(times, truth(times - 100.0), strict=True):
+        ranges = ray_cast(pose, ANGLES)
+        lines.append(flaser(ranges + rng.normal(0.0, 0.03, ranges.size), pose, t))
+    log = write_carmen(tmp_path, lines)
+    out = tmp_path / "run"
+    assert main(["run", str(log), "--out", str(out), "--no-texture", "--no-record", "--quiet"]) == 0
+    stats = json.loads((out / "metrics.json").read_text())["filter"]
+    assert abs(stats["range_noise_m"] / 0.03 - 1.0) < 0.15
+    assert stats["smooth_scale"] >= stats["range_noise_m"] / 0.01 - 0.01  # both rounded
+    capsys.readouterr()
+    assert main(["data", "calibrate", str(log), "--json"]) == 0
+    noise = json.loads(capsys.readouterr().out)["range_noise"]
+    assert noise["noise_m"] == stats["range_noise_m"] and noise["reference_m"] == 0.01
+    assert noise["multiple"] == pytest.approx(noise["noise_m"] / 0.01, abs=1e-3)
+    assert main(["data", "calibrate", str(log)]) == 0
+    text = capsys.readouterr().out
+    assert f"ranges    scatter {noise['noise_m']:.4f} m" in text
+    assert f"counts {noise['multiple']:.2f} times less against the odometry" in text
+    assert main(["data", "calibrate", str(log), "--set", "rbpf.smooth_noise_ref=0"]) == 0
+    assert "ranges    not measured (rbpf.smooth_noise_ref = 0" in capsys.readouterr().out
 
 
 class _MixedScans:

@@ -348,12 +348,12 @@ def test_thin_returns_rounds_half_to_even_as_linspace_does(width):
 
 
 def test_the_lasers_noise_sets_the_smoothing_multiple():
-    """noise_multiple: the range noise measured on the scans over ``rbpf.smooth_noise_ref``, at
-    least 1; off (1, NaN) with a reference of 0."""
+    """noise_multiple on the scans noise_picks chooses: the range noise over
+    ``rbpf.smooth_noise_ref``, at least 1; off (1, NaN) with a reference of 0."""
     from synthetic_logs import ray_cast
 
+    from slam.calibration import RANGE_NOISE_SCANS, noise_multiple, noise_picks
     from slam.scans import Scan
-    from slam.stages import noise_multiple
 
     angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
     rng = np.random.default_rng(6)
@@ -367,7 +367,17 @@ def test_the_lasers_noise_sets_the_smoothing_multiple():
         return seq
 
     noisy = scans(0.03)
-    multiple, noise = noise_multiple(noisy, 0.01)
-    assert abs(noise / 0.03 - 1.0) < 0.1 and multiple == pytest.approx(noise / 0.01)
-    assert noise_multiple(noisy, 0.0) == (1.0, pytest.approx(float("nan"), nan_ok=True))
-    assert noise_multiple(scans(0.002), 0.01)[0] == 1.0  # quieter than the reference
+    readings = noisy.readings(noise_picks(len(noisy)))[0]
+    multiple, noise, triples = noise_multiple(readings, 0.01)
+    assert triples > 1000 and abs(noise / 0.03 - 1.0) < 0.1
+    assert multiple == pytest.approx(noise / 0.01)
+    multiple, noise, triples = noise_multiple(readings, 0.0)
+    assert multiple == 1.0 and np.isnan(noise) and triples == 0
+    quiet = scans(0.002)
+    assert noise_multiple(quiet.readings(noise_picks(100))[0], 0.01)[0] == 1.0
+    assert noise_picks(100).tolist() == list(range(100))
+    most = noise_picks(10 * RANGE_NOISE_SCANS)
+    assert (
+        most.size == RANGE_NOISE_SCANS and most[0] == 0 and most[-1] == 10 * RANGE_NOISE_SCANS - 1
+    )
+    assert noise_picks(0).size == 0

@@ -266,6 +266,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
         from slam.errors import DataError
 
         raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
+    from slam.calibration import noise_multiple, noise_picks
+
+    picks = scans.indices[noise_picks(len(scans))]  # the scans a run's smoothing reads
+    reference = config.rbpf.smooth_noise_ref
+    multiple, noise, triples = noise_multiple(log.scans.ranges[picks], reference)  # type: ignore[union-attr]
     stated = [float(v) for v in log.scans.laser_offset]  # type: ignore[union-attr]
     beams = source.beam_geometry  # measured as the log loaded (what a run does) ...
     if beams is None:  # ... or not (a declared step, the measurement off): the same measurement
@@ -281,6 +286,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
         "mount": mount.as_dict(),
         "stated_mount": {"x": stated[0], "y": stated[1], "yaw_deg": math.degrees(stated[2])},
         "beam_geometry": beams,
+        "range_noise": {
+            "noise_m": None if not math.isfinite(noise) else round(noise, 4),
+            "triples": triples,
+            "reference_m": reference,
+            "multiple": round(multiple, 4),
+        },
         "beam_step_deg": config.lidar.beam_step_deg,
         "beam_step_measured": source.beam_step_deg is not None,
         "beam_step_declarable": declarable,
@@ -335,6 +346,7 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
         f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/accuracy.md: ground truth may "
         f"refer to the laser or to the odometry point)"
     )
+    lines.append(_noise_line(report["range_noise"]))
     beams = report.get("beam_geometry")
     if beams:
         from slam.calibration import BEAM_MARGIN
@@ -371,3 +383,23 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
                 f"them centred only when that fits {BEAM_MARGIN:.0%} better than spread)"
             )
     return lines
+
+
+def _noise_line(noise: dict[str, Any]) -> str:
+    """The ``ranges`` line of a ``slam data calibrate`` report: the laser's measured scatter and
+    what the smoothing makes of it (``rbpf.smooth_noise_ref``)."""
+    if noise["reference_m"] <= 0:
+        return "ranges    not measured (rbpf.smooth_noise_ref = 0: the registration's own weight)"
+    if noise["noise_m"] is None:
+        return "ranges    no three neighbouring readings of 0.5-3 m: scatter not measured"
+    head = (
+        f"ranges    scatter {noise['noise_m']:.4f} m (second differences of neighbouring "
+        f"readings of 0.5-3 m, {noise['triples']} triples)"
+    )
+    if noise["multiple"] <= 1.0:
+        return f"{head}: at most rbpf.smooth_noise_ref = {noise['reference_m']:g} m, no change"
+    return (
+        f"{head}: a registered pose counts {noise['multiple']:.2f} times less against the "
+        f"odometry than a {noise['reference_m']:g} m laser's (rbpf.smooth_noise_ref; "
+        "docs/accuracy.md, the registration's weight from the laser's noise)"
+    )
