@@ -690,8 +690,8 @@ class QualityConfig(Validated):
     worst: int = bounded(5, ge=0, le=1000)
     """How many of the worst stretches are reported and marked on ``quality.png``."""
     warn_below: float = bounded(0.75, ge=0.0, le=1.0)
-    """``slam run`` warns when its map's score is below this: the map contradicts itself, the
-    filter has probably lost track (0: never). Under every default run measured (0.78–0.995 on
+    """``slam run`` warns when its map's score is below this: stretches of the map contradict
+    each other (a loop left open or closed wrongly, or the filter lost track; 0: never). Under every default run measured (0.78–0.995 on
     the six benchmark logs, seeds 0–3), above a run with loops closed wrongly (0.67) and the
     odometry alone (0.29–0.51; docs/evaluation.md)."""
 

@@ -205,7 +205,8 @@ def low_score_warning(report: dict[str, Any], warn_below: float) -> str | None:
     where = f"; the worst stretches at {worst} (marked on map.png and {PICTURE})" if worst else ""
     return (
         f"map quality {score:.3f} is below quality.warn_below = {warn_below:g}: stretches of the "
-        f"map contradict each other, the filter has probably lost track{where}; `slam eval RUN` "
+        "map contradict each other (a loop left open or closed wrongly, or the filter lost track)"
+        f"{where}; `slam eval RUN` "
         "lists every stretch (docs/evaluation.md)"
     )
 
