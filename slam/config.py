@@ -691,9 +691,9 @@ class QualityConfig(Validated):
     """How many of the worst stretches are reported and marked on ``quality.png``."""
     warn_below: float = bounded(0.75, ge=0.0, le=1.0)
     """``slam run`` warns when its map's score is below this: stretches of the map contradict
-    each other (a loop left open or closed wrongly, or the filter lost track; 0: never). Under every default run measured (0.78–0.995 on
-    the six benchmark logs, seeds 0–3), above a run with loops closed wrongly (0.67) and the
-    odometry alone (0.29–0.51; docs/evaluation.md)."""
+    each other (a loop left open or closed wrongly, or the filter lost track; 0: never). Under
+    every default run measured (0.78–0.995 on the six benchmark logs, seeds 0–11), above a run
+    whose long loop stayed open (0.67) and the odometry alone (0.29–0.51; docs/evaluation.md)."""
 
 
 @dataclass(frozen=True)

@@ -73,6 +73,7 @@ BAD = [  # (line added to the log, arguments, what the one-line message says)
     ("", ["--sigma-m", "2"], "--sigma-m: expected a value from 0 to 1, found 2.0"),
     ("", ["--sigma-rel", "-0.1"], "--sigma-rel: expected a value from 0 to 0.2, found -0.1"),
     ("", ["--sigma-m", "nan"], "--sigma-m: expected a value from 0 to 1, found nan"),
+    ("", ["--seed", "-1"], "--seed: expected a whole number 0 or above, found -1"),
     ("FLASER 3 1.0 2.0", [], "a.clf, line 5: expected 11 fields or more for 3 readings, found 4"),
     ("FLASER 2 1.0 x 0 0 0 0 0 0 3 h 3", [], "a.clf, line 5: expected 2 numbers as readings"),
     ("FLASER 2 1.0 -2 0 0 0 0 0 0 3 h 3", [], "a.clf, line 5: a reading is negative or not"),

@@ -1,8 +1,9 @@
 """Reading a CARMEN log and writing a new copy of it: what the robustness tools share.
 
 ``tools/perturb_odometry.py`` (the odometry rescaled), ``tools/perturb_ranges.py`` (noisier
-readings) and ``tools/crop_log.py`` (the first records dropped) read a log as text lines, gzipped or not (by its content), and write their copy
-whole or not at all, never over an existing file, compressed when its name ends in ``.gz``.
+readings) and ``tools/crop_log.py`` (the first records dropped) read a log as text lines,
+gzipped or not (by its content), and write their copy whole or not at all, never over an
+existing file, compressed when its name ends in ``.gz``.
 Errors are :class:`LogFileError`, one line naming the file and what was expected.
 """
 

@@ -92,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         ):
             if not (math.isfinite(value) and 0.0 <= value <= most):
                 raise PerturbError(f"{flag}: expected a value from 0 to {most:g}, found {value}")
+        if args.seed < 0:
+            raise PerturbError(f"--seed: expected a whole number 0 or above, found {args.seed}")
         lines = read_lines(args.log)
         noisy = perturb_lines(lines, str(args.log), args.sigma_m, args.sigma_rel, args.seed)
         write_new(args.out, noisy)

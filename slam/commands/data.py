@@ -270,7 +270,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     picks = scans.indices[noise_picks(len(scans))]  # the scans a run's smoothing reads
     reference = config.rbpf.smooth_noise_ref
-    multiple, noise, triples = noise_multiple(log.scans.ranges[picks], reference)  # type: ignore[union-attr]
+    ranges = log.scans.ranges[picks]  # type: ignore[union-attr]
+    multiple, noise, triples = noise_multiple(ranges, reference)
     stated = [float(v) for v in log.scans.laser_offset]  # type: ignore[union-attr]
     beams = source.beam_geometry  # measured as the log loaded (what a run does) ...
     if beams is None:  # ... or not (a declared step, the measurement off): the same measurement
