@@ -370,17 +370,21 @@ class Localizer:
         """MCL takes over when the histogram's mode holds ``global_mode_share`` of the mass and
         its refined centre explains the scan (match quality ≥ ``relocalize_quality``).
 
-        While recovering, the tracked pose is kept (a false alarm) when it lies in the mode or
-        explains the scan at least as well as the mode's centre; otherwise the particles are
-        drawn anew from the mode's states.
+        While recovering, the tracked pose is kept (a false alarm) when it lies in the mode and
+        explains the scan no worse than the lost test allows (match quality at least
+        ``lost_ratio`` times the long-term average before the alarm: right after it most of the
+        mass is the prior around the tracked pose, so lying in the mode alone says nothing), or
+        when it explains the scan at least as well as the mode's centre; otherwise the particles
+        are drawn anew from the mode's states.
         """
         cfg = self.config.localize
         if mode.share < cfg.global_mode_share:
             return
         recovering = self.phase == "recovering"
         if recovering and self.histogram.contains(mode, self._pose):
-            self._resume_tracking(false_alarm=True)
-            return
+            if self._match_quality(self._pose, beams) >= cfg.lost_ratio * self.monitor.w_slow:
+                self._resume_tracking(false_alarm=True)
+            return  # the mode is the prior's: more steps of the histogram decide
         candidate, cost = self._match(mode.pose, beams)
         if self._match_quality(candidate, beams) < cfg.relocalize_quality:
             self.counters["weak_modes"] += 1
