@@ -46,6 +46,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -272,31 +273,55 @@ def synchronise_odometry(
     return written, OdometrySync("scan", 0.0, at_scan, at_scan, best_lag, best, len(pairs))
 
 
+class Disagreement(NamedTuple):
+    """How far a log's odometry moves between consecutive scans from where the matcher puts the
+    second scan (:func:`odometry_disagreement`): trimmed RMS differences in the robot's frame at
+    the first scan, NaN when nothing was measured."""
+
+    along: float
+    """Along the robot's heading (m): how far the two disagree on the distance driven."""
+    across: float
+    """Across the heading (m): a differential drive does not move sideways, so this is the
+    smaller one wherever the matcher sees walls on either side."""
+    heading: float
+    """In heading (rad)."""
+    pairs: int
+    """The pairs of consecutive scans that fitted (0: nothing measured)."""
+
+
 def odometry_disagreement(
     hits_of: HitsOf,
     odometry: F64,
     config: Config,
     settings: CalibrationSettings | None = None,
-) -> tuple[float, float, int]:
+) -> Disagreement:
     """How far the odometry's motion between consecutive scans is from the matcher's: trimmed
-    RMS (``trim``) of the translation (m) and rotation (rad) differences over ``pairs`` evenly
-    spread pairs, and the pairs that fitted (0: nothing measured, the sizes are NaN). It holds
-    the matcher's own noise too, so it bounds the odometry's error from above. Scan ``j`` of
-    a pair is matched with at most ``rbpf.register_beams`` of its returns, as the registration
-    that the smoothing weighs against the odometry matches a scan (:func:`pair_motions`)."""
+    RMS (``trim``) of the differences along and across the robot's heading (m) and in heading
+    (rad) over ``pairs`` evenly spread pairs, and the pairs that fitted. It holds the matcher's
+    own noise too, so it bounds the odometry's error from above; measured per axis, as the
+    smoothing weighs each (docs/accuracy.md, "The odometry's disagreement along and across the
+    heading").
+    Scan ``j`` of a pair is matched with at most ``rbpf.register_beams`` of its returns, as the
+    registration that the smoothing weighs against the odometry matches a scan
+    (:func:`pair_motions`)."""
     settings = settings or CalibrationSettings()
+    nothing = Disagreement(float("nan"), float("nan"), float("nan"), 0)
     n = odometry.shape[0]
     if n < 2:
-        return float("nan"), float("nan"), 0
+        return nothing
     pairs = _consecutive_pairs(n, settings.pairs)
     beams = config.rbpf.register_beams  # scan j matched as the registration matches a scan
     laser, kept = pair_motions(hits_of, odometry, pairs, config, settings, beams)
     if len(kept) == 0:
-        return float("nan"), float("nan"), 0
+        return nothing
     pairs = pairs[kept]
-    odo = relative(odometry[pairs[:, 0]], odometry[pairs[:, 1]])
-    xy = _trimmed_rms(np.hypot(laser[:, 0] - odo[:, 0], laser[:, 1] - odo[:, 1]), settings.trim)
-    return xy, _trimmed_rms(wrap_angle(laser[:, 2] - odo[:, 2]), settings.trim), len(kept)
+    odo = relative(odometry[pairs[:, 0]], odometry[pairs[:, 1]])  # both in scan i's robot frame
+    return Disagreement(
+        _trimmed_rms(laser[:, 0] - odo[:, 0], settings.trim),
+        _trimmed_rms(laser[:, 1] - odo[:, 1], settings.trim),
+        _trimmed_rms(wrap_angle(laser[:, 2] - odo[:, 2]), settings.trim),
+        len(kept),
+    )
 
 
 RANGE_NOISE_SCANS = 2000

@@ -331,10 +331,11 @@ class RbpfConfig(Validated):
     smooth_odometry: bool = True
     """After :attr:`register_scans`, smooth every scan's pose with the odometry between
     neighbouring scans (:class:`slam.stages.OdometrySmoothing`): each registered pose is a prior
-    of sigma ``smooth_sigma_xy`` / ``smooth_sigma_th``, each odometry step an edge whose sigma
-    is ``smooth_factor`` times the odometry's measured disagreement with the matcher
+    of sigma ``smooth_sigma_xy`` / ``smooth_sigma_th``, each odometry step an edge whose sigmas
+    along and across the robot's heading and in heading are ``smooth_factor`` times the
+    odometry's measured disagreement with the matcher on each
     (:func:`slam.calibration.odometry_disagreement`), so a log's odometry counts as far as its
-    own data show it deserves (docs/accuracy.md)."""
+    own data show it deserves, in each direction (docs/accuracy.md)."""
     smooth_factor: float = bounded(2.0, gt=0.0, le=1000.0)
     """See :attr:`smooth_odometry`."""
     smooth_sigma_xy: float = bounded(0.02, gt=0.0, le=10.0)

@@ -386,20 +386,26 @@ def gauss_newton(
 
 
 def smooth_with_odometry(
-    poses: F64, odometry: F64, reg: tuple[float, float], odo: tuple[float, float], lc: LoopConfig
+    poses: F64,
+    odometry: F64,
+    reg: tuple[float, float],
+    odo: tuple[float, float, float],
+    lc: LoopConfig,
 ) -> F64:
     """Every pose of ``poses`` ``(N, 3)`` pulled towards the odometry's shape between neighbours:
-    :func:`gauss_newton` on the chain of odometry edges ``o_k⁻¹ ⊕ o_{k+1}`` (sigmas ``odo``:
-    metres, radians) with every pose held to ``poses`` (sigmas ``reg``). The chain's system is
-    block-tridiagonal, which :func:`solve_system`'s preconditioner solves exactly; the priors sit
-    on its diagonal, so no node needs fixing."""
+    :func:`gauss_newton` on the chain of odometry edges ``o_k⁻¹ ⊕ o_{k+1}`` (sigmas ``odo``: along
+    and across the robot's heading at ``o_k`` in metres — the edge's own frame —, and in heading
+    in radians) with every pose held to ``poses`` (sigmas ``reg``: metres, radians). The chain's
+    system is block-tridiagonal, which :func:`solve_system`'s preconditioner solves exactly; the
+    priors sit on its diagonal, so no node needs fixing."""
     n = poses.shape[0]
     if n < 2:
         return poses.copy()
     i = np.arange(n - 1, dtype=np.int64)
     info = np.zeros((n - 1, 3, 3))
-    info[:, 0, 0] = info[:, 1, 1] = 1.0 / odo[0] ** 2
-    info[:, 2, 2] = 1.0 / odo[1] ** 2
+    info[:, 0, 0] = 1.0 / odo[0] ** 2
+    info[:, 1, 1] = 1.0 / odo[1] ** 2
+    info[:, 2, 2] = 1.0 / odo[2] ** 2
     graph = PoseGraph(
         i, i + 1, np.ascontiguousarray(relative(odometry[:-1], odometry[1:])), info, np.zeros(n - 1)
     )

@@ -157,10 +157,10 @@ class OdometrySmoothing:
         if self.measured.get("scans") is not seq:  # another run's scans (stages reused): anew
             self.measured["scans"] = seq
             self.measured["value"] = odometry_disagreement(seq.hits, odometry, config)
-        sxy, sth, pairs = self.measured["value"]
-        if pairs == 0:
+        measured = self.measured["value"]
+        if measured.pairs == 0:
             return output
-        odo = (rc.smooth_factor * sxy, rc.smooth_factor * sth)
+        odo = tuple(rc.smooth_factor * v for v in measured[:3])  # along, across, heading
         if self.measured.get("choice_of") is not seq:  # the first round chooses the scale
             from slam.calibration import noise_multiple, noise_picks
 
@@ -181,8 +181,9 @@ class OdometrySmoothing:
             poses = smooth_with_odometry(output.poses, odometry, reg, odo, config.loops)
         stats = {
             **output.stats,
-            "odometry_disagreement_m": round(sxy, 4),
-            "odometry_disagreement_deg": round(float(np.degrees(sth)), 3),
+            "odometry_disagreement_along_m": round(measured.along, 4),
+            "odometry_disagreement_across_m": round(measured.across, 4),
+            "odometry_disagreement_deg": round(float(np.degrees(measured.heading)), 3),
             "smooth_scale": round(float(scale), 4),
         }
         if np.isfinite(self.measured["range_noise"]):
@@ -231,10 +232,11 @@ def smoothing_pick(scores: list[float], judged: list[int], margin: float, z: flo
 
 
 def choose_smoothing(
-    poses: F64, odometry: F64, seq: ScanSequence, odo: tuple[float, float], config: Config
+    poses: F64, odometry: F64, seq: ScanSequence, odo: tuple[float, float, float], config: Config
 ) -> SmoothingChoice:
     """The multiple of the registration's sigmas :attr:`~slam.config.RbpfConfig.smooth_scales`
-    picks for ``poses`` (every scan's, registered) and the odometry's sigmas ``odo``: each
+    picks for ``poses`` (every scan's, registered) and the odometry's sigmas ``odo`` (along,
+    across, heading; :func:`slam.graph.smooth_with_odometry`): each
     scale's smoothed trajectory (:func:`slam.graph.smooth_with_odometry`) scored by the map
     quality (:func:`slam.eval.quality.map_quality`) of every ``smooth_choice_every``-th scan,
     the best unless it beats the first by less than ``smooth_choice_margin`` or by less than

@@ -261,13 +261,32 @@ def test_odometry_disagreement_measures_the_odometry_noise(turning_robot):
 
     times, hits, _ = turning_robot
     exact = truth(times)
-    xy0, th0, pairs = odometry_disagreement(lambda k: hits[k], exact, load_config())
-    assert pairs > 300 and xy0 < 0.01 and np.degrees(th0) < 0.4  # the matcher's own noise
+    along0, across0, th0, pairs = odometry_disagreement(lambda k: hits[k], exact, load_config())
+    assert pairs > 300 and max(along0, across0) < 0.01 and np.degrees(th0) < 0.4  # the matcher's
     noise = np.random.default_rng(1).normal(0.0, [0.0, 0.0, 0.01], exact.shape)
-    xy1, th1, _ = odometry_disagreement(lambda k: hits[k], exact + noise, load_config())
+    th1 = odometry_disagreement(lambda k: hits[k], exact + noise, load_config()).heading
     assert th1 > 2.0 * th0  # heading noise of 0.01 rad per scan: about 0.8° between two scans
     empty = (np.zeros(0), np.zeros(0))
-    assert odometry_disagreement(lambda k: empty, exact, load_config())[2] == 0
+    nothing = odometry_disagreement(lambda k: empty, exact, load_config())
+    assert nothing.pairs == 0 and np.isnan(nothing.along) and np.isnan(nothing.heading)
+
+
+def test_odometry_disagreement_tells_along_from_across(turning_robot):
+    """Odometry that misjudges each step's length by 2 cm (slip) but never moves sideways: the
+    disagreement along the heading reads the error (trimmed, with the matcher's own 5 mm), across
+    it and in heading stays the matcher's own."""
+    times, hits, _ = turning_robot
+    exact = truth(times)
+    steps = relative(exact[:-1], exact[1:])
+    steps[:, 0] += np.random.default_rng(4).normal(0.0, 0.02, len(steps))
+    odometry = [exact[0]]
+    for step in steps:
+        odometry.append(compose(odometry[-1], step))
+    measured = odometry_disagreement(lambda k: hits[k], np.array(odometry), load_config())
+    clean = odometry_disagreement(lambda k: hits[k], exact, load_config())
+    assert clean.along < 0.007 and 0.014 < measured.along < 0.024
+    assert abs(measured.across - clean.across) < 0.001
+    assert abs(measured.heading - clean.heading) < 0.2 * clean.heading
 
 
 def test_the_smoothing_stage_runs_by_default(tmp_path):
@@ -282,8 +301,9 @@ def test_the_smoothing_stage_runs_by_default(tmp_path):
     assert main([*base, "--out", str(tmp_path / "smooth")]) == 0
     plain = json.loads((tmp_path / "plain" / "metrics.json").read_text())["filter"]
     smooth = json.loads((tmp_path / "smooth" / "metrics.json").read_text())["filter"]
-    assert "odometry_disagreement_m" not in plain
-    assert smooth["odometry_disagreement_m"] < 0.02  # the synthetic odometry is exact
+    assert "odometry_disagreement_along_m" not in plain
+    assert smooth["odometry_disagreement_along_m"] < 0.02  # the synthetic odometry is exact
+    assert smooth["odometry_disagreement_across_m"] < 0.02
     assert smooth["range_noise_m"] < 0.002 and smooth["smooth_scale"] == 1.0  # millimetre ranges
 
 

@@ -290,18 +290,43 @@ def test_smoothing_with_good_odometry_removes_the_registration_noise():
     def rmse(poses):
         return float(np.sqrt(np.mean(np.sum((poses[:, :2] - truth[:, :2]) ** 2, axis=1))))
 
-    smoothed = smooth_with_odometry(registered, truth, (0.02, 0.005), (0.002, 0.001), lc)
+    smoothed = smooth_with_odometry(registered, truth, (0.02, 0.005), (0.002, 0.002, 0.001), lc)
     assert rmse(smoothed) < 0.5 * rmse(registered)
     # odometry trusted as little as it deserves (metres of noise): the registered poses stay
     noisy = truth + rng.normal(0.0, [0.5, 0.5, 0.3], truth.shape)
-    kept = smooth_with_odometry(registered, noisy, (0.02, 0.005), (5.0, 3.0), lc)
+    kept = smooth_with_odometry(registered, noisy, (0.02, 0.005), (5.0, 5.0, 3.0), lc)
     assert np.abs(kept - registered).max() < 2e-3
-    assert smooth_with_odometry(
-        registered[:1], truth[:1], (0.02, 0.005), (0.01, 0.01), lc
-    ).shape == (
-        1,
-        3,
-    )
+    one = smooth_with_odometry(registered[:1], truth[:1], (0.02, 0.005), (0.01, 0.01, 0.01), lc)
+    assert one.shape == (1, 3)
+
+
+def test_smoothing_trusts_the_odometry_per_axis():
+    """Each odometry edge's sigmas are along and across the robot's heading: odometry whose
+    steps are 3 cm off in length but exact sideways, trusted only across (1 mm) and not along
+    (1 m), straightens the registration's sideways noise and leaves its noise along the path;
+    trusted along too, it takes on the odometry's error in length."""
+    from slam.geometry import compose, relative
+    from slam.graph import smooth_with_odometry
+
+    rng = np.random.default_rng(5)
+    n = 300
+    truth = np.zeros((n, 3))
+    truth[:, 0] = np.arange(n) * 0.1  # a straight corridor along x, heading 0
+    registered = truth + rng.normal(0.0, [0.02, 0.02, 0.0], truth.shape)
+    steps = relative(truth[:-1], truth[1:])
+    steps[:, 0] += rng.normal(0.0, 0.03, n - 1)
+    odometry = [truth[0]]
+    for step in steps:
+        odometry.append(compose(odometry[-1], step))
+    odometry = np.array(odometry)
+    lc = LoopConfig()
+    across = smooth_with_odometry(registered, odometry, (0.02, 0.005), (1.0, 0.001, 0.001), lc)
+    err_x = np.abs(across[:, 0] - truth[:, 0]).mean()
+    err_y = np.abs(across[:, 1] - truth[:, 1]).mean()
+    assert err_y < 0.3 * np.abs(registered[:, 1] - truth[:, 1]).mean()
+    assert err_x < 1.1 * np.abs(registered[:, 0] - truth[:, 0]).mean()
+    both = smooth_with_odometry(registered, odometry, (0.02, 0.005), (0.001, 0.001, 0.001), lc)
+    assert np.abs(both[:, 0] - truth[:, 0]).mean() > 2.0 * err_x  # the odometry's length error
 
 
 def test_search_beyond_the_drift_window_only_from_keyframes_no_closure_holds(small_log):

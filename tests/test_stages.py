@@ -244,7 +244,7 @@ def test_the_map_quality_picks_the_odometry_where_it_is_the_better_shape(long_ro
     bent = truth.copy()
     bent[:, 1] += 0.3 * np.sin(k / 10.0)
     bent[:, 2] += 0.03 * np.cos(k / 10.0)
-    scale, scores, judged, poses = choose_smoothing(bent, truth, seq, (0.002, 0.001), config)
+    scale, scores, judged, poses = choose_smoothing(bent, truth, seq, (0.002, 0.002, 0.001), config)
     assert len(judged) == 3 and min(judged) > 1000
     assert scale == 10.0 and len(scores) == 3  # 10 and 50 score alike (1.0): the first of them
     assert scores[0] < 0.9 and scores[1] - scores[0] >= config.rbpf.smooth_choice_margin
@@ -255,7 +255,7 @@ def test_the_map_quality_picks_the_odometry_where_it_is_the_better_shape(long_ro
     steps = relative(truth[:-1], truth[1:])
     steps[:, 2] += 0.02  # the odometry turns 1.1° a step too far
     curved = accumulate(steps, truth[0])
-    scale, scores, _, poses = choose_smoothing(truth, curved, seq, (0.002, 0.001), config)
+    scale, scores, _, poses = choose_smoothing(truth, curved, seq, (0.002, 0.002, 0.001), config)
     assert scale == 1.0 and scores[0] > 0.95 and max(scores[1:]) < 0.5
     assert np.abs(poses[:, :2] - truth[:, :2]).max() < 0.03
 
@@ -270,11 +270,17 @@ def test_one_smoothing_scale_is_no_choice(long_room):
     one = dataclasses.replace(config, rbpf=dataclasses.replace(config.rbpf, smooth_scales=(1.0,)))
     rng = np.random.default_rng(2)
     poses = seq.odometry + rng.normal(0.0, 0.01, seq.odometry.shape)
-    scale, scores, judged, got = choose_smoothing(poses, seq.odometry, seq, (0.004, 0.002), one)
+    scale, scores, judged, got = choose_smoothing(
+        poses, seq.odometry, seq, (0.004, 0.004, 0.002), one
+    )
     assert judged == []
     rc = config.rbpf
     want = smooth_with_odometry(
-        poses, seq.odometry, (rc.smooth_sigma_xy, rc.smooth_sigma_th), (0.004, 0.002), one.loops
+        poses,
+        seq.odometry,
+        (rc.smooth_sigma_xy, rc.smooth_sigma_th),
+        (0.004, 0.004, 0.002),
+        one.loops,
     )
     assert scale == 1.0 and scores == [] and got.tobytes() == want.tobytes()
 
@@ -294,12 +300,12 @@ def test_nothing_judged_keeps_the_first_smoothing_scale(long_room):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         scale, scores, judged, got = choose_smoothing(
-            poses, seq.odometry, seq, (0.004, 0.002), alone
+            poses, seq.odometry, seq, (0.004, 0.004, 0.002), alone
         )
     assert len(scores) == 3 and all(np.isnan(v) for v in scores) and judged == [0, 0, 0]
     assert scale == 1.0
     _, _, _, first = choose_smoothing(
-        poses, seq.odometry, seq, (0.004, 0.002),
+        poses, seq.odometry, seq, (0.004, 0.004, 0.002),
         dataclasses.replace(alone, rbpf=dataclasses.replace(alone.rbpf, smooth_scales=(1.0,))),
     )  # fmt: skip
     np.testing.assert_array_equal(got, first)

@@ -9,7 +9,8 @@ odometry beats the filter on relations under 5 s). For every scan pose ``x_k`` i
 ``o``: the odometry ``slam run`` used, ``robot.odometry_sync``) with what ``rbpf.smooth_odometry``
 runs (:func:`slam.graph.smooth_with_odometry`) and prints the relation error before and after.
 The registration's sigmas are fixed (``--reg-xy``, ``--reg-th``); the odometry's are its
-disagreement with the filter's matcher over 1000 pairs of consecutive scans
+disagreement with the filter's matcher over 1000 pairs of consecutive scans, along and across the
+robot's heading and in heading
 (:func:`slam.calibration.odometry_disagreement`) times each ``--factor`` (``rbpf.smooth_factor``):
 the odometry is trusted as far as the log shows it deserves. docs/accuracy.md, "Smoothing with the
 odometry (default, measured)".
@@ -65,20 +66,26 @@ def main() -> int:
             float(relation_errors(Trajectory(scans.times, poses), relations).trans.mean()), 4
         )
 
-    sxy, sth, _ = odometry_disagreement(lambda k: scans.scan(k).hits(), scans.odometry, config)
+    measured = odometry_disagreement(lambda k: scans.scan(k).hits(), scans.odometry, config)
+    along, across, heading = measured.along, measured.across, measured.heading
     reg = (args.reg_xy, args.reg_th)
     report = {
         "log": args.log,
         "run": error(run.poses),
         "odometry_disagreement": {
-            "xy_m": round(sxy, 4),
-            "th_deg": round(float(np.degrees(sth)), 3),
+            "along_m": round(along, 4),
+            "across_m": round(across, 4),
+            "th_deg": round(float(np.degrees(heading)), 3),
         },
         "smoothed": {
             f"{f:g}": error(
                 smooth_with_odometry(
-                    run.poses, scans.odometry, reg, (f * sxy, f * sth), config.loops
-                )
+                    run.poses,
+                    scans.odometry,
+                    reg,
+                    (f * along, f * across, f * heading),
+                    config.loops,
+                )  # fmt: skip
             )
             for f in args.factor
         },
@@ -87,8 +94,8 @@ def main() -> int:
         print(json.dumps(report, indent=2))
     else:
         print(
-            f"{args.log}: run {report['run']} m; odometry vs matcher {sxy:.4f} m, "
-            f"{np.degrees(sth):.3f}°; smoothed (factor: m) "
+            f"{args.log}: run {report['run']} m; odometry vs matcher {along:.4f} m along, "
+            f"{across:.4f} m across, {np.degrees(heading):.3f}°; smoothed (factor: m) "
             + ", ".join(f"{k}: {v}" for k, v in report["smoothed"].items())
         )
     return 0
