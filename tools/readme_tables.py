@@ -483,6 +483,12 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "slam.seeds_aces": seed_range("aces"),
     "slam.seeds_fr079": seed_range("fr079"),
     "slam.seeds_fr-clinic": seed_range("fr-clinic"),
+    "slam.seed_mean_intel": _figure(
+        "slam.intel", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
+    ),
+    "slam.seed_mean_fr-clinic": _figure(
+        "slam.fr-clinic", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
+    ),
     "slam.demo_scans": _figure("slam.demo_100", "scans"),
     "slam.classic_path": _figure("slam.demo_classic_100", "path_length_m", digits=1),
     "slam.true_path": _figure("slam.demo_classic_100", "true_path_length_m", digits=1),
