@@ -327,13 +327,26 @@ def test_a_noisy_laser_is_trusted_less_against_the_odometry(tmp_path, capsys):
     assert stats["smooth_scale"] >= stats["range_noise_m"] / 0.01 - 0.01  # both rounded
     capsys.readouterr()
     assert main(["data", "calibrate", str(log), "--json"]) == 0
-    noise = json.loads(capsys.readouterr().out)["range_noise"]
+    report = json.loads(capsys.readouterr().out)
+    noise, steps = report["range_noise"], report["odometry_steps"]
     assert noise["noise_m"] == stats["range_noise_m"] and noise["reference_m"] == 0.01
     assert noise["multiple"] == pytest.approx(noise["noise_m"] / 0.01, abs=1e-3)
+    # the odometry's steps as the run's smoothing measured them (the same function and scans)
+    assert steps["along_m"] == stats["odometry_disagreement_along_m"]
+    assert steps["across_m"] == stats["odometry_disagreement_across_m"]
+    assert steps["heading_deg"] == stats["odometry_disagreement_deg"]
+    assert steps["pairs"] > 200 and steps["factor"] == 2.0
     assert main(["data", "calibrate", str(log)]) == 0
     text = capsys.readouterr().out
     assert f"ranges    scatter {noise['noise_m']:.4f} m" in text
     assert f"counts {noise['multiple']:.2f} times less against the odometry" in text
+    assert (
+        f"steps     the odometry differs from the matcher between consecutive scans by "
+        f"{steps['along_m']:.4f} m along the heading, {steps['across_m']:.4f} m across" in text
+    )
+    assert "weighs each odometry step by 2 times these" in text
+    assert main(["data", "calibrate", str(log), "--set", "rbpf.smooth_odometry=false"]) == 0
+    assert "rbpf.smooth_odometry = false: not used" in capsys.readouterr().out
     assert main(["data", "calibrate", str(log), "--set", "rbpf.smooth_noise_ref=0"]) == 0
     assert "ranges    not measured (rbpf.smooth_noise_ref = 0" in capsys.readouterr().out
 

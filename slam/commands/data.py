@@ -26,7 +26,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from slam.commands._common import (
     add_actions,
@@ -39,6 +39,10 @@ from slam.commands._common import (
     data_dir_from,
 )
 from slam.io.datadir import DATA_DIR_ENV
+
+if TYPE_CHECKING:
+    from slam.calibration import Disagreement
+    from slam.config import RbpfConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -266,8 +270,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         from slam.errors import DataError
 
         raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
-    from slam.calibration import noise_multiple, noise_picks
+    from slam.calibration import noise_multiple, noise_picks, odometry_disagreement
 
+    steps = odometry_disagreement(lambda k: scans.scan(k).hits(), scans.odometry, config)
     picks = scans.indices[noise_picks(len(scans))]  # the scans a run's smoothing reads
     reference = config.rbpf.smooth_noise_ref
     ranges = log.scans.ranges[picks]  # type: ignore[union-attr]
@@ -293,6 +298,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             "reference_m": reference,
             "multiple": round(multiple, 4),
         },
+        "odometry_steps": _steps_report(steps, config.rbpf),
         "beam_step_deg": config.lidar.beam_step_deg,
         "beam_step_measured": source.beam_step_deg is not None,
         "beam_step_declarable": declarable,
@@ -347,6 +353,7 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
         f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/accuracy.md: ground truth may "
         f"refer to the laser or to the odometry point)"
     )
+    lines.append(_steps_line(report["odometry_steps"]))
     lines.append(_noise_line(report["range_noise"]))
     beams = report.get("beam_geometry")
     if beams:
@@ -384,6 +391,39 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
                 f"them centred only when that fits {BEAM_MARGIN:.0%} better than spread)"
             )
     return lines
+
+
+def _steps_report(steps: Disagreement, rc: RbpfConfig) -> dict[str, Any]:
+    """The odometry's measured disagreement with the matcher (what the smoothing weighs each
+    odometry step by, ``rbpf.smooth_factor`` times it), as plain values."""
+    known = steps.pairs > 0
+    return {
+        "along_m": round(steps.along, 4) if known else None,
+        "across_m": round(steps.across, 4) if known else None,
+        "heading_deg": round(math.degrees(steps.heading), 3) if known else None,
+        "pairs": steps.pairs,
+        "factor": rc.smooth_factor,
+        "smoothing": rc.smooth_odometry,
+    }
+
+
+def _steps_line(steps: dict[str, Any]) -> str:
+    """The ``steps`` line of a ``slam data calibrate`` report: how far the odometry's steps
+    differ from the matcher's along and across the heading, and what the smoothing makes of it."""
+    if not steps["pairs"]:
+        return "steps     no pair of consecutive scans fitted: the odometry's steps not measured"
+    head = (
+        f"steps     the odometry differs from the matcher between consecutive scans by "
+        f"{steps['along_m']:.4f} m along the heading, {steps['across_m']:.4f} m across and "
+        f"{steps['heading_deg']:.3f}° (trimmed RMS over {steps['pairs']} pairs)"
+    )
+    if not steps["smoothing"]:
+        return f"{head}; rbpf.smooth_odometry = false: not used"
+    return (
+        f"{head}: the smoothing weighs each odometry step by {steps['factor']:g} times these "
+        "(rbpf.smooth_factor; docs/accuracy.md, the odometry's disagreement along and across "
+        "the heading)"
+    )
 
 
 def _noise_line(noise: dict[str, Any]) -> str:
