@@ -300,9 +300,8 @@ def odometry_disagreement(
     (rad) over ``pairs`` evenly spread pairs, and the pairs that fitted. It holds the matcher's
     own noise too, so it bounds the odometry's error from above; measured per axis, as the
     smoothing weighs each (docs/accuracy.md, "The odometry's disagreement along and across the
-    heading").
-    Scan ``j`` of a pair is matched with at most ``rbpf.register_beams`` of its returns, as the
-    registration that the smoothing weighs against the odometry matches a scan
+    heading"). Scan ``j`` of a pair is matched with at most ``rbpf.register_beams`` of its
+    returns, as the registration that the smoothing weighs against the odometry matches a scan
     (:func:`pair_motions`)."""
     settings = settings or CalibrationSettings()
     nothing = Disagreement(float("nan"), float("nan"), float("nan"), 0)

@@ -527,3 +527,20 @@ def test_range_noise_uses_readings_of_half_a_metre_to_three_and_needs_a_triple()
     assert np.isnan(noise) and triples == 0
     assert np.isnan(range_noise(np.full((4, 2), 1.0))[0])  # two beams: no triple
     assert range_noise(clean, near=0.5, far=3.0)[1] > range_noise(clean, near=0.5, far=1.0)[1]
+
+
+def test_calibrate_says_when_no_step_was_measured():
+    """A log whose consecutive scans never fit (or a single scan): the ``steps`` line says the
+    odometry's steps were not measured, and the JSON holds nulls, not NaN."""
+    from slam.calibration import Disagreement
+    from slam.commands.data import _steps_line, _steps_report
+    from slam.config import RbpfConfig
+
+    nan = float("nan")
+    report = _steps_report(Disagreement(nan, nan, nan, 0), RbpfConfig())
+    assert report["along_m"] is None and report["across_m"] is None and report["pairs"] == 0
+    assert json.loads(json.dumps(report)) == report  # plain JSON
+    assert "not measured" in _steps_line(report)
+    measured = _steps_report(Disagreement(0.012, 0.006, 0.004, 900), RbpfConfig())
+    assert measured["heading_deg"] == round(np.degrees(0.004), 3)
+    assert "0.0120 m along the heading, 0.0060 m across and 0.229°" in _steps_line(measured)
