@@ -413,3 +413,22 @@ def test_slam_run_keeps_a_given_config_over_the_datasets_file(carmen_dir, tmp_pa
     assert used.lidar.range_max == 8.0
     assert used.lidar.beam_step_deg == 1.0  # measured: configs/fr-clinic.toml declares none
     assert used.dataset == "fr-clinic"
+
+
+def test_an_exact_odometry_gets_a_finite_weight(small, monkeypatch):
+    """A noise-free log can measure no disagreement at all between its odometry and its scans:
+    the smoothing weighs its steps at the floor (``slam.stages.ODOMETRY_FLOOR``), finite, and
+    the run ends with finite poses (an infinite weight divided by zero before)."""
+    import slam.calibration as calibration
+    from slam.stages import ODOMETRY_FLOOR
+
+    monkeypatch.setattr(
+        calibration,
+        "odometry_disagreement",
+        lambda *args, **kwargs: calibration.Disagreement(0.0, 0.0, 0.0, 100),
+    )
+    config = slam.load_config("", None, ["filter.particles=8"])
+    result = replay(_log(str(small), config), config, 200)
+    assert np.isfinite(result.poses).all()
+    assert result.stats["odometry_disagreement_along_m"] == 0.0
+    assert ODOMETRY_FLOOR == 1e-3
