@@ -351,9 +351,10 @@ class RbpfConfig(Validated):
     :attr:`smooth_choice_z` standard errors, then the first. A larger multiple trusts the
     odometry's shape more, which a log whose odometry is locally better than its registration
     (fr-clinic) scores better on. One value: no choice
-    (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` improves
-    fr-clinic on two seeds of four, changes no other benchmark log and costs 0.3–1.2 s a run
-    (docs/accuracy.md, "How far to trust the odometry's shape")."""
+    (``[1]``: the smoothing before the choice existed). The default ``[1, 10, 50]`` takes a
+    larger multiple on fr-clinic's seeds 0, 1 and 3 of 0–3 and on no other
+    benchmark log, and costs 0.3–1.2 s a run (docs/accuracy.md, "How far to trust the
+    odometry's shape")."""
     smooth_noise_ref: float = bounded(0.01, ge=0.0, le=1.0)
     """The registration's sigmas (``smooth_sigma_xy``, ``smooth_sigma_th``) hold for a laser
     whose readings scatter by at most this much (m: about a SICK LMS's, as on intel, fr079 and
