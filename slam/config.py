@@ -92,6 +92,18 @@ class RobotConfig(Validated):
     odometry_lag_s: float = bounded(0.0, ge=-10.0, le=10.0)
     """With ``odometry_sync = "stream"``: the stream is read this long after each scan's time
     (s; negative: before it)."""
+    odometry: str = bounded("auto", choices=("auto", "log", "laser"))
+    """Where the odometry comes from: ``"log"`` the log's (wheel odometry, encoders + IMU; a log
+    without any is refused), ``"laser"`` scan matching alone (:mod:`slam.laser_odometry`), ``"auto"``
+    the log's where it has one, else the laser's — a log without odometry messages, encoders or
+    poses with its scans, or whose poses never move while its scans do (``metrics.json``:
+    ``odometry_source``; ``slam run`` warns)."""
+    laser_odometry_keyframe_m: float = bounded(0.3, gt=0.0, le=100.0)
+    """Laser odometry: a scan becomes a keyframe of the local map after this much travel (m) ..."""
+    laser_odometry_keyframe_rad: float = bounded(0.2, gt=0.0, le=TAU)
+    """... or this much turn (rad) since the last keyframe."""
+    laser_odometry_window: int = bounded(8, ge=1, le=1000)
+    """Laser odometry: the local map holds the last this many keyframes."""
 
 
 @dataclass(frozen=True)

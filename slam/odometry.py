@@ -172,6 +172,13 @@ def poses_at(times: F64, poses: F64, query: F64, what: str = "poses") -> F64:
     return interpolate_poses(times, poses, query)
 
 
+def has_odometry(log: Log) -> bool:
+    """Whether ``log`` holds any odometry: poses with its scans, encoders, or odometry messages."""
+    if log.scans is not None and log.scans.odometry is not None:
+        return True
+    return log.encoders is not None or (log.odometry is not None and len(log.odometry.time) > 0)
+
+
 def scan_odometry(log: Log, robot: RobotConfig) -> F64:
     """Odometry pose ``(N, 3)`` of the robot at each scan of ``log`` (in file order).
 
@@ -190,7 +197,10 @@ def scan_odometry(log: Log, robot: RobotConfig) -> F64:
         return poses_at(
             log.odometry.time[order], log.odometry.poses[order], log.scans.time, what="scan"
         )
-    raise DataError(f"{log.name}: the log has no odometry (no encoders, no ODOM messages)")
+    raise DataError(
+        f"{log.name}: the log has no odometry (no encoders, no ODOM messages); "
+        'robot.odometry = "auto" or "laser" runs on the laser\'s scan matching instead'
+    )
 
 
 def odometry_trajectory(log: Log, robot: RobotConfig) -> Trajectory:

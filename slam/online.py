@@ -191,6 +191,7 @@ class Slam:
         self._rng = np.random.default_rng(config.filter.seed)
         self._filter: RbpfFilter | ClassicFilter | None = None
         self._odometry: Any = None
+        self._laser: Any = None
         self._live_map: OccupancyGrid | None = None
         self._finished = False
         self._seconds: dict[str, float] = {"filter": 0.0}
@@ -234,7 +235,9 @@ class Slam:
         ``odometry`` is the robot's odometry pose ``(x, y, θ)`` at the scan (any fixed frame: the
         map starts at the first one). Without it the pose comes from the encoder and IMU
         readings fed so far; ``encoders=(times, counts)`` and ``imu=(times, gyro_z)`` feed the
-        readings since the previous scan first.
+        readings since the previous scan first. A robot with neither gives no odometry for any
+        scan, and laser odometry (:class:`slam.laser_odometry.LaserOdometry`) stands in — unless
+        ``robot.odometry = "log"``, which refuses the scan.
         """
         if self._finished:
             raise UsageError("Slam.update: the run is finished (make a new Slam)")
@@ -244,13 +247,15 @@ class Slam:
             self.add_imu(*imu)
         if encoders is not None:
             self.add_encoders(*encoders)
+        resolved = scan.resolved(self.config.lidar)
         if odometry is None:
-            if self._odometry is None:
-                raise UsageError(
-                    "Slam.update: give odometry= (a pose) or feed encoders and IMU readings"
-                )
-            odometry = self._odometry.pose_at(scan.time)
-        k = self.scans.append(scan.resolved(self.config.lidar), odometry)
+            odometry = self._odometry_at(resolved)
+        elif self._laser is not None:
+            raise UsageError(
+                "Slam.update: the earlier scans came without odometry (laser odometry); "
+                "give none for this one either"
+            )
+        k = self.scans.append(resolved, odometry)
         self._running_period.add(scan.time)
         start = time.perf_counter()
         if self._filter is None:
@@ -264,6 +269,27 @@ class Slam:
         if self._observer is not None:
             self._notify(self._observer, outcome, estimate)
         return estimate
+
+    def _odometry_at(self, scan: Scan) -> F64:
+        """The odometry at ``scan`` when :meth:`update` got none: the encoder + IMU integrator's
+        where readings were fed, else laser odometry (:mod:`slam.laser_odometry`) unless
+        ``robot.odometry = "log"``."""
+        if self._odometry is not None:
+            return self._odometry.pose_at(scan.time)
+        if self.config.robot.odometry == "log":
+            raise UsageError(
+                "Slam.update: give odometry= (a pose) or feed encoders and IMU readings "
+                '(robot.odometry = "log"; "auto" or "laser" match the scans instead)'
+            )
+        if self._laser is None:
+            if len(self.scans):
+                raise UsageError(
+                    "Slam.update: the earlier scans came with odometry; give it for this one too"
+                )
+            from slam.laser_odometry import LaserOdometry
+
+            self._laser = LaserOdometry(self.config)
+        return self._laser.pose_at(scan)
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:
         k = outcome.step
@@ -339,6 +365,11 @@ class Slam:
         stats = dict(output.stats)
         if self._odometry is not None and self._odometry.wheel_yaw_intervals:
             stats["odometry_wheel_yaw_intervals"] = self._odometry.wheel_yaw_intervals
+        if self._laser is not None:
+            stats["laser_odometry"] = {
+                "matched": self._laser.matched,
+                "kept_prediction": self._laser.kept_prediction,
+            }
         seq = output.scans
         return Result(
             trajectory=Trajectory(seq.times.copy(), output.poses, seq.indices.copy()),

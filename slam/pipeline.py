@@ -371,6 +371,9 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     scans = LogScans.from_log(log, config)
     if scans.odometry_sync is not None:
         base["odometry_sync"] = scans.odometry_sync.as_dict()
+    base["odometry_source"] = scans.odometry_source
+    if scans.laser_odometry is not None:
+        base["laser_odometry"] = scans.laser_odometry
     if source.beam_geometry is not None:
         base["beam_geometry"] = source.beam_geometry
     beams = int(log.scans.ranges.shape[1])  # type: ignore[union-attr]
@@ -443,14 +446,24 @@ def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
     scans at their odometry poses."""
     from slam.odometry import odometry_trajectory
     from slam.online import Result
-    from slam.scans import ScanSequence
+    from slam.scans import LogScans, ScanSequence
     from slam.stages import build_map
+    from slam.trajectory import Trajectory
 
     start = time.perf_counter()
-    trajectory = odometry_trajectory(log, config.robot)
     grid = None
-    if log.scans is not None:
-        seq = ScanSequence.from_log(log, config)
+    if log.scans is None:
+        trajectory = odometry_trajectory(log, config.robot)
+    else:
+        scans = LogScans.from_log(log, config)
+        seq = ScanSequence(len(scans))
+        for scan, odometry in scans:
+            seq.append(scan, odometry)
+        base["odometry_source"] = scans.odometry_source
+        if scans.odometry_source == "laser":  # no odometry of the log's: the laser's, per scan
+            trajectory = Trajectory(scans.times, scans.odometry)
+        else:
+            trajectory = odometry_trajectory(log, config.robot)
         if config.filter.max_scans:  # the trajectory ends with the last scan the run processes
             trajectory = _up_to_scan(trajectory, log, int(seq.indices[-1]))
         reach = float(seq.scan(0).range_max)  # type: ignore[arg-type]

@@ -20,6 +20,7 @@ of the log's arrays, so a run holds no copy of them per scan.
 
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -552,6 +553,23 @@ class ScanHits:
         return self.xy[:, index], offsets, self.reach[rows]
 
 
+def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64 | None, str]:
+    """The log's odometry at the selected scans ``idx`` (:func:`slam.odometry.scan_odometry`), or
+    ``None`` where ``robot.odometry`` takes the laser's instead, with why when ``"auto"`` chose
+    it ("": ``"laser"`` asked for it)."""
+    from slam.odometry import has_odometry, scan_odometry
+
+    mode = config.robot.odometry
+    if mode == "laser":
+        return None, ""
+    if mode == "auto" and not has_odometry(log):
+        return None, "the log has no odometry (no odometry messages, encoders or scan poses)"
+    odometry = np.ascontiguousarray(scan_odometry(log, config.robot)[idx], dtype=np.float64)
+    if mode == "auto" and idx.size > 1 and not np.any(odometry != odometry[0]):
+        return None, f"the log's odometry never moves (every scan's pose is {odometry[0].tolist()})"
+    return odometry, ""
+
+
 @dataclass(frozen=True, eq=False)
 class LogScans:
     """The scans of a recorded log that a run processes, ready to be fed one by one."""
@@ -570,6 +588,12 @@ class LogScans:
     """"No return" reading (m): ``lidar.no_return``, else the log's."""
     odometry_sync: OdometrySync | None = None
     """Which odometry ``robot.odometry_sync`` chose for a log that has two (None: the log has one)."""
+    odometry_source: str = "log"
+    """Where :attr:`odometry` comes from: ``"log"`` the log's, ``"laser"`` scan matching
+    (:mod:`slam.laser_odometry`; ``robot.odometry``)."""
+    laser_odometry: dict[str, float] | None = None
+    """With laser odometry: the scans its matcher placed (``matched``), those that kept the
+    constant-velocity prediction (``kept_prediction``) and the time it took (``seconds``)."""
 
     @classmethod
     def from_log(cls, log: Log, config: Config) -> LogScans:
@@ -580,12 +604,10 @@ class LogScans:
         too many are sparse (:func:`slam.io.plausibility.check_valid_beams`).
         """
         from slam.io.plausibility import DataWarning, check_valid_beams
-        from slam.odometry import scan_odometry
 
         if log.scans is None:
             raise DataError(f"{log.name}: the log has no laser scans to run SLAM on")
         scans = log.scans
-        odometry = scan_odometry(log, config.robot)
         idx = np.arange(len(scans), dtype=np.int64)[:: config.filter.every]
         if config.filter.max_scans:
             idx = idx[: config.filter.max_scans]
@@ -600,15 +622,38 @@ class LogScans:
         )
         if sparse is not None:  # the pipeline records warnings in metrics.json and on stderr
             warnings.warn(sparse, DataWarning, stacklevel=2)
+        odometry, why = _log_odometry(log, idx, config)
         selected = cls(
             log=log,
             indices=idx,
-            odometry=np.ascontiguousarray(odometry[idx], dtype=np.float64),
+            odometry=np.zeros((idx.size, 3)) if odometry is None else odometry,
             range_min=float(range_min),
             range_max=float(min(range_max, no_return)),
             no_return=float(no_return),
         )
-        return selected.synchronised(config)
+        if odometry is not None:
+            return selected.synchronised(config)
+        if why:  # robot.odometry = "auto" found none: say so (metrics.json and stderr)
+            warnings.warn(
+                f"{log.name}: {why}; the odometry comes from matching the scans "
+                '(robot.odometry = "auto"; docs/slam.md, "A robot without odometry")',
+                DataWarning,
+                stacklevel=2,
+            )
+        return selected.with_laser_odometry(config)
+
+    def with_laser_odometry(self, config: Config) -> LogScans:
+        """These scans with the odometry :class:`slam.laser_odometry.LaserOdometry` gives them."""
+        from slam.laser_odometry import laser_odometry
+
+        start = time.perf_counter()
+        poses, made = laser_odometry([self.scan(i) for i in range(len(self))], config)
+        counts = {
+            "matched": made.matched,
+            "kept_prediction": made.kept_prediction,
+            "seconds": round(time.perf_counter() - start, 3),
+        }
+        return replace(self, odometry=poses, odometry_source="laser", laser_odometry=counts)
 
     def synchronised(self, config: Config) -> LogScans:
         """These scans with the odometry ``robot.odometry_sync`` picks when the log has a stream

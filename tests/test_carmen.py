@@ -283,14 +283,14 @@ def test_rawlaser1_beside_flaser_is_skipped(tmp_path):
     assert log.meta["skipped"] == {"RAWLASER1": 1} and log.meta["rawlaser_scans"] == 0
 
 
-def test_rawlaser1_without_odom_is_one_error(tmp_path):
-    path = write(tmp_path, [rawlaser([1.0, 2.0], t=1.0), rawlaser([1.0, 2.0], t=2.0)])
-    with pytest.raises(DataError) as err:
-        load_carmen(path)
-    assert str(err.value) == (
-        f"{path}: RAWLASER1 lines carry no pose and the log has no ODOM lines to place them with "
-        "(expected ODOM, FLASER or ROBOTLASER1 lines; found 2 RAWLASER1 lines only)"
-    )
+def test_rawlaser1_without_odom_loads_without_odometry(tmp_path):
+    """Raw scans and no ODOM line: a log without odometry (``slam run`` then matches the scans,
+    tests/test_laser_odometry.py); a malformed line is still one error naming it."""
+    path = write(tmp_path, [rawlaser([1.0, 2.0], t=1.0), rawlaser([1.5, 2.5], t=2.0)])
+    log = load_carmen(path)
+    assert log.odometry is None and log.scans.odometry is None
+    np.testing.assert_array_equal(log.scans.ranges, np.float32([[1.0, 2.0], [1.5, 2.5]]))
+    assert log.meta["rawlaser_scans"] == 2 and log.meta["odom_messages"] == 0
     bad = write(tmp_path, [odom_line(0, 0, 0, 0.0), rawlaser([1.0, 2.0], t=1.0) + " 7"], "bad.clf")
     with pytest.raises(
         DataError, match=r"bad\.clf:2: RAWLASER1 line: expected 15 fields, found 16"

@@ -330,8 +330,9 @@ def test_api_errors_are_one_clear_line(small):
     s = slam.Slam()
     with pytest.raises(UsageError, match="no scan was processed"):
         s.finish()
+    strict = slam.Slam(slam.load_config("", None, ['robot.odometry="log"']))
     with pytest.raises(UsageError, match="give odometry"):
-        s.update(slam.Scan(0.0, [1.0], [0.0]))
+        strict.update(slam.Scan(0.0, [1.0], [0.0]))
     with pytest.raises(UsageError, match="expected a slam.Scan"):
         s.update(np.ones(3), odometry=np.zeros(3))  # type: ignore[arg-type]
     s.update(slam.Scan(0.0, [1.0, 1.0], [0.0, 0.1]), odometry=np.zeros(3))

@@ -22,7 +22,8 @@ Messages
   when the log has no FLASER or ROBOTLASER1 line (a logger that writes both writes the same
   scans twice): beam ``k`` at ``start_angle + k · angular_res``; the line carries no pose, so
   the scans' odometry is the ``ODOM`` stream interpolated at their times (a log of raw scans
-  needs ``ODOM`` lines) and the laser sits on the odometry point (the log states no mount;
+  without ``ODOM`` lines has none: ``slam run`` then matches the scans for it,
+  :mod:`slam.laser_odometry`) and the laser sits on the odometry point (the log states no mount;
   with ``lidar.use_log_laser_pose = false``, ``lidar.x``, ``lidar.y``, ``lidar.yaw``;
   ``slam data calibrate`` measures it).
 * Any other message type (``PARAM``, ``SYNC``, ``RAWLASER2``, ...) is counted and skipped:
@@ -208,12 +209,6 @@ def load_carmen(
     if groups and raw_scans:  # the same laser's scans again, without their poses
         skipped["RAWLASER1"] = raw_scans
     elif rawlaser:
-        if not odom.text:
-            raise DataError(
-                f"{path}: RAWLASER1 lines carry no pose and the log has no ODOM lines to place "
-                f"them with (expected ODOM, FLASER or ROBOTLASER1 lines; found {raw_scans} "
-                "RAWLASER1 lines only)"
-            )
         groups = [_parse_rawlaser(path, n, nrem, g) for (n, nrem), g in rawlaser.items()]
     if not groups:
         raise DataError(

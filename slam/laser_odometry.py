@@ -1,0 +1,188 @@
+"""Odometry from the laser alone, for a robot whose log has none.
+
+Owns :class:`LaserOdometry`, the stand-in for wheel odometry when a log carries none (a bag of
+laser scans only, a CARMEN log whose poses are all zero, a hand-held laser) or when
+``robot.odometry = "laser"`` asks for it. Every scan is matched, by the filter's own matcher
+(:func:`slam.kernels.field.match_one`), onto a local map of the last ``robot.laser_odometry_window``
+keyframes (its returns within :data:`MAX_RANGE`), starting from the previous scan's pose moved
+on by the previous step (a constant velocity per scan, not per second: logs' clocks jitter, and
+intel's runs backwards at 631 of its scans). Where that start does not fit the map (fewer than :data:`MIN_FIT` of the returns within
+:data:`FIT_DISTANCE` of it: the robot began or stopped turning), a brute-force search of ±
+:data:`SEARCH_XY` and ± :data:`SEARCH_TH` around it gives a second start, and the lower-cost
+match wins; where neither fits, a search over every heading (a gap in the log, during which the
+robot turned). A scan that fits nowhere keeps the constant-velocity prediction.
+
+The poses are causal — each depends on the scans before it only — so a batch run
+(:meth:`slam.scans.LogScans.from_log`) and :meth:`slam.online.Slam.update` fed the same scans
+without odometry agree bit for bit. They are in the frame of the first scan's robot pose. It is
+an odometry, not a SLAM: it drifts and closes no loop; the particle filter and the stages after
+it treat it as they treat wheel odometry. docs/slam.md, "A robot without odometry", has what it
+gives on the benchmark logs.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.calibration import CalibrationSettings
+from slam.config import Config
+from slam.geometry import compose, relative, wrap_angle
+from slam.kernels.field import FieldView, match_one
+from slam.kernels.graph import correlative_search, fit_counts
+from slam.mapping import ParticleMaps, likelihood_tables
+from slam.scans import Scan
+
+F64 = NDArray[np.float64]
+
+MAX_RANGE = CalibrationSettings.max_range
+"""Returns farther than this (20 m) are not matched, as the odometry's calibration matches
+(:class:`slam.calibration.CalibrationSettings`): a local map of a few scans holds a far wall as
+returns a metre apart. Measured on the benchmark logs without their odometry (docs/slam.md, "A
+robot without odometry"): every return, or those within ``rbpf.dmax`` over the beam step, lose
+aces on every seed; within 20 m it holds."""
+FIT_DISTANCE = 0.1
+"""A pose fits the local map when at least :data:`MIN_FIT` of the scan's returns lie within this
+(m) of its surfaces ..."""
+MIN_FIT = 0.5
+"""... this share (:data:`FIT_DISTANCE`)."""
+SEARCH_XY = 0.3
+"""The search around a start that does not fit: ± this in x and y (m, in ``loops.search_step``
+steps) ..."""
+SEARCH_TH = 0.35
+"""... and ± this in heading (rad, 20°) ..."""
+SEARCH_TH_STEP = 0.0175
+"""... in steps of this (rad, 1°), scored with ``loops.search_sigma`` on at most
+``loops.search_beams`` returns, as the loop closing's search is."""
+
+
+class LaserOdometry:
+    """Causal scan-to-local-map odometry (module docstring).
+
+    Feed the scans in time order with :meth:`pose_at`; each call returns the robot's pose at that
+    scan. :attr:`matched` counts the scans the matcher placed, :attr:`kept_prediction` those that
+    kept the constant-velocity prediction, :attr:`searched` the brute-force searches.
+    """
+
+    def __init__(self, config: Config) -> None:
+        rc, lc, robot = config.rbpf, config.loops, config.robot
+        self.config = config
+        self.luts, self.step_inv = likelihood_tables(
+            np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax
+        )
+        self.coarse, self.coarse_inv = likelihood_tables(
+            np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
+        )
+        self.iterations = rc.max_iterations * lc.match_iteration_factor
+        self.keyframes: deque[tuple[F64, F64]] = deque(maxlen=robot.laser_odometry_window)
+        self.maps: ParticleMaps | None = None
+        self.poses: list[F64] = []
+        self.matched = 0
+        self.kept_prediction = 0
+        self.searched = 0
+
+    def pose_at(self, scan: Scan) -> F64:
+        """The robot's pose ``(3,)`` at ``scan`` (resolved: :meth:`slam.scans.Scan.resolved`),
+        the scans before it fed already."""
+        ex, ey = scan.hits(self.config.rbpf.register_beams)
+        near = ex * ex + ey * ey <= MAX_RANGE * MAX_RANGE
+        ex, ey = np.ascontiguousarray(ex[near]), np.ascontiguousarray(ey[near])
+        pose = self._match(self._predict(), ex, ey) if self.poses else np.zeros(3)
+        self.poses.append(pose)
+        if ex.size and self._is_keyframe(pose):
+            self.keyframes.append((pose, np.vstack([ex, ey])))
+            self._rebuild()
+        return pose.copy()
+
+    def _predict(self) -> F64:
+        """The last pose moved on by the last step (the first scans: the last pose)."""
+        last = self.poses[-1]
+        if len(self.poses) < 2:
+            return last.copy()
+        return compose(last, relative(self.poses[-2], last))
+
+    def _match(self, start: F64, ex: F64, ey: F64) -> F64:
+        """The scan's pose on the local map from ``start`` (module docstring), or ``start``."""
+        lc = self.config.loops
+        if self.maps is None or ex.size < lc.min_beams:
+            self.kept_prediction += 1
+            return start
+        view = self.maps.field(0)
+        need = MIN_FIT * ex.size
+        _, close = fit_counts(view, start, ex, ey, FIT_DISTANCE)
+        starts = [start]
+        if close < need:
+            starts.append(self._search(view, start, ex, ey, SEARCH_TH))
+        found, close = self._best(view, starts, ex, ey)
+        if close < need:
+            wide, close_wide = self._best(view, [self._search(view, start, ex, ey, np.pi)], ex, ey)
+            if close_wide > close:
+                found, close = wide, close_wide
+        if close < need or close < lc.min_beams:
+            self.kept_prediction += 1
+            return start
+        self.matched += 1
+        return found
+
+    def _search(self, view: FieldView, start: F64, ex: F64, ey: F64, th: float) -> F64:
+        """The best pose of a grid ± :data:`SEARCH_XY` and ± ``th`` (rad) around ``start``."""
+        lc = self.config.loops
+        self.searched += 1
+        thin = slice(None, None, max(1, ex.size // lc.search_beams))
+        return correlative_search(
+            view, start, ex[thin].copy(), ey[thin].copy(), self.coarse[0, 0], self.coarse_inv,
+            SEARCH_XY, lc.search_step, th, SEARCH_TH_STEP,
+        )[:3].copy()  # fmt: skip
+
+    def _best(self, view: FieldView, starts: list[F64], ex: F64, ey: F64) -> tuple[F64, int]:
+        """The lowest-cost match of the scan from each of ``starts``, and how many of its
+        returns lie within :data:`FIT_DISTANCE` of the map there."""
+        best, best_cost = starts[0], np.inf
+        for start in starts:
+            found, cost, _ = match_one(
+                view, start, ex, ey, self.luts, self.step_inv, self.iterations,
+                self.config.rbpf.tolerance, 1,
+            )  # fmt: skip
+            if cost < best_cost:
+                best, best_cost = found, cost
+        _, close = fit_counts(view, best, ex, ey, FIT_DISTANCE)
+        return best, close
+
+    def _is_keyframe(self, pose: F64) -> bool:
+        """Whether ``pose`` lies far enough from the last keyframe's to be one."""
+        if not self.keyframes:
+            return True
+        robot = self.config.robot
+        d = relative(self.keyframes[-1][0], pose)
+        return bool(
+            np.hypot(d[0], d[1]) >= robot.laser_odometry_keyframe_m
+            or abs(wrap_angle(d[2])) >= robot.laser_odometry_keyframe_rad
+        )
+
+    def _rebuild(self) -> None:
+        """The local map anew from the keyframes in the window (the loop closing's submap
+        settings, ``loops.submap_*``)."""
+        rc, lc = self.config.rbpf, self.config.loops
+        newest = self.keyframes[-1][0]
+        maps = ParticleMaps(
+            1, rc.resolution or self.config.map.resolution, rc.dmax, tile=rc.tile,
+            center=(float(newest[0]), float(newest[1])), size_m=lc.submap_size,
+            grow_margin_m=lc.submap_grow_margin, capacity=lc.submap_tiles,
+        )  # fmt: skip
+        poses = np.array([p for p, _ in self.keyframes])
+        hits = np.hstack([h for _, h in self.keyframes])
+        sizes = [h.shape[1] for _, h in self.keyframes]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        reach = np.array([np.sqrt((h * h).sum(axis=0).max()) for _, h in self.keyframes])
+        maps.insert_scans(poses, hits, offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
+        self.maps = maps
+
+
+def laser_odometry(scans: list[Scan], config: Config) -> tuple[F64, LaserOdometry]:
+    """The :class:`LaserOdometry` pose ``(N, 3)`` at each of ``scans`` (resolved, in time
+    order), and the odometry that made them (its counters)."""
+    odometry = LaserOdometry(config)
+    poses = np.array([odometry.pose_at(scan) for scan in scans], dtype=np.float64)
+    return poses.reshape(-1, 3), odometry
