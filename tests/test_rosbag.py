@@ -20,9 +20,12 @@ from bagfixtures import (
 )
 
 from slam.cli import main
+from slam.config import load_config
 from slam.errors import DataError, UsageError
 from slam.io.formats import detect_format, run_config_name
+from slam.io.plausibility import DataWarning
 from slam.io.rosbag import BagOptions, in_order_times, load_bag, publication_order
+from slam.scans import LogScans
 
 
 def _run(capsys, *argv: str) -> tuple[int, str, str]:
@@ -121,18 +124,119 @@ def test_varying_beam_counts_pad_angles_and_ranges(tmp_path):
     np.testing.assert_array_equal(np.isnan(s.ranges[2, :5]), [False, True, True, True, False])
 
 
-def test_missing_odometry_names_the_topics(tmp_path, capsys):
-    content = straight_run(3)
+def _laser_only(n: int = 20) -> BagContent:
+    """straight_run(n) with its LaserScan topic alone: no Odometry, no /tf, no /tf_static."""
+    content = straight_run(n)
     content.odom.clear()
     content.tf.clear()
+    return content
+
+
+def test_a_bag_without_odometry_loads_and_runs_on_laser_odometry(tmp_path, capsys):
+    content = _laser_only(20)
     bag = write_ros1_bag(tmp_path / "noodom.bag", content)
+    log = load_bag(bag)
+    assert log.odometry is None and log.scans.odometry is None
+    assert log.meta["odom_source"] == "none" and log.meta["odom_match"] == "none"
+    # no tf_static: the laser frame is the robot frame, the laser at its origin
+    assert log.meta["base_frame"] == "laser" and log.meta["laser_frame"] == "laser"
+    assert log.meta["laser_offset_source"] == "not stated: the laser frame is the robot frame"
+    np.testing.assert_array_equal(log.scans.laser_offset, [0.0, 0.0, 0.0])
+    # the scans are the bag's: 20 scans of 90 beams, ranges and stamps as written
+    assert len(log.scans) == 20 and log.scans.num_beams == 90 and log.scans.invalid_beams == 0
+    written = np.array([s.ranges for s in content.scans], dtype=np.float32)
+    np.testing.assert_array_equal(log.scans.ranges, written)
+    np.testing.assert_allclose(log.scans.time, [s.t for s in content.scans], atol=1e-9)
+    assert log.meta["fast_decoder"] == "scan=True"
+    # the same scans as the bag with odometry, and the same log from a bare MCAP file
+    with_odometry = load_bag(write_ros1_bag(tmp_path / "odom.bag", straight_run(20)))
+    np.testing.assert_array_equal(log.scans.ranges, with_odometry.scans.ranges)
+    np.testing.assert_array_equal(log.scans.angles, with_odometry.scans.angles)
+    mcap = load_bag(write_bare_mcap(tmp_path / "noodom.mcap", content))
+    assert_same_log(log, mcap, skip_meta=("scan_order",))
+    # robot.odometry = "auto" (the default): the odometry comes from matching the scans
+    with pytest.warns(DataWarning, match="the log has no odometry"):
+        scans = LogScans.from_log(log, load_config(""))
+    assert scans.odometry_source == "laser" and scans.odometry.shape == (20, 3)
+    np.testing.assert_array_equal(scans.odometry[0], [0.0, 0.0, 0.0])
+    # the wall 5 m ahead fixes x: the robot drives 0.1 m per scan
+    np.testing.assert_allclose(scans.odometry[:, 0], 0.1 * np.arange(20), atol=0.02)
+    # robot.odometry = "log" refuses it
+    with pytest.raises(DataError, match="no odometry"):
+        LogScans.from_log(log, load_config("", None, ['robot.odometry="log"']))
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0 and "slam run reads: scans /scan, odometry none (laser odometry)" in out
+
+
+def test_a_bag_without_odometry_takes_the_mount_from_tf_static(tmp_path):
+    content = _laser_only(5)
+    content.tf = [
+        Tf(t=100.0, parent="odom", child="base_footprint", static=True),  # a fixed frame: not the robot
+        Tf(t=100.0, parent="base_footprint", child="base_link", x=0.05, static=True),
+        Tf(t=100.0, parent="base_link", child="laser", x=0.3, y=-0.1,
+           quaternion=yaw_quaternion(0.1), static=True),
+    ]  # fmt: skip
+    log = load_bag(write_ros1_bag(tmp_path / "mounted.bag", content))
+    assert log.odometry is None and log.scans.odometry is None
+    assert log.meta["odom_source"] == "none"
+    assert log.meta["base_frame"] == "base_footprint"
+    assert log.meta["laser_offset_source"] == "tf_static"
+    np.testing.assert_allclose(log.scans.laser_offset, [0.35, -0.1, 0.1], atol=1e-12)
+    assert (log.meta["laser_offset_x"], log.meta["laser_offset_yaw"]) == pytest.approx((0.35, 0.1))
+    assert len(log.scans) == 5 and log.scans.num_beams == 90
+
+
+def test_tf_without_a_moving_transform_above_the_laser_is_no_odometry(tmp_path, capsys):
+    content = _laser_only(5)
+    content.tf = [Tf(t=100.0, parent="base_link", child="laser", x=0.2, static=True)] + [
+        Tf(t=100.0 + 0.2 * k, parent="odom", child="base_footprint", x=0.1 * k) for k in range(6)
+    ]  # /tf moves base_footprint, which nothing links to the laser
+    bag = write_ros1_bag(tmp_path / "loose.bag", content)
+    log = load_bag(bag)
+    assert log.odometry is None and log.scans.odometry is None
+    assert log.meta["odom_source"] == "none" and log.meta["base_frame"] == "base_link"
+    np.testing.assert_allclose(log.scans.laser_offset, [0.2, 0.0, 0.0], atol=1e-12)
+    assert "no moving /tf transform above the laser frame 'laser'" in log.meta["notes"]
+    assert "odom → base_footprint" in log.meta["notes"]
+    _, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert "odometry none (laser odometry)" in out
+    # asked for odometry the bag does not have: the errors name the file and what was found
+    with pytest.raises(
+        DataError, match=r"loose\.bag: no odometry: .*\(moving transforms: odom → base_footprint\)"
+    ):
+        load_bag(bag, options=BagOptions(odom_topic="tf"))
+    with pytest.raises(DataError, match=r"no odometry for the robot frame 'base_link'"):
+        load_bag(bag, options=BagOptions(base_frame="base_link"))
+    with pytest.raises(DataError, match=r"--odom-topic /odom: no such topic; topics in the bag"):
+        load_bag(bag, options=BagOptions(odom_topic="/odom"))
+
+
+def test_asking_for_odometry_a_laser_only_bag_lacks_is_an_error(tmp_path, capsys):
+    bag = write_ros1_bag(tmp_path / "alone.bag", _laser_only(3))
     with pytest.raises(DataError, match="no odometry") as info:
-        load_bag(bag)
-    assert "/scan (sensor_msgs/msg/LaserScan)" in str(info.value)
-    out_dir = tmp_path / "out"
-    code, out, err = _run(capsys, "run", str(bag), "--out", str(out_dir), "--quiet")
+        load_bag(bag, options=BagOptions(base_frame="base_link"))
+    message = str(info.value)
+    assert "alone.bag" in message and "/scan (sensor_msgs/msg/LaserScan)" in message
+    assert "'base_link' (--base-frame)" in message
+    with pytest.raises(
+        DataError,
+        match=r"alone\.bag: no odometry: .*laser frame 'laser' \(moving transforms: none\)",
+    ):
+        load_bag(bag, options=BagOptions(odom_topic="tf"))
+    with pytest.raises(DataError, match=r"--odom-topic /odom: no such topic"):
+        load_bag(bag, options=BagOptions(odom_topic="/odom"))
+    code, _, err = _run(
+        capsys,
+        "run",
+        str(bag),
+        "--base-frame",
+        "base_link",
+        "--out",
+        str(tmp_path / "o"),
+        "--quiet",
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and "no odometry" in err
-    assert not out_dir.exists()
+    assert not (tmp_path / "o").exists()
 
 
 def test_two_scan_topics_ask_for_scan_topic(tmp_path, capsys):

@@ -164,7 +164,7 @@ def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
         "--odom-topic",
         metavar="TOPIC",
         help="Odometry topic, or 'tf' for the odom → base transforms (default: the only "
-        "Odometry topic, else tf)",
+        "Odometry topic, else tf, else none: the run then matches the scans for its odometry)",
     )
     group.add_argument(
         "--odom-sync",
@@ -176,7 +176,8 @@ def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--base-frame",
         metavar="FRAME",
-        help="robot frame (default: the Odometry child_frame_id, or the laser's moving ancestor in tf)",
+        help="robot frame (default: the Odometry child_frame_id, the laser's moving ancestor in "
+        "tf, or, without odometry, the top of the laser's tf_static chain)",
     )
 
 

@@ -17,6 +17,12 @@ Streams
   Odometry topic, the ``odom → base`` transforms of ``/tf`` (velocities then by finite
   differences). The odometry pose at a scan is interpolated at the scan's stamp, or with
   ``odom_sync="latest"`` the last one at or before it.
+* **No odometry.** A bag with laser scans but neither an Odometry topic nor a moving ``/tf``
+  transform above the laser frame still loads: :attr:`Log.odometry` and
+  :attr:`ScanStream.odometry` are ``None`` and ``meta["odom_source"]`` is ``"none"``. ``slam
+  run`` then takes its odometry from matching the scans (``robot.odometry = "auto"``, with a
+  warning; ``"log"`` refuses such a log; docs/slam.md, "A robot without odometry"). Only
+  ``--odom-topic`` or ``--base-frame`` asking for odometry the bag lacks is an error.
 * **Publication order.** In a ROS 1 bag each message carries the publisher's counter
   ``header.seq``. Scans are kept in that order (the order the driver published them, which is
   also the order of a CARMEN log's lines; the bag's order when the counter is missing or
@@ -34,8 +40,9 @@ Streams
 
 Topics are found by message type; when a type has several topics the error lists them and asks
 for ``--scan-topic`` / ``--odom-topic``. The robot frame is the Odometry messages'
-``child_frame_id`` (for tf odometry: the first frame above the laser with a moving parent) unless
-``--base-frame`` names it.
+``child_frame_id`` (for tf odometry: the first frame above the laser with a moving parent; without
+odometry: the top of the laser's ``/tf_static`` chain, else the laser frame itself, at offset
+zero) unless ``--base-frame`` names it.
 
 Reading streams the messages once (no whole-bag load): arrays are preallocated from the bag's
 index counts and grow only when a count is unknown. LaserScan and Odometry messages are decoded
@@ -75,9 +82,16 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 IMU_TYPE = "sensor_msgs/msg/Imu"
 TF_TOPIC = "tf"
 """``--odom-topic`` value (also ``/tf``) that asks for odometry from the transforms."""
+NO_ODOMETRY = "none"
+"""``meta["odom_source"]`` of a bag without odometry (the run's odometry is then the laser's)."""
 
 ODOM_SYNC = ("interpolate", "latest")
 """Values of :attr:`BagOptions.odom_sync`."""
+WORLD_FRAMES = frozenset({"odom", "map", "earth", "world"})
+"""Fixed frames of REP 105: never the robot's, even when tf_static hangs the laser from one."""
+LASER_AT_ORIGIN = "not stated: the laser frame is the robot frame"
+"""``meta["laser_offset_source"]`` of a bag without odometry whose tf_static does not mount the
+laser on a robot frame: the laser's own frame is the robot's, at offset zero."""
 MAX_BEAMS = CARMEN_MAX_BEAMS
 """Most beams a LaserScan may have: the bound of every loader (:data:`slam.io.carmen.MAX_BEAMS`)."""
 MAX_TILT_DEG = 5.0
@@ -95,9 +109,12 @@ class BagOptions:
     scan_topic: str | None = None
     """LaserScan topic; default: the only one."""
     odom_topic: str | None = None
-    """Odometry topic, or ``tf`` for the transforms; default: the only Odometry topic, else tf."""
+    """Odometry topic, or ``tf`` for the transforms; default: the only Odometry topic, else tf,
+    else none (:data:`NO_ODOMETRY`)."""
     base_frame: str | None = None
-    """Robot frame; default: the Odometry ``child_frame_id`` (tf: the laser's moving ancestor)."""
+    """Robot frame; default: the Odometry ``child_frame_id`` (tf: the laser's moving ancestor;
+    a bag without odometry: the top of the laser's tf_static chain, else the laser frame). Naming
+    it asks for its odometry: a bag without any is then an error."""
     odom_sync: str = "interpolate"
     """Odometry pose at a scan: ``"interpolate"`` at the scan's stamp (what tf does) or
     ``"latest"``, the last odometry pose at or before it (what CARMEN logs record per scan)."""
@@ -160,7 +177,7 @@ class _Selection:
     imu: list[Any]
     scan_topic: str
     odom_topic: str
-    """The Odometry topic or ``"tf"``."""
+    """The Odometry topic, ``"tf"``, or ``"none"`` (:data:`NO_ODOMETRY`: neither is in the bag)."""
     notes: list[str] = field(default_factory=list)
 
 
@@ -261,9 +278,10 @@ def _norm(topic: str) -> str:
 def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
     """The connections of the scan, odometry, tf and IMU topics :func:`load_bag` reads.
 
-    :class:`DataError` when a needed stream is missing (naming the topics that exist) or a named
-    topic is not there; :class:`UsageError` when a type has several topics and no option says
-    which (naming the option and the topics).
+    A bag with neither an Odometry topic nor /tf selects no odometry (:data:`NO_ODOMETRY`)
+    unless ``--base-frame`` asks for the robot's. :class:`DataError` when the scans are missing
+    (naming the topics that exist) or a named topic is not there; :class:`UsageError` when a
+    type has several topics and no option says which (naming the option and the topics).
     """
     topics = _topics(reader)
     by_type: dict[str, list[str]] = {}
@@ -278,12 +296,15 @@ def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
     if odom_choice is not None and _norm(odom_choice) == "/" + TF_TOPIC:
         odom_topic = TF_TOPIC
     elif odom_choice is None and not by_type.get(ODOM_TYPE):
-        if not tf_topics:
+        if tf_topics:
+            odom_topic = TF_TOPIC
+        elif options.base_frame is None:  # a laser alone: the run's odometry is the laser's
+            odom_topic = NO_ODOMETRY
+        else:
             raise DataError(
-                f"{path}: no odometry: no {ODOM_TYPE} topic and no /tf transforms; "
-                f"topics in the bag: {_describe(topics)}"
+                f"{path}: no odometry: no {ODOM_TYPE} topic and no /tf transforms for the robot "
+                f"frame {options.base_frame!r} (--base-frame); topics in the bag: {_describe(topics)}"
             )
-        odom_topic = TF_TOPIC
     else:
         odom_topic = _pick(path, topics, by_type, ODOM_TYPE, odom_choice, "--odom-topic")
     imu_topics = by_type.get(IMU_TYPE, [])
@@ -646,8 +667,8 @@ class _Streams:
 
 def _odometry_at_scans(
     stream: ScanStream,
-    odometry: OdometryStream,
-    published: NDArray[np.float64],
+    odometry: OdometryStream | None,
+    published: NDArray[np.float64] | None,
     ordered: bool,
     odom_sync: str,
 ) -> tuple[ScanStream, bool, int, int]:
@@ -656,8 +677,11 @@ def _odometry_at_scans(
     When the scans have a publication order (``ordered``) and either stream's stamps run against
     it, both streams' times are rebuilt from that order (:func:`scan_odometry_in_order`);
     otherwise the loader's interpolation stands, or with ``odom_sync == "latest"`` the latest
-    odometry message at or before each scan, as CARMEN FLASER lines carry it.
+    odometry message at or before each scan, as CARMEN FLASER lines carry it. Without odometry
+    the stream is returned as it is (``ScanStream.odometry`` stays ``None``).
     """
+    if odometry is None or published is None:
+        return stream, False, 0, 0
     glitches = ordered and (
         bool(np.any(np.diff(stream.time) < 0)) or bool(np.any(np.diff(published[:, 0]) < 0))
     )
@@ -688,11 +712,17 @@ def load_bag(
     default from tf). ``log.meta`` records the topics, frames, where the mounting came from
     and whether the fast decoder was used.
 
-    Raises :class:`DataError` naming the file when it cannot be read or lacks scans or
-    odometry, :class:`UsageError` when a topic choice is ambiguous.
+    A bag without odometry (no Odometry topic, no moving /tf transform above the laser) loads
+    with ``log.odometry`` and ``log.scans.odometry`` ``None`` and ``meta["odom_source"] ==
+    "none"``; ``slam run`` then runs on laser odometry (``robot.odometry = "auto"``).
+
+    Raises :class:`DataError` naming the file when it cannot be read, lacks scans, or lacks the
+    odometry ``options`` ask for (``odom_topic``, ``base_frame``); :class:`UsageError` when a
+    topic choice is ambiguous.
 
     Long because it is the loader's one readable sequence (open, choose topics, read tf, stream,
-    order, mount, sync, describe); each step is a call, and most of the length is ``meta``.
+    find the robot and its odometry, order, mount, sync, describe); each step is a call, and most
+    of the length is ``meta``.
     """
     path = Path(path)
     lidar = lidar or LidarConfig()
@@ -718,12 +748,15 @@ def load_bag(
         streams = _stream(reader, sel, need_tf)
 
     scans = streams.scans
-    if base is None:
-        base = _tf_base(path, parents, streams.dynamic, laser_frame)
-    odometry, odom_source, published = _odometry(path, sel, streams, base)
+    notes = list(sel.notes)
+    base, odometry, odom_source, published = _robot_odometry(
+        path, sel, options, streams, parents, laser_frame, base, notes
+    )
     offset, upside_down, offset_source = _laser_offset(
         path, lidar, parents, streams, base, laser_frame
     )
+    if odometry is None and offset_source == "same frame":
+        offset_source = LASER_AT_ORIGIN
     scan_order = publication_order(scans.seq.array()[:, 0])
     moved = _reorder_scans(scans, scan_order)
     stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
@@ -737,7 +770,9 @@ def load_bag(
         "scans_reordered": moved,
         "odom_source": odom_source,
         "odom_sync": options.odom_sync,
-        "odom_match": "in publication order" if glitches else "by stamp",
+        "odom_match": (
+            NO_ODOMETRY if odometry is None else "in publication order" if glitches else "by stamp"
+        ),
         "scan_stamp_glitches": scan_glitches,
         "odom_stamp_glitches": odom_glitches,
         "base_frame": base,
@@ -749,8 +784,8 @@ def load_bag(
     }
     if sel.imu:
         meta["imu_topic"] = sel.imu[0].topic
-    if sel.notes:
-        meta["notes"] = "; ".join(sel.notes)
+    if notes:
+        meta["notes"] = "; ".join(notes)
     return Log(
         name=name or bag_stem(path),
         kind="rosbag",
@@ -998,24 +1033,82 @@ def _add_scan(scans: _ScanRows, s: _Scan, record_ns: int, topic: str) -> None:
     scans.seq.append(s.seq)
 
 
+def _robot_odometry(
+    path: Path,
+    sel: _Selection,
+    options: BagOptions,
+    streams: _Streams,
+    parents: dict[str, _Edge],
+    laser: str,
+    base: str | None,
+    notes: list[str],
+) -> tuple[str, OdometryStream | None, str, F64 | None]:
+    """The robot frame, the odometry stream, its source and the odometry in publication order
+    (:func:`_odometry`); ``base`` is the frame known before the pass (``--base-frame``, the
+    Odometry messages' child), ``None`` for tf odometry or none.
+
+    A bag without odometry (:data:`NO_ODOMETRY`, or /tf moving no frame above the laser and no
+    option asking for it) gives ``(robot frame, None, "none", None)``: the robot frame is then
+    the top of the laser's tf_static chain (:func:`_static_base`).
+    """
+    if base is None and sel.odom_topic == TF_TOPIC:
+        base = _tf_base(path, parents, streams.dynamic, laser, options, notes)
+    if base is None:
+        return _static_base(parents, laser), None, NO_ODOMETRY, None
+    odometry, source, published = _odometry(path, sel, streams, base)
+    return base, odometry, source, published
+
+
 def _tf_base(
-    path: Path, parents: dict[str, _Edge], dynamic: dict[tuple[str, str], _Rows], laser: str
-) -> str:
-    """The robot frame for tf odometry: the first frame above the laser with a moving parent."""
-    moving = {child for _, child in dynamic}
+    path: Path,
+    parents: dict[str, _Edge],
+    dynamic: dict[tuple[str, str], _Rows],
+    laser: str,
+    options: BagOptions,
+    notes: list[str],
+) -> str | None:
+    """The robot frame for tf odometry: the first frame above the laser with a moving parent.
+
+    Without one the bag has no odometry (``None``, and a line in ``notes`` saying what /tf
+    holds), unless ``--odom-topic tf`` asked for it: then a :class:`DataError`.
+    """
+    parent_of = {child: edge.parent for child, edge in parents.items()}
+    base = _moving_ancestor(parent_of, {child for _, child in dynamic}, laser)
+    if base is not None:
+        return base
+    found = (
+        f"no {ODOM_TYPE} topic, and no moving /tf transform above the laser frame {laser!r} "
+        f"(moving transforms: {_edge_list(dynamic) or 'none'})"
+    )
+    if options.odom_topic is not None:
+        raise DataError(f"{path}: no odometry: {found}; pass --base-frame or --odom-topic")
+    notes.append(f"no odometry: {found}; --base-frame or --odom-topic names the robot's")
+    return None
+
+
+def _moving_ancestor(parent_of: dict[str, str], moving: set[str], laser: str) -> str | None:
+    """The first frame at or above ``laser`` (along the static ``parent_of``) that is in
+    ``moving`` (the children of /tf transforms), or ``None``."""
     current: str | None = laser
     seen = 0
     while current is not None and seen < 64:
         if current in moving:
             return current
-        edge = parents.get(current)
-        current = edge.parent if edge else None
+        current = parent_of.get(current)
         seen += 1
-    raise DataError(
-        f"{path}: no odometry: no {ODOM_TYPE} topic, and no moving /tf transform above the laser "
-        f"frame {laser!r} (moving transforms: {_edge_list(dynamic) or 'none'}); pass "
-        f"--base-frame or --odom-topic"
-    )
+    return None
+
+
+def _static_base(parents: dict[str, _Edge], laser: str) -> str:
+    """The robot frame of a bag without odometry: the top of the laser's tf_static chain (below
+    any :data:`WORLD_FRAMES`), or the laser frame itself when tf_static does not mount it."""
+    current = laser
+    for _ in range(64):
+        edge = parents.get(current)
+        if edge is None or edge.parent in WORLD_FRAMES:
+            break
+        current = edge.parent
+    return current
 
 
 def _edge_list(dynamic: dict[tuple[str, str], _Rows]) -> str:
@@ -1235,7 +1328,10 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
         start, end = _seconds(reader.start_time), _seconds(reader.end_time)
         try:
             sel = select_topics(path, reader, options)
-            plan: dict[str, Any] = {"scan_topic": sel.scan_topic, "odom_source": sel.odom_topic}
+            plan: dict[str, Any] = {
+                "scan_topic": sel.scan_topic,
+                "odom_source": _planned_odometry(reader, sel, options, tf_edges),
+            }
             if sel.imu:
                 plan["imu_topic"] = sel.imu[0].topic
             plan["command"] = _command(path, options)
@@ -1270,6 +1366,24 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
         ],
         "run": plan,
     }
+
+
+def _planned_odometry(
+    reader: Any, sel: _Selection, options: BagOptions, tf_edges: dict[tuple[str, str, bool], int]
+) -> str:
+    """The odometry :func:`load_bag` reads: the Odometry topic, ``tf``, or none (the run's is
+    then the laser's), decided as it does from the frames of /tf and /tf_static."""
+    source = sel.odom_topic
+    if source == TF_TOPIC and options.odom_topic is None and options.base_frame is None:
+        first = _first(reader, sel.scan, SCAN_TYPE, _scan_msg)
+        parent_of = {c: p for p, c, static in tf_edges if static}
+        moving = {c for _, c, static in tf_edges if not static}
+        if (
+            first is not None
+            and _moving_ancestor(parent_of, moving, first.frame.lstrip("/")) is None
+        ):
+            source = NO_ODOMETRY
+    return f"{NO_ODOMETRY} (laser odometry)" if source == NO_ODOMETRY else source
 
 
 def _command(path: Path, options: BagOptions) -> str:
