@@ -63,7 +63,8 @@ class LaserOdometry:
 
     Feed the scans in time order with :meth:`pose_at`; each call returns the robot's pose at that
     scan. :attr:`matched` counts the scans the matcher placed, :attr:`kept_prediction` those that
-    kept the constant-velocity prediction, :attr:`searched` the brute-force searches.
+    kept the constant-velocity prediction, :attr:`searched` the brute-force searches;
+    :attr:`unfit` lists the scans whose start did not fit.
     """
 
     def __init__(self, config: Config) -> None:
@@ -82,6 +83,8 @@ class LaserOdometry:
         self.matched = 0
         self.kept_prediction = 0
         self.searched = 0
+        self.unfit: list[int] = []
+        """The scans (their numbers, from 0) whose start did not fit the local map."""
 
     def pose_at(self, scan: Scan) -> F64:
         """The robot's pose ``(3,)`` at ``scan`` (resolved: :meth:`slam.scans.Scan.resolved`),
@@ -114,6 +117,7 @@ class LaserOdometry:
         _, close = fit_counts(view, start, ex, ey, FIT_DISTANCE)
         starts = [start]
         if close < need:
+            self.unfit.append(len(self.poses))
             starts.append(self._search(view, start, ex, ey, SEARCH_TH))
         found, close = self._best(view, starts, ex, ey)
         if close < need:

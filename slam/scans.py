@@ -553,6 +553,24 @@ class ScanHits:
         return self.xy[:, index], offsets, self.reach[rows]
 
 
+PAUSE_S = 1.0
+"""A pause in the scans is longer than this (s) ..."""
+PAUSE_PERIODS = 5.0
+"""... and than this many nominal scan periods (:func:`nominal_scan_period`)."""
+
+
+def scan_pauses(times: ArrayLike) -> NDArray[np.int64]:
+    """Indices ``k`` of the scans after which the log pauses (``times[k + 1] - times[k]`` over
+    :data:`PAUSE_S` and :data:`PAUSE_PERIODS` scan periods): where laser odometry, which sees
+    nothing of the motion there, has to guess it."""
+    times = np.asarray(times, dtype=np.float64)
+    if times.size < 2:
+        return np.zeros(0, dtype=np.int64)
+    gaps = np.diff(times)
+    limit = max(PAUSE_S, PAUSE_PERIODS * nominal_scan_period(times))
+    return np.flatnonzero(gaps > limit).astype(np.int64)
+
+
 def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64 | None, str]:
     """The log's odometry at the selected scans ``idx`` (:func:`slam.odometry.scan_odometry`), or
     ``None`` where ``robot.odometry`` takes the laser's instead, with why when ``"auto"`` chose
@@ -643,7 +661,10 @@ class LogScans:
         return selected.with_laser_odometry(config)
 
     def with_laser_odometry(self, config: Config) -> LogScans:
-        """These scans with the odometry :class:`slam.laser_odometry.LaserOdometry` gives them."""
+        """These scans with the odometry :class:`slam.laser_odometry.LaserOdometry` gives them,
+        and a :class:`DataWarning` when the robot moved during pauses in the scans
+        (:func:`scan_pauses` after which the scan did not fit where the motion before put it)."""
+        from slam.io.plausibility import DataWarning
         from slam.laser_odometry import laser_odometry
 
         start = time.perf_counter()
@@ -653,6 +674,18 @@ class LogScans:
             "kept_prediction": made.kept_prediction,
             "seconds": round(time.perf_counter() - start, 3),
         }
+        times = self.times
+        pauses = np.intersect1d(scan_pauses(times) + 1, made.unfit) - 1  # moved while unseen
+        if pauses.size:
+            longest = int(pauses[np.argmax(times[pauses + 1] - times[pauses])])
+            warnings.warn(
+                f"{self.log.name}: the robot moved during {pauses.size} pause(s) in the scans, "
+                f"the longest {times[longest + 1] - times[longest]:.2f} s at "
+                f"{times[longest] - times[0]:.1f} s into the log; laser odometry sees nothing of "
+                'that motion and guesses it (docs/slam.md, "A robot without odometry")',
+                DataWarning,
+                stacklevel=2,
+            )
         return replace(self, odometry=poses, odometry_source="laser", laser_odometry=counts)
 
     def synchronised(self, config: Config) -> LogScans:

@@ -20,7 +20,7 @@ from slam.io.plausibility import DataWarning
 from slam.io.tum import read_tum
 from slam.laser_odometry import LaserOdometry, laser_odometry
 from slam.odometry import has_odometry
-from slam.scans import LogScans
+from slam.scans import LogScans, scan_pauses
 
 ANGLES = np.linspace(-np.pi / 2, np.pi / 2, 181)
 
@@ -177,3 +177,31 @@ def test_odometry_is_given_for_every_scan_or_for_none():
     strict = slam.Slam(slam.load_config("", None, ['robot.odometry="log"']))
     with pytest.raises(UsageError, match='robot.odometry = "log"'):
         strict.update(room_scan(room_path(3)[0], 0.0))
+
+
+def test_a_pause_in_which_the_robot_turned_is_named_in_a_warning(tmp_path):
+    """The scans pause for 3 s (30 scan periods) after scan 39: where the robot stood still
+    meanwhile, nothing is said; where it turned 60°, laser odometry names the pause."""
+    np.testing.assert_array_equal(scan_pauses([0.0, 0.1, 0.2, 3.2, 3.3, 4.2]), [2])
+    np.testing.assert_array_equal(scan_pauses([0.0, 0.1, 0.2, 0.9, 1.0]), [])  # under 1 s
+    np.testing.assert_array_equal(scan_pauses([0.0, 2.0, 4.0, 5.5, 7.5]), [])  # 5 periods: 10 s
+    path = room_path(40)
+    for turn, warned in ((0.0, False), (np.pi / 3, True)):
+        turned = path[-1] + np.array([0.0, 0.0, turn])
+        poses = np.vstack([path, np.repeat(turned[None], 20, axis=0)])
+        lines = flaser_lines(poses, odometry=False)
+        for k in range(40, 60):  # the scans after the pause: 2.9 s later
+            fields = lines[k].split()
+            t = float(fields[-3]) + 2.9
+            fields[-3], fields[-1] = f"{t:.6f}", f"{t:.6f}"
+            lines[k] = " ".join(fields)
+        log_path = tmp_path / f"paused{turn:.2f}.clf"
+        log_path.write_text("\n".join(lines) + "\n")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            LogScans.from_log(load_carmen(log_path), slam.load_config(""))
+        texts = [str(w.message) for w in caught]
+        said = [t for t in texts if "pause(s) in the scans" in t]
+        assert bool(said) == warned, texts
+        if warned:
+            assert "moved during 1 pause(s) in the scans, the longest 3.00 s at 3.9 s" in said[0]
