@@ -205,3 +205,19 @@ def test_a_pause_in_which_the_robot_turned_is_named_in_a_warning(tmp_path):
         assert bool(said) == warned, texts
         if warned:
             assert "moved during 1 pause(s) in the scans, the longest 3.00 s at 3.9 s" in said[0]
+
+
+def test_calibrate_on_a_log_without_odometry(tmp_path, capsys):
+    """``slam data calibrate`` on raw scans alone: it says the laser odometry stands in, does not
+    measure a mount against it, and prints the warning as ``slam run`` does."""
+    log_path = tmp_path / "raw.clf"
+    log_path.write_text("\n".join(rawlaser_lines(room_path(120))) + "\n")
+    assert main(["data", "calibrate", str(log_path)]) == 0
+    captured = capsys.readouterr()
+    assert "odometry  none of the log's: laser odometry (scan matching) stands in" in captured.out
+    assert "not measured: laser odometry turns with the laser" in captured.out
+    assert captured.err.startswith("slam: warning: raw: the log has no odometry")
+    assert main(["data", "calibrate", str(log_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["odometry_source"] == "laser" and report["mount"] is None
+    assert report["odometry_steps"]["pairs"] == 119

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -262,14 +263,21 @@ def run_calibrate(args: argparse.Namespace) -> int:
     source = load_source(args.name, data_dir, config)
     config = source.configured(config)  # the beam step measured when it loaded, if applied
     log = source.log
-    scans = LogScans.from_log(log, config)
+    with warnings.catch_warnings(record=True) as caught:  # said as `slam run` says them
+        warnings.simplefilter("always")
+        scans = LogScans.from_log(log, config)
+    for message in sorted({str(w.message) for w in caught}):
+        print(f"slam: warning: {message}", file=sys.stderr, flush=True)
     sync = scans.odometry_sync
-    try:
-        mount = calibrate_mount(scans, config)
-    except ValueError as exc:
-        from slam.errors import DataError
+    laser = scans.odometry_source == "laser"
+    mount = None
+    if not laser:  # laser odometry turns with the laser: no mount to measure against it
+        try:
+            mount = calibrate_mount(scans, config)
+        except ValueError as exc:
+            from slam.errors import DataError
 
-        raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
+            raise DataError(f"{log.source or args.name}: the laser's mount: {exc}") from exc
     from slam.calibration import noise_multiple, noise_picks, odometry_disagreement
 
     steps = odometry_disagreement(lambda k: scans.scan(k).hits(), scans.odometry, config)
@@ -288,8 +296,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     report = {
         "log": str(log.source or args.name),
         "scans": len(scans),
+        "odometry_source": scans.odometry_source,
         "odometry_sync": None if sync is None else sync.as_dict(),
-        "mount": mount.as_dict(),
+        "mount": None if mount is None else mount.as_dict(),
         "stated_mount": {"x": stated[0], "y": stated[1], "yaw_deg": math.degrees(stated[2])},
         "beam_geometry": beams,
         "range_noise": {
@@ -315,7 +324,12 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
     """The text form of a ``slam data calibrate`` report."""
     lines = [f"{report['log']}: {report['scans']} scans"]
     sync = report["odometry_sync"]
-    if sync is None:
+    if report["odometry_source"] == "laser":
+        lines.append(
+            "odometry  none of the log's: laser odometry (scan matching) stands in "
+            '(robot.odometry; docs/slam.md, "A robot without odometry")'
+        )
+    elif sync is None:
         lines.append("odometry  the log has one odometry; nothing to choose")
     elif sync["pairs"] == 0:
         lines.append(f"odometry  {sync['source']} at {sync['lag_s']:+.2f} s (set, not measured)")
@@ -338,21 +352,13 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
         )
         lines.append(f"          robot.odometry_sync = {json.dumps(mode)}: {chosen}")
     m, st = report["mount"], report["stated_mount"]
-    lines.append(
-        f"laser     measured at x {m['x']:+.3f} m, y {m['y']:+.3f} m, yaw {m['yaw_deg']:+.2f}° on "
-        f"the robot (± {m['std_x']:.3f} m, {m['std_y']:.3f} m, {m['std_yaw_deg']:.2f}°; "
-        f"{m['pairs']} turning pairs), residual {m['residual_m'] * 100:.1f} cm"
-    )
-    lines.append(
-        f"          the log states x {st['x']:+.3f} m, y {st['y']:+.3f} m, yaw "
-        f"{st['yaw_deg']:+.2f}°: residual {m['residual_stated_m'] * 100:.1f} cm"
-    )
-    lines.append(
-        f"          to use the measured mount: --set lidar.use_log_laser_pose=false "
-        f"--set lidar.x={m['x']:.3f} --set lidar.y={m['y']:.3f} "
-        f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/accuracy.md: ground truth may "
-        f"refer to the laser or to the odometry point)"
-    )
+    if m is None:
+        lines.append(
+            f"laser     the log states x {st['x']:+.3f} m, y {st['y']:+.3f} m, yaw "
+            f"{st['yaw_deg']:+.2f}°; not measured: laser odometry turns with the laser"
+        )
+    else:
+        lines += _mount_lines(m, st)
     lines.append(_steps_line(report["odometry_steps"]))
     lines.append(_noise_line(report["range_noise"]))
     beams = report.get("beam_geometry")
@@ -390,6 +396,23 @@ def _calibration_lines(report: dict[str, Any], mode: str) -> list[str]:
                 f"          {beams['best']} fits best; read spread, as the lines say (a run reads "
                 f"them centred only when that fits {BEAM_MARGIN:.0%} better than spread)"
             )
+    return lines
+
+
+def _mount_lines(m: dict[str, Any], st: dict[str, Any]) -> list[str]:
+    """The ``laser`` lines of a ``slam data calibrate`` report: the measured mount ``m`` against
+    the stated one ``st``, and the options that apply it."""
+    lines = [
+        f"laser     measured at x {m['x']:+.3f} m, y {m['y']:+.3f} m, yaw {m['yaw_deg']:+.2f}° on "
+        f"the robot (± {m['std_x']:.3f} m, {m['std_y']:.3f} m, {m['std_yaw_deg']:.2f}°; "
+        f"{m['pairs']} turning pairs), residual {m['residual_m'] * 100:.1f} cm",
+        f"          the log states x {st['x']:+.3f} m, y {st['y']:+.3f} m, yaw "
+        f"{st['yaw_deg']:+.2f}°: residual {m['residual_stated_m'] * 100:.1f} cm",
+        f"          to use the measured mount: --set lidar.use_log_laser_pose=false "
+        f"--set lidar.x={m['x']:.3f} --set lidar.y={m['y']:.3f} "
+        f"--set lidar.yaw={math.radians(m['yaw_deg']):.4f} (docs/accuracy.md: ground truth may "
+        f"refer to the laser or to the odometry point)",
+    ]
     return lines
 
 
