@@ -221,3 +221,19 @@ def test_calibrate_on_a_log_without_odometry(tmp_path, capsys):
     report = json.loads(capsys.readouterr().out)
     assert report["odometry_source"] == "laser" and report["mount"] is None
     assert report["odometry_steps"]["pairs"] == 119
+
+
+def test_inspect_says_which_odometry_a_run_reads(tmp_path, capsys):
+    raw = tmp_path / "raw.clf"
+    raw.write_text("\n".join(rawlaser_lines(room_path(20))) + "\n")
+    still = tmp_path / "still.clf"
+    still.write_text("\n".join(flaser_lines(room_path(20), odometry=False)) + "\n")
+    moving = tmp_path / "moving.clf"
+    moving.write_text("\n".join(flaser_lines(room_path(20), odometry=True)) + "\n")
+    said = {}
+    for log in (raw, still, moving):
+        assert main(["data", "inspect", str(log)]) == 0
+        said[log.stem] = capsys.readouterr().out.splitlines()[-2]
+    assert said["raw"] == "slam run reads: odometry none in the log: laser odometry (scan matching)"
+    assert said["still"].endswith("the scans' poses never move: laser odometry (scan matching)")
+    assert said["moving"] == "slam run reads: odometry the poses written with the scans"

@@ -14,6 +14,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from slam.io.formats import BAG_FORMATS, detect_format, run_config_name
 from slam.io.rosbag import BagOptions
 
@@ -48,8 +50,11 @@ def inspect_path(path: Path, options: BagOptions | None = None) -> dict[str, Any
         number = next(path.glob("Encoders*.npz")).stem[len("Encoders") :]
         log = load_ece276a(path, number, need=(), name=dataset, lidar=config.lidar)
     command = f"slam run {shlex.quote(str(path))}"
+    run: dict[str, Any] = {"command": command}
     if log.scans is None:
-        command += " --method odometry"
+        run["command"] += " --method odometry"
+    else:
+        run["odometry"] = _odometry_read(log)
     summary = log.summary()
     return {
         "path": str(path),
@@ -60,8 +65,26 @@ def inspect_path(path: Path, options: BagOptions | None = None) -> dict[str, Any
             for k, v in summary.items()
             if not isinstance(v, dict) and k not in ("name", "kind")
         },
-        "run": {"command": command},
+        "run": run,
     }
+
+
+def _odometry_read(log: Any) -> str:
+    """Which odometry ``slam run`` reads from a log with scans (``robot.odometry = "auto"``)."""
+    from slam.odometry import has_odometry
+
+    written = log.scans.odometry
+    if not has_odometry(log):
+        return "none in the log: laser odometry (scan matching)"
+    if written is not None and len(written) > 1 and not np.any(written != written[0]):
+        return "the scans' poses never move: laser odometry (scan matching)"
+    if log.encoders is not None:
+        return "encoders + IMU"
+    if written is None:
+        return "the odometry messages at the scans' times"
+    if log.odometry is not None:
+        return "the poses written with the scans, or the odometry messages (robot.odometry_sync)"
+    return "the poses written with the scans"
 
 
 def _clock(seconds: float) -> str:
@@ -116,6 +139,8 @@ def format_inspection(report: dict[str, Any]) -> str:
             if "imu_topic" in run:
                 reads += f", IMU {run['imu_topic']}"
             lines.append(f"slam run reads: {reads}")
+        elif "odometry" in run:
+            lines.append(f"slam run reads: odometry {run['odometry']}")
         lines.append(f"run it: {run['command']}")
     else:
         lines.append(f"slam run cannot use it as it is: {run['error']}")
