@@ -679,10 +679,11 @@ class LogScans:
         if pauses.size:
             longest = int(pauses[np.argmax(times[pauses + 1] - times[pauses])])
             warnings.warn(
-                f"{self.log.name}: the robot moved during {pauses.size} pause(s) in the scans, "
-                f"the longest {times[longest + 1] - times[longest]:.2f} s at "
-                f"{times[longest] - times[0]:.1f} s into the log; laser odometry sees nothing of "
-                'that motion and guesses it (docs/slam.md, "A robot without odometry")',
+                f"{self.log.name}: after {pauses.size} pause(s) in the scans the next scan did "
+                f"not fit where the motion before put it (the robot moved meanwhile), the longest "
+                f"{times[longest + 1] - times[longest]:.2f} s at {times[longest] - times[0]:.1f} s "
+                "into the log; laser odometry sees nothing of that motion and guesses it "
+                '(docs/slam.md, "A robot without odometry")',
                 DataWarning,
                 stacklevel=2,
             )

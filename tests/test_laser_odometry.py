@@ -204,7 +204,8 @@ def test_a_pause_in_which_the_robot_turned_is_named_in_a_warning(tmp_path):
         said = [t for t in texts if "pause(s) in the scans" in t]
         assert bool(said) == warned, texts
         if warned:
-            assert "moved during 1 pause(s) in the scans, the longest 3.00 s at 3.9 s" in said[0]
+            assert "after 1 pause(s) in the scans the next scan did not fit" in said[0]
+            assert "the longest 3.00 s at 3.9 s into the log" in said[0]
 
 
 def test_calibrate_on_a_log_without_odometry(tmp_path, capsys):
