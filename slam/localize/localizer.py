@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -156,6 +157,8 @@ class Localizer:
         self.initial = self._initial(initial)
         self.phase = "global" if self.initial is None else "tracking"
         self._started = False
+        self._laser: Any = None
+        """Laser odometry (:mod:`slam.laser_odometry`) when :meth:`update` gets no odometry."""
         self._odom_mcl = np.zeros(3)
         self._odom_hist = np.zeros(3)
         self._mcl_pose = np.zeros(3)
@@ -200,15 +203,24 @@ class Localizer:
         return cached
 
     # -- one scan
-    def update(self, scan: Scan, odometry: ArrayLike) -> LocalizationEstimate:
+    def update(self, scan: Scan, odometry: ArrayLike | None = None) -> LocalizationEstimate:
         """Process one scan taken at the odometry pose ``odometry`` ``(x, y, θ)`` (any fixed
-        frame; only its increments are used); return the estimate after it.
+        frame; only its increments are used); return the estimate after it. A robot without
+        odometry gives none for any scan: laser odometry (:mod:`slam.laser_odometry`) stands in,
+        unless ``robot.odometry = "log"``.
 
         What the scan leaves out (range semantics, laser offset) comes from ``[lidar]``, as for
         :meth:`slam.Slam.update`.
         """
         if not isinstance(scan, Scan):
             raise UsageError(f"Localizer.update: expected a slam.Scan, found {type(scan).__name__}")
+        if odometry is None:
+            odometry = self._laser_odometry(scan.resolved(self.config.lidar))
+        elif self._laser is not None:
+            raise UsageError(
+                "Localizer.update: the earlier scans came without odometry (laser odometry); "
+                "give none for this one either"
+            )
         pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise DataError(
@@ -223,6 +235,24 @@ class Localizer:
             )
         ex, ey = scan.hits()
         return self.update_hits(scan.time, ex, ey, pose, float(scan.range_max))  # type: ignore[arg-type]
+
+    def _laser_odometry(self, scan: Scan) -> F64:
+        """The laser odometry's pose at ``scan`` (:meth:`update` without odometry)."""
+        if self.config.robot.odometry == "log":
+            raise UsageError(
+                'Localizer.update: give odometry= (robot.odometry = "log"; "auto" or "laser" '
+                "match the scans instead)"
+            )
+        if self._laser is None:
+            if self._started:
+                raise UsageError(
+                    "Localizer.update: the earlier scans came with odometry; give it for this "
+                    "one too"
+                )
+            from slam.laser_odometry import LaserOdometry
+
+            self._laser = LaserOdometry(self.config)
+        return self._laser.pose_at(scan)
 
     def update_hits(
         self, time: float, ex: ArrayLike, ey: ArrayLike, odometry: ArrayLike, z_range: float
