@@ -17,7 +17,8 @@ post-filter stages (:mod:`slam.stages`). ``slam run`` feeds recorded logs throug
 Robots without an odometry pose (the ECE276A robot: wheel encoders and a gyro) feed their
 readings instead — :meth:`Slam.add_encoders` and :meth:`Slam.add_imu`, or ``encoders=`` and
 ``imu=`` of :meth:`Slam.update` — and a causal integrator (:class:`slam.odometry.OdometryIntegrator`)
-gives the odometry at each scan. docs/api.md describes the whole interface.
+gives the odometry at each scan; a robot with neither feeds its scans alone, and laser odometry
+(:class:`slam.laser_odometry.LaserOdometry`) stands in. docs/api.md describes the whole interface.
 """
 
 from __future__ import annotations
