@@ -238,3 +238,22 @@ def test_inspect_says_which_odometry_a_run_reads(tmp_path, capsys):
     assert said["raw"] == "slam run reads: odometry none in the log: laser odometry (scan matching)"
     assert said["still"].endswith("the scans' poses never move: laser odometry (scan matching)")
     assert said["moving"] == "slam run reads: odometry the poses written with the scans"
+
+
+def test_dead_reckoning_of_a_log_without_odometry_is_its_laser_odometry(tmp_path):
+    """``slam run --method odometry`` on raw scans alone draws the laser odometry, one pose per
+    scan, as the filter would receive it."""
+    truth = room_path(60)
+    log_path = tmp_path / "raw.clf"
+    log_path.write_text("\n".join(rawlaser_lines(truth)) + "\n")
+    out = tmp_path / "dr"
+    args = ["run", str(log_path), "--out", str(out), "--method", "odometry", "--quiet"]
+    assert main([*args, "--no-texture", "--no-record"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["odometry_source"] == "laser"
+    got = read_tum(out / "trajectory.tum")
+    with pytest.warns(DataWarning, match="the log has no odometry"):
+        scans = LogScans.from_log(load_carmen(log_path), slam.load_config(""))
+    np.testing.assert_array_equal(got.times, scans.times)
+    np.testing.assert_allclose(got.poses, scans.odometry, atol=1e-6)  # TUM's printed digits
+    assert np.abs(got.poses[:, :2] - in_first_frame(truth)[:, :2]).max() < 0.05
