@@ -96,7 +96,8 @@ class RobotConfig(Validated):
     """Where the odometry comes from: ``"log"`` the log's (wheel odometry, encoders + IMU; a log
     without any is refused), ``"laser"`` scan matching alone (:mod:`slam.laser_odometry`), ``"auto"``
     the log's where it has one, else the laser's — a log without odometry messages, encoders or
-    poses with its scans, or whose poses never move while its scans do (``metrics.json``:
+    poses with its scans, or whose odometry never moves (poses written with the scans that never
+    move give way to the log's odometry messages when those move) (``metrics.json``:
     ``odometry_source``; ``slam run`` warns)."""
     laser_odometry_keyframe_m: float = bounded(0.3, gt=0.0, le=100.0)
     """Laser odometry: a scan becomes a keyframe of the local map after this much travel (m) ..."""

@@ -574,7 +574,8 @@ def scan_pauses(times: ArrayLike) -> NDArray[np.int64]:
 def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64 | None, str]:
     """The log's odometry at the selected scans ``idx`` (:func:`slam.odometry.scan_odometry`), or
     ``None`` where ``robot.odometry`` takes the laser's instead, with why when ``"auto"`` chose
-    it ("": ``"laser"`` asked for it)."""
+    it ("": ``"laser"`` asked for it). With ``"auto"``, poses written with the scans that never
+    move give way to the log's odometry messages when those move, else to the laser's."""
     from slam.odometry import has_odometry, scan_odometry
 
     mode = config.robot.odometry
@@ -583,9 +584,23 @@ def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64
     if mode == "auto" and not has_odometry(log):
         return None, "the log has no odometry (no odometry messages, encoders or scan poses)"
     odometry = np.ascontiguousarray(scan_odometry(log, config.robot)[idx], dtype=np.float64)
-    if mode == "auto" and idx.size > 1 and not np.any(odometry != odometry[0]):
+    if mode != "auto" or idx.size < 2 or np.any(odometry != odometry[0]):
+        return odometry, ""
+    stream = log.odometry
+    if stream is None or len(stream.time) < 2 or not np.any(stream.poses != stream.poses[0]):
         return None, f"the log's odometry never moves (every scan's pose is {odometry[0].tolist()})"
-    return odometry, ""
+    from slam.io.plausibility import DataWarning
+    from slam.odometry import poses_at
+
+    warnings.warn(
+        f"{log.name}: the poses written with the scans never move (every one is "
+        f"{odometry[0].tolist()}); the odometry messages at the scans' times stand in",
+        DataWarning,
+        stacklevel=3,
+    )
+    order = np.argsort(stream.time, kind="stable")
+    times = np.asarray(log.scans.time, dtype=np.float64)[idx]  # type: ignore[union-attr]
+    return np.ascontiguousarray(poses_at(stream.time[order], stream.poses[order], times)), ""
 
 
 @dataclass(frozen=True, eq=False)

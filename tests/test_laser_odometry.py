@@ -257,3 +257,20 @@ def test_dead_reckoning_of_a_log_without_odometry_is_its_laser_odometry(tmp_path
     np.testing.assert_array_equal(got.times, scans.times)
     np.testing.assert_allclose(got.poses, scans.odometry, atol=1e-6)  # TUM's printed digits
     assert np.abs(got.poses[:, :2] - in_first_frame(truth)[:, :2]).max() < 0.05
+
+
+def test_still_scan_poses_give_way_to_moving_odometry_messages(tmp_path, capsys):
+    """FLASER lines whose poses are all zero beside ODOM lines that move: the messages at the
+    scans' times are the odometry (with a warning), not the laser's."""
+    truth = room_path(60)
+    lines = flaser_lines(truth, odometry=False)
+    lines += [f"ODOM {x:.6f} {y:.6f} {th:.6f} 0 0 0 {100.0 + 0.1 * k:.6f} h {100.0 + 0.1 * k:.6f}"
+              for k, (x, y, th) in enumerate(truth)]  # fmt: skip
+    log_path = tmp_path / "still_with_odom.clf"
+    log_path.write_text("\n".join(lines) + "\n")
+    with pytest.warns(DataWarning, match="the odometry messages at the scans' times stand in"):
+        scans = LogScans.from_log(load_carmen(log_path), slam.load_config(""))
+    assert scans.odometry_source == "log"
+    np.testing.assert_allclose(scans.odometry, truth, atol=1e-6)
+    assert main(["data", "inspect", str(log_path)]) == 0
+    assert "odometry the odometry messages at the scans' times" in capsys.readouterr().out

@@ -77,6 +77,9 @@ def _odometry_read(log: Any) -> str:
     if not has_odometry(log):
         return "none in the log: laser odometry (scan matching)"
     if written is not None and len(written) > 1 and not np.any(written != written[0]):
+        stream = log.odometry
+        if stream is not None and len(stream.time) > 1 and np.any(stream.poses != stream.poses[0]):
+            return "the odometry messages at the scans' times (the scans' poses never move)"
         return "the scans' poses never move: laser odometry (scan matching)"
     if log.encoders is not None:
         return "encoders + IMU"
