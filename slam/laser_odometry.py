@@ -10,7 +10,8 @@ intel's runs backwards at 631 of its scans). Where that start does not fit the m
 :data:`FIT_DISTANCE` of it: the robot began or stopped turning), a brute-force search of ±
 :data:`SEARCH_XY` and ± :data:`SEARCH_TH` around it gives a second start, and the lower-cost
 match wins; where neither fits, a search over every heading (a gap in the log, during which the
-robot turned). A scan that fits nowhere keeps the constant-velocity prediction.
+robot turned), and the best of them is taken where it explains more of the scan than the start
+does. A scan that fits nowhere keeps the constant-velocity prediction.
 
 The poses are causal — each depends on the scans before it only — so a batch run
 (:meth:`slam.scans.LogScans.from_log`) and :meth:`slam.online.Slam.update` fed the same scans
@@ -114,9 +115,9 @@ class LaserOdometry:
             return start
         view = self.maps.field(0)
         need = MIN_FIT * ex.size
-        _, close = fit_counts(view, start, ex, ey, FIT_DISTANCE)
+        _, close_start = fit_counts(view, start, ex, ey, FIT_DISTANCE)
         starts = [start]
-        if close < need:
+        if close_start < need:
             self.unfit.append(len(self.poses))
             starts.append(self._search(view, start, ex, ey, SEARCH_TH))
         found, close = self._best(view, starts, ex, ey)
@@ -124,6 +125,9 @@ class LaserOdometry:
             wide, close_wide = self._best(view, [self._search(view, start, ex, ey, np.pi)], ex, ey)
             if close_wide > close:
                 found, close = wide, close_wide
+            if close >= lc.min_beams and close > close_start:  # explains more than the start
+                self.matched += 1
+                return found
         if close < need or close < lc.min_beams:
             self.kept_prediction += 1
             return start
