@@ -66,8 +66,9 @@ class LoopResult:
     """Largest change of a node's position (m)."""
 
 
-def _empty_map(center: F64, config: Config) -> ParticleMaps:
-    """A one-particle map for a loop submap around ``center`` (the filter's field settings)."""
+def empty_submap(center: F64, config: Config) -> ParticleMaps:
+    """A one-particle map around ``center`` (the filter's field settings, ``loops.submap_*``): a
+    loop submap, or the local map of laser odometry."""
     rc, lc = config.rbpf, config.loops
     return ParticleMaps(
         1,
@@ -159,7 +160,7 @@ def _detect(
     lc = config.loops
     candidates = _candidates(poses, path, lc)
     windows = [_submap_window(path, j, i, lc) for j, i in candidates]
-    context = _MatchContext.of(config)
+    context = MatchContext.of(config)
     ranges = window_chunks(windows, 4 * threads())
     parts = in_threads(
         [
@@ -180,8 +181,9 @@ def _detect(
     return [edge for part in parts for edge in part], len(candidates)
 
 
-class _MatchContext(NamedTuple):
-    """The likelihood tables a loop match uses (the filter's levels, the search's coarse one)."""
+class MatchContext(NamedTuple):
+    """The likelihood tables a match on a one-particle map uses (the filter's levels, the
+    search's coarse one): loop closing, and laser odometry (:mod:`slam.laser_odometry`)."""
 
     luts: F64
     step_inv: float
@@ -190,7 +192,7 @@ class _MatchContext(NamedTuple):
     iterations: int
 
     @classmethod
-    def of(cls, config: Config) -> _MatchContext:
+    def of(cls, config: Config) -> MatchContext:
         """The tables of ``config``'s ``[rbpf]`` and ``[loops]`` settings."""
         lc, rc = config.loops, config.rbpf
         luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
@@ -208,7 +210,7 @@ def _detect_range(
     poses: F64,
     config: Config,
     table: ScanHits,
-    context: _MatchContext,
+    context: MatchContext,
     candidates: list[tuple[int, int]],
     windows: list[tuple[int, int]],
 ) -> list:
@@ -220,7 +222,7 @@ def _detect_range(
     maps, window = None, (-1, -1)
     for (j, i), (lo, hi) in zip(candidates, windows, strict=True):
         if (lo, hi) != window:
-            maps, window = _empty_map(poses[j], config), (lo, hi)
+            maps, window = empty_submap(poses[j], config), (lo, hi)
             insert_nodes(maps, table, np.arange(lo, hi, lc.submap_stride), poses, config)
         ex, ey = seq.hits(int(steps[i]), rc.match_beams)
         if ex.size < lc.min_beams:

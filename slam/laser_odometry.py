@@ -30,10 +30,12 @@ from numpy.typing import NDArray
 
 from slam.calibration import CalibrationSettings
 from slam.config import Config
+from slam.errors import UsageError
 from slam.geometry import compose, relative, wrap_angle
+from slam.graph import MatchContext, empty_submap
 from slam.kernels.field import FieldView, match_one
 from slam.kernels.graph import correlative_search, fit_counts
-from slam.mapping import ParticleMaps, likelihood_tables
+from slam.mapping import ParticleMaps
 from slam.scans import Scan
 
 F64 = NDArray[np.float64]
@@ -69,16 +71,10 @@ class LaserOdometry:
     """
 
     def __init__(self, config: Config) -> None:
-        rc, lc, robot = config.rbpf, config.loops, config.robot
         self.config = config
-        self.luts, self.step_inv = likelihood_tables(
-            np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax
-        )
-        self.coarse, self.coarse_inv = likelihood_tables(
-            np.array([lc.search_sigma]), rc.z_hit, rc.z_rand, rc.dmax
-        )
-        self.iterations = rc.max_iterations * lc.match_iteration_factor
-        self.keyframes: deque[tuple[F64, F64]] = deque(maxlen=robot.laser_odometry_window)
+        self.tables = MatchContext.of(config)
+        """The matcher's likelihood tables, as the loop closing's matches use them."""
+        self.keyframes: deque[tuple[F64, F64]] = deque(maxlen=config.robot.laser_odometry_window)
         self.maps: ParticleMaps | None = None
         self.poses: list[F64] = []
         self.matched = 0
@@ -139,8 +135,9 @@ class LaserOdometry:
         lc = self.config.loops
         self.searched += 1
         thin = slice(None, None, max(1, ex.size // lc.search_beams))
+        t = self.tables
         return correlative_search(
-            view, start, ex[thin].copy(), ey[thin].copy(), self.coarse[0, 0], self.coarse_inv,
+            view, start, ex[thin].copy(), ey[thin].copy(), t.coarse[0, 0], t.coarse_inv,
             SEARCH_XY, lc.search_step, th, SEARCH_TH_STEP,
         )[:3].copy()  # fmt: skip
 
@@ -149,10 +146,10 @@ class LaserOdometry:
         returns lie within :data:`FIT_DISTANCE` of the map there."""
         best, best_cost = starts[0], np.inf
         for start in starts:
+            t = self.tables
             found, cost, _ = match_one(
-                view, start, ex, ey, self.luts, self.step_inv, self.iterations,
-                self.config.rbpf.tolerance, 1,
-            )  # fmt: skip
+                view, start, ex, ey, t.luts, t.step_inv, t.iterations, self.config.rbpf.tolerance, 1
+            )
             if cost < best_cost:
                 best, best_cost = found, cost
         _, close = fit_counts(view, best, ex, ey, FIT_DISTANCE)
@@ -170,15 +167,9 @@ class LaserOdometry:
         )
 
     def _rebuild(self) -> None:
-        """The local map anew from the keyframes in the window (the loop closing's submap
-        settings, ``loops.submap_*``)."""
-        rc, lc = self.config.rbpf, self.config.loops
-        newest = self.keyframes[-1][0]
-        maps = ParticleMaps(
-            1, rc.resolution or self.config.map.resolution, rc.dmax, tile=rc.tile,
-            center=(float(newest[0]), float(newest[1])), size_m=lc.submap_size,
-            grow_margin_m=lc.submap_grow_margin, capacity=lc.submap_tiles,
-        )  # fmt: skip
+        """The local map anew from the keyframes in the window (a loop submap's settings)."""
+        rc = self.config.rbpf
+        maps = empty_submap(self.keyframes[-1][0], self.config)
         poses = np.array([p for p, _ in self.keyframes])
         hits = np.hstack([h for _, h in self.keyframes])
         sizes = [h.shape[1] for _, h in self.keyframes]
@@ -186,6 +177,28 @@ class LaserOdometry:
         reach = np.array([np.sqrt((h * h).sum(axis=0).max()) for _, h in self.keyframes])
         maps.insert_scans(poses, hits, offsets, reach + rc.dmax + 1.0, rc.skip_insert_below)
         self.maps = maps
+
+
+def start_for_update(config: Config, owner: str, started: bool, ask: str) -> LaserOdometry:
+    """The laser odometry an online ``owner`` (``"Slam.update"``, ``"Localizer.update"``) starts
+    when its first scan comes without odometry; a :class:`~slam.errors.UsageError` naming what
+    to give instead (``ask``) with ``robot.odometry = "log"``, or when earlier scans
+    (``started``) came with odometry."""
+    if config.robot.odometry == "log":
+        raise UsageError(
+            f'{owner}: {ask} (robot.odometry = "log"; "auto" or "laser" match the scans instead)'
+        )
+    if started:
+        raise UsageError(f"{owner}: the earlier scans came with odometry; give it for this one too")
+    return LaserOdometry(config)
+
+
+def refuse_given(owner: str) -> UsageError:
+    """The error of an online ``owner`` given odometry after scans that came without it."""
+    return UsageError(
+        f"{owner}: the earlier scans came without odometry (laser odometry); give none for this "
+        "one either"
+    )
 
 
 def laser_odometry(scans: list[Scan], config: Config) -> tuple[F64, LaserOdometry]:

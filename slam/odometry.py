@@ -179,6 +179,19 @@ def has_odometry(log: Log) -> bool:
     return log.encoders is not None or (log.odometry is not None and len(log.odometry.time) > 0)
 
 
+def never_moves(poses: F64) -> bool:
+    """Whether odometry ``poses`` ``(N, 3)`` (N ≥ 2) are all the same pose: no odometry at all,
+    as a log whose scan lines carry zeros has."""
+    return len(poses) > 1 and not np.any(poses != poses[0])
+
+
+def moving_stream(log: Log) -> bool:
+    """Whether ``log`` has odometry messages that move (what stands in for scan poses that
+    never do)."""
+    stream = log.odometry
+    return stream is not None and len(stream.time) > 1 and not never_moves(stream.poses)
+
+
 def scan_odometry(log: Log, robot: RobotConfig) -> F64:
     """Odometry pose ``(N, 3)`` of the robot at each scan of ``log`` (in file order).
 
@@ -198,7 +211,7 @@ def scan_odometry(log: Log, robot: RobotConfig) -> F64:
             log.odometry.time[order], log.odometry.poses[order], log.scans.time, what="scan"
         )
     raise DataError(
-        f"{log.name}: the log has no odometry (no encoders, no ODOM messages); "
+        f"{log.source or log.name}: the log has no odometry (no encoders, no ODOM messages); "
         'robot.odometry = "auto" or "laser" runs on the laser\'s scan matching instead'
     )
 

@@ -252,10 +252,9 @@ class Slam:
         if odometry is None:
             odometry = self._odometry_at(resolved)
         elif self._laser is not None:
-            raise UsageError(
-                "Slam.update: the earlier scans came without odometry (laser odometry); "
-                "give none for this one either"
-            )
+            from slam.laser_odometry import refuse_given
+
+            raise refuse_given("Slam.update")
         k = self.scans.append(resolved, odometry)
         self._running_period.add(scan.time)
         start = time.perf_counter()
@@ -277,19 +276,13 @@ class Slam:
         ``robot.odometry = "log"``."""
         if self._odometry is not None:
             return self._odometry.pose_at(scan.time)
-        if self.config.robot.odometry == "log":
-            raise UsageError(
-                "Slam.update: give odometry= (a pose) or feed encoders and IMU readings "
-                '(robot.odometry = "log"; "auto" or "laser" match the scans instead)'
-            )
         if self._laser is None:
-            if len(self.scans):
-                raise UsageError(
-                    "Slam.update: the earlier scans came with odometry; give it for this one too"
-                )
-            from slam.laser_odometry import LaserOdometry
+            from slam.laser_odometry import start_for_update
 
-            self._laser = LaserOdometry(self.config)
+            self._laser = start_for_update(
+                self.config, "Slam.update", len(self.scans) > 0,
+                "give odometry= (a pose) or feed encoders and IMU readings",
+            )  # fmt: skip
         return self._laser.pose_at(scan)
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:

@@ -442,8 +442,9 @@ def _up_to_scan(trajectory: Trajectory, log: Log, last: int) -> Trajectory:
 
 
 def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
-    """``method = "odometry"``: the odometry trajectory at its natural rate, and the map of the
-    scans at their odometry poses."""
+    """``method = "odometry"``: the odometry trajectory at its natural rate (a log without
+    odometry: its laser odometry, one pose per scan), and the map of the scans at their odometry
+    poses."""
     from slam.odometry import odometry_trajectory
     from slam.online import Result
     from slam.scans import LogScans, ScanSequence
@@ -456,9 +457,7 @@ def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
         trajectory = odometry_trajectory(log, config.robot)
     else:
         scans = LogScans.from_log(log, config)
-        seq = ScanSequence(len(scans))
-        for scan, odometry in scans:
-            seq.append(scan, odometry)
+        seq = ScanSequence.from_scans(scans)
         base["odometry_source"] = scans.odometry_source
         if scans.odometry_source == "laser":  # no odometry of the log's: the laser's, per scan
             trajectory = Trajectory(scans.times, scans.odometry)

@@ -517,7 +517,11 @@ class ScanSequence:
     @classmethod
     def from_log(cls, log: Log, config: Config) -> ScanSequence:
         """The scans a run of ``log`` processes (:class:`LogScans`), with their odometry."""
-        source = LogScans.from_log(log, config)
+        return cls.from_scans(LogScans.from_log(log, config))
+
+    @classmethod
+    def from_scans(cls, source: LogScans) -> ScanSequence:
+        """The scans of ``source``, with their odometry, in a sequence."""
         seq = cls(len(source))
         for scan, odometry in source:
             seq.append(scan, odometry)
@@ -576,7 +580,7 @@ def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64
     ``None`` where ``robot.odometry`` takes the laser's instead, with why when ``"auto"`` chose
     it ("": ``"laser"`` asked for it). With ``"auto"``, poses written with the scans that never
     move give way to the log's odometry messages when those move, else to the laser's."""
-    from slam.odometry import has_odometry, scan_odometry
+    from slam.odometry import has_odometry, moving_stream, never_moves, scan_odometry
 
     mode = config.robot.odometry
     if mode == "laser":
@@ -584,10 +588,10 @@ def _log_odometry(log: Log, idx: NDArray[np.int64], config: Config) -> tuple[F64
     if mode == "auto" and not has_odometry(log):
         return None, "the log has no odometry (no odometry messages, encoders or scan poses)"
     odometry = np.ascontiguousarray(scan_odometry(log, config.robot)[idx], dtype=np.float64)
-    if mode != "auto" or idx.size < 2 or np.any(odometry != odometry[0]):
+    if mode != "auto" or not never_moves(odometry):
         return odometry, ""
     stream = log.odometry
-    if stream is None or len(stream.time) < 2 or not np.any(stream.poses != stream.poses[0]):
+    if stream is None or not moving_stream(log):
         return None, f"the log's odometry never moves (every scan's pose is {odometry[0].tolist()})"
     from slam.io.plausibility import DataWarning
     from slam.odometry import poses_at

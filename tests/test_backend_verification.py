@@ -10,7 +10,7 @@ import numpy as np
 
 from slam.backend.global_loops import _fitting
 from slam.config import Config
-from slam.graph import _empty_map
+from slam.graph import empty_submap
 from slam.kernels.graph import fit_counts
 from slam.mapping import MatchResult
 from slam.particle_filter import RbpfFilter
@@ -25,7 +25,7 @@ def _walls(x0: float, x1: float, y1: float = 6.0) -> np.ndarray:
 
 
 def _submap(points: np.ndarray, config: Config):
-    maps = _empty_map(np.zeros(3), config)
+    maps = empty_submap(np.zeros(3), config)
     maps.ensure_contains(-2.0, -2.0, 12.0, 8.0)
     hx, hy = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
     maps.insert(np.zeros((1, 3)), hx, hy, hx, hy, 0.0)

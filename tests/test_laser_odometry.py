@@ -130,7 +130,7 @@ def test_slam_run_on_raw_scans_without_odometry(tmp_path, capsys):
     args = ["run", str(log_path), "--out", str(refused), "--set", 'robot.odometry="log"', "--quiet"]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "raw: the log has no odometry" in err[0] and "laser" in err[0]
+    assert len(err) == 1 and f"{log_path}: the log has no odometry" in err[0] and "laser" in err[0]
     assert not refused.exists()
     with pytest.raises(DataError, match="no odometry"):
         LogScans.from_log(log, slam.load_config("", None, ['robot.odometry="log"']))

@@ -149,9 +149,9 @@ class SubmapCache:
         return self._cached("map", self._maps, (lo, hi), lambda: self._field_view(lo, hi))
 
     def _field_view(self, lo: int, hi: int) -> FieldView:
-        from slam.graph import _empty_map, insert_nodes
+        from slam.graph import empty_submap, insert_nodes
 
-        maps = _empty_map(self.poses[lo], self.config)
+        maps = empty_submap(self.poses[lo], self.config)
         nodes = np.arange(lo, hi, self.config.loops.submap_stride)
         insert_nodes(maps, self._hits_table(), nodes, self.poses, self.config)
         return compact_view(maps.field(0))

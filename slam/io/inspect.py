@@ -14,8 +14,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from slam.io.formats import BAG_FORMATS, detect_format, run_config_name
 from slam.io.rosbag import BagOptions
 
@@ -71,14 +69,13 @@ def inspect_path(path: Path, options: BagOptions | None = None) -> dict[str, Any
 
 def _odometry_read(log: Any) -> str:
     """Which odometry ``slam run`` reads from a log with scans (``robot.odometry = "auto"``)."""
-    from slam.odometry import has_odometry
+    from slam.odometry import has_odometry, moving_stream, never_moves
 
     written = log.scans.odometry
     if not has_odometry(log):
         return "none in the log: laser odometry (scan matching)"
-    if written is not None and len(written) > 1 and not np.any(written != written[0]):
-        stream = log.odometry
-        if stream is not None and len(stream.time) > 1 and np.any(stream.poses != stream.poses[0]):
+    if written is not None and never_moves(written):
+        if moving_stream(log):
             return "the odometry messages at the scans' times (the scans' poses never move)"
         return "the scans' poses never move: laser odometry (scan matching)"
     if log.encoders is not None:

@@ -217,10 +217,9 @@ class Localizer:
         if odometry is None:
             odometry = self._laser_odometry(scan.resolved(self.config.lidar))
         elif self._laser is not None:
-            raise UsageError(
-                "Localizer.update: the earlier scans came without odometry (laser odometry); "
-                "give none for this one either"
-            )
+            from slam.laser_odometry import refuse_given
+
+            raise refuse_given("Localizer.update")
         pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise DataError(
@@ -238,20 +237,12 @@ class Localizer:
 
     def _laser_odometry(self, scan: Scan) -> F64:
         """The laser odometry's pose at ``scan`` (:meth:`update` without odometry)."""
-        if self.config.robot.odometry == "log":
-            raise UsageError(
-                'Localizer.update: give odometry= (robot.odometry = "log"; "auto" or "laser" '
-                "match the scans instead)"
-            )
         if self._laser is None:
-            if self._started:
-                raise UsageError(
-                    "Localizer.update: the earlier scans came with odometry; give it for this "
-                    "one too"
-                )
-            from slam.laser_odometry import LaserOdometry
+            from slam.laser_odometry import start_for_update
 
-            self._laser = LaserOdometry(self.config)
+            self._laser = start_for_update(
+                self.config, "Localizer.update", self._started, "give odometry="
+            )
         return self._laser.pose_at(scan)
 
     def update_hits(
