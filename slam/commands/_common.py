@@ -158,7 +158,9 @@ def add_bag_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``--scan-topic``, ``--odom-topic`` and ``--base-frame`` (ROS bags and MCAP files)."""
     group = parser.add_argument_group("ROS bags and MCAP files")
     group.add_argument(
-        "--scan-topic", metavar="TOPIC", help="LaserScan topic (default: the only one)"
+        "--scan-topic",
+        metavar="TOPIC",
+        help="LaserScan or MultiEchoLaserScan topic (default: the only one)",
     )
     group.add_argument(
         "--odom-topic",

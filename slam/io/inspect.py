@@ -135,9 +135,17 @@ def format_inspection(report: dict[str, Any]) -> str:
     run = report["run"]
     if run.get("command"):
         if "scan_topic" in run:
-            reads = f"scans {run['scan_topic']}, odometry {run['odom_source']}"
+            kind = (
+                " (MultiEchoLaserScan: first echoes)"
+                if "MultiEcho" in run.get("scan_type", "")
+                else ""
+            )
+            reads = f"scans {run['scan_topic']}{kind}, odometry {run['odom_source']}"
             if "imu_topic" in run:
-                reads += f", IMU {run['imu_topic']}"
+                gyro = (
+                    " (its gyro turns the laser odometry)" if "laser" in run["odom_source"] else ""
+                )
+                reads += f", IMU {run['imu_topic']}{gyro}"
             lines.append(f"slam run reads: {reads}")
         elif "odometry" in run:
             lines.append(f"slam run reads: odometry {run['odometry']}")

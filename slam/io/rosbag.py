@@ -13,6 +13,11 @@ Streams
   (the record time when a driver left it zero). Readings below ``range_min``, negative, NaN or
   −inf are invalid beams (NaN, counted); +inf and readings at or beyond the message's
   ``range_max`` mean "no return" (REP 117): they keep their value, or become ``no_return``.
+* ``sensor_msgs/MultiEchoLaserScan`` (Cartographer's demo bags) → :attr:`Log.scans` too, read
+  like a LaserScan whose range per beam is the beam's **first** echo (as Cartographer's
+  ``msg_conversion.cc`` takes it); the first echo then follows the LaserScan rules above, and
+  a beam with no echo at all is an invalid beam (NaN, counted). ``meta["scan_type"]`` names the
+  message type read.
 * ``nav_msgs/Odometry`` → :attr:`Log.odometry` (pose and twist, sorted by stamp); without an
   Odometry topic, the ``odom → base`` transforms of ``/tf`` (velocities then by finite
   differences). The odometry pose at a scan is interpolated at the scan's stamp, or with
@@ -36,19 +41,25 @@ Streams
 * ``tf2_msgs/TFMessage`` on ``/tf_static`` (else ``/tf``) → the laser's mounting in the robot
   frame, composed along the frame chain ``base → … → laser`` and projected to the plane (an
   upside-down laser, rolled by π, has its beam angles mirrored; a tilted one is an error).
-* ``sensor_msgs/Imu`` (when there is exactly one such topic) → :attr:`Log.imu`.
+* ``sensor_msgs/Imu`` (when there is exactly one such topic) → :attr:`Log.imu`, its angular
+  velocity and linear acceleration rotated into the robot frame (the full 3D rotation of the
+  chain ``robot → … → header.frame_id``, found as the laser's is) so that row 2 of
+  ``angular_velocity`` is the yaw rate about the robot's z axis. Without such a chain they stay
+  as recorded; ``meta["imu_frame"]``, ``meta["imu_rotated"]`` and ``meta["imu_frame_source"]``
+  say which.
 
-Topics are found by message type; when a type has several topics the error lists them and asks
-for ``--scan-topic`` / ``--odom-topic``. The robot frame is the Odometry messages'
-``child_frame_id`` (for tf odometry: the first frame above the laser with a moving parent; without
-odometry: the top of the laser's ``/tf_static`` chain, else the laser frame itself, at offset
-zero) unless ``--base-frame`` names it.
+Topics are found by message type (LaserScan and MultiEchoLaserScan topics are both scan topics);
+when a type has several topics the error lists them and asks for ``--scan-topic`` /
+``--odom-topic``. The robot frame is the Odometry messages' ``child_frame_id`` (for tf odometry:
+the first frame above the laser with a moving parent; without odometry: the top of the laser's
+``/tf_static`` chain, else the laser frame itself, at offset zero) unless ``--base-frame`` names
+it.
 
 Reading streams the messages once (no whole-bag load): arrays are preallocated from the bag's
-index counts and grow only when a count is unknown. LaserScan and Odometry messages are decoded
-by a small ROS 1 / CDR decoder (five times faster than the generic deserializer on intel), which
-is checked against ``rosbags``' deserializer on each topic's first message and falls back to it
-when the bag's message definition differs.
+index counts and grow only when a count is unknown. LaserScan, MultiEchoLaserScan and Odometry
+messages are decoded by a small ROS 1 / CDR decoder (five times faster than the generic
+deserializer on intel), which is checked against ``rosbags``' deserializer on each topic's first
+message and falls back to it when the bag's message definition differs.
 """
 
 from __future__ import annotations
@@ -77,6 +88,9 @@ from slam.io.log import ImuStream, Log, OdometryStream, ScanStream, laser_offset
 F64 = NDArray[np.float64]
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
+MULTI_ECHO_TYPE = "sensor_msgs/msg/MultiEchoLaserScan"
+SCAN_TYPES = (SCAN_TYPE, MULTI_ECHO_TYPE)
+"""Message types read as laser scans (a MultiEchoLaserScan beam's range: its first echo)."""
 ODOM_TYPE = "nav_msgs/msg/Odometry"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -107,7 +121,7 @@ class BagOptions:
     """What to read from a bag when it is ambiguous (``--scan-topic`` etc.)."""
 
     scan_topic: str | None = None
-    """LaserScan topic; default: the only one."""
+    """LaserScan or MultiEchoLaserScan topic; default: the only one."""
     odom_topic: str | None = None
     """Odometry topic, or ``tf`` for the transforms; default: the only Odometry topic, else tf,
     else none (:data:`NO_ODOMETRY`)."""
@@ -176,6 +190,8 @@ class _Selection:
     tf_static: list[Any]
     imu: list[Any]
     scan_topic: str
+    scan_type: str
+    """The scan topic's message type (one of :data:`SCAN_TYPES`)."""
     odom_topic: str
     """The Odometry topic, ``"tf"``, or ``"none"`` (:data:`NO_ODOMETRY`: neither is in the bag)."""
     notes: list[str] = field(default_factory=list)
@@ -289,7 +305,7 @@ def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
         by_type.setdefault(msgtype, []).append(topic)
     conns = reader.connections
 
-    scan_topic = _pick(path, topics, by_type, SCAN_TYPE, options.scan_topic, "--scan-topic")
+    scan_topic = _pick(path, topics, by_type, SCAN_TYPES, options.scan_topic, "--scan-topic")
     tf_topics = [t for t in by_type.get(TF_TYPE, []) if not t.endswith("tf_static")]
     static_topics = [t for t in by_type.get(TF_TYPE, []) if t.endswith("tf_static")]
     odom_choice = options.odom_topic
@@ -306,7 +322,7 @@ def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
                 f"frame {options.base_frame!r} (--base-frame); topics in the bag: {_describe(topics)}"
             )
     else:
-        odom_topic = _pick(path, topics, by_type, ODOM_TYPE, odom_choice, "--odom-topic")
+        odom_topic = _pick(path, topics, by_type, (ODOM_TYPE,), odom_choice, "--odom-topic")
     imu_topics = by_type.get(IMU_TYPE, [])
     notes = []
     if len(imu_topics) > 1:
@@ -318,6 +334,7 @@ def select_topics(path: Path, reader: Any, options: BagOptions) -> _Selection:
         tf_static=[c for c in conns if c.topic in static_topics],
         imu=[c for c in conns if len(imu_topics) == 1 and c.topic == imu_topics[0]],
         scan_topic=scan_topic,
+        scan_type=next(m for t, m, _ in topics if t == scan_topic),
         odom_topic=odom_topic,
         notes=notes,
     )
@@ -327,12 +344,13 @@ def _pick(
     path: Path,
     topics: Sequence[tuple[str, str, int]],
     by_type: dict[str, list[str]],
-    msgtype: str,
+    msgtypes: Sequence[str],
     chosen: str | None,
     option: str,
 ) -> str:
-    """The one topic of ``msgtype`` (or the ``chosen`` one, which must have that type)."""
-    candidates = by_type.get(msgtype, [])
+    """The one topic of the types ``msgtypes`` (or the ``chosen`` one, which must have one)."""
+    candidates = sorted(t for m in msgtypes for t in by_type.get(m, []))
+    wanted = msgtypes[0] + " topic" + (f" (or {', '.join(msgtypes[1:])})" if msgtypes[1:] else "")
     if chosen is not None:
         match = [t for t, _, _ in topics if t in (chosen, _norm(chosen))]
         if not match:
@@ -340,19 +358,20 @@ def _pick(
                 f"{path}: {option} {chosen}: no such topic; topics in the bag: {_describe(topics)}"
             )
         found = next(m for t, m, _ in topics if t == match[0])
-        if found != msgtype:
-            raise DataError(f"{path}: {option} {chosen}: expected a {msgtype} topic, found {found}")
+        if found not in msgtypes:
+            raise DataError(f"{path}: {option} {chosen}: expected a {wanted}, found {found}")
         return match[0]
     if not candidates:
-        what = "laser scans" if msgtype == SCAN_TYPE else "odometry"
-        raise DataError(
-            f"{path}: no {what}: no {msgtype} topic; topics in the bag: {_describe(topics)}"
-        )
+        what = "laser scans" if SCAN_TYPE in msgtypes else "odometry"
+        raise DataError(f"{path}: no {what}: no {wanted}; topics in the bag: {_describe(topics)}")
     if len(candidates) > 1:
-        raise UsageError(
-            f"{path}: {len(candidates)} {msgtype} topics ({', '.join(candidates)}); "
-            f"choose one with {option} TOPIC"
-        )
+        types = {m for t, m, _ in topics if t in candidates}
+        if len(types) == 1:
+            listed = f"{len(candidates)} {types.pop()} topics ({', '.join(candidates)})"
+        else:
+            mixed = [row for row in topics if row[0] in candidates]
+            listed = f"{len(candidates)} laser scan topics ({_describe(mixed)})"
+        raise UsageError(f"{path}: {listed}; choose one with {option} TOPIC")
     return candidates[0]
 
 
@@ -422,6 +441,120 @@ def _scan_cdr(raw: bytes) -> _Scan:
     return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
 
 
+def _multi_echo_ros1(raw: bytes) -> _Scan:
+    seq, sec, nsec = struct.unpack_from("<III", raw, 0)
+    frame, pos = _ros1_string(raw, 12)
+    amin, _, inc, _, _, rmin, rmax = struct.unpack_from("<7f", raw, pos)
+    ranges = _first_echoes(raw, pos + 28, "<", 0)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges, seq)
+
+
+def _multi_echo_cdr(raw: bytes) -> _Scan:
+    e = _cdr_endian(raw)
+    sec, nsec = struct.unpack_from(e + "iI", raw, 4)
+    frame, pos = _cdr_string(raw, 12, e)
+    pos = _align(pos, 4)
+    amin, _, inc, _, _, rmin, rmax = struct.unpack_from(e + "7f", raw, pos)
+    ranges = _first_echoes(raw, pos + 28, e, 3)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
+
+
+def _first_echoes(raw: bytes, pos: int, e: str, padding: int) -> NDArray[np.float32]:
+    """The first echo of each beam of a MultiEchoLaserScan (NaN for a beam without echoes): the
+    ``ranges`` and ``intensities`` lists of ``LaserEcho`` (``uint32`` count, then per beam a
+    ``uint32`` count and that many ``float32``) from byte ``pos`` to the end of ``raw``.
+
+    Every field is 4 bytes wide, so the rest of the message is read as one array of words (in
+    CDR ``pos`` is 4-aligned, so no padding falls inside it; up to ``padding`` bytes may follow).
+    The intensities are only skipped: at once when they have the ranges' echo counts.
+    """
+    size = (len(raw) - pos) // 4
+    if size < 2:
+        raise _Mismatch
+    words = np.frombuffer(raw, e + "u4", size, pos)
+    n = int(words[0])
+    starts, after = _echo_starts(words, 1, n)
+    if after >= size:
+        raise _Mismatch
+    counts = words[starts]
+    if (
+        int(words[after]) == n
+        and 2 * after <= size
+        and np.array_equal(words[starts + after], counts)
+    ):
+        end = 2 * after  # the intensities laid out like the ranges
+    else:
+        _, end = _echo_starts(words, after + 1, int(words[after]))
+    _end(raw, pos + 4 * end, padding)
+    first = np.full(n, np.nan, dtype=np.float32)
+    has = counts > 0
+    first[has] = words.view(e + "f4")[starts[has] + 1]
+    return first
+
+
+_ECHO_COUNT_MAX = 64
+"""Largest echo count per beam the vectorised walk of :func:`_varying_echo_starts` expects."""
+
+
+def _echo_starts(words: NDArray[np.uint32], start: int, n: int) -> tuple[NDArray[np.intp], int]:
+    """Index in ``words`` of each of the ``n`` echo counts of a ``LaserEcho[]`` list whose first
+    count is at ``start``, and the index just past the list.
+
+    A lidar that reports the same number of echoes for every beam is indexed by one strided
+    comparison; varying counts by :func:`_varying_echo_starts`, else by following the counts one
+    by one (:func:`_walk_echo_starts`).
+    """
+    if n == 0:
+        return np.zeros(0, dtype=np.intp), start
+    if n > words.shape[0] - start:  # every beam takes at least its count's word
+        raise _Mismatch
+    stride = int(words[start]) + 1
+    end = start + n * stride
+    if end <= words.shape[0] and np.all(words[start:end:stride] == stride - 1):
+        return np.arange(start, end, stride, dtype=np.intp), end
+    rest = words[start:]
+    heads, length = _varying_echo_starts(rest, n) or _walk_echo_starts(rest, n)
+    return heads + start, start + length
+
+
+def _varying_echo_starts(words: NDArray[np.uint32], n: int) -> tuple[NDArray[np.intp], int] | None:
+    """The echo counts of a ``LaserEcho[]`` list starting at ``words[0]`` found without a loop,
+    or ``None``.
+
+    A count is a small word (at most :data:`_ECHO_COUNT_MAX`) that no earlier count's echoes
+    cover: an echo's float32 bits are that small only for 0.0 (which covers nothing) or a
+    subnormal. The chain ``next = count + 1 + words[count]`` is then checked from the first count
+    to the last, so a wrong guess returns ``None`` instead of a wrong answer.
+    """
+    size = words.shape[0]
+    small = np.flatnonzero(words <= _ECHO_COUNT_MAX)
+    reach = np.minimum(small + words[small].astype(np.intp) + 1, size + 1)
+    depth = np.bincount(small + 1, minlength=size + 2) - np.bincount(reach, minlength=size + 2)
+    covered = np.cumsum(depth[:size]) > 0
+    heads = small[~covered[small]][:n]
+    if heads.shape[0] != n or heads[0] != 0:
+        return None
+    after = heads + 1 + words[heads].astype(np.intp)
+    if not np.array_equal(heads[1:], after[:-1]) or after[-1] > size:
+        return None
+    return heads, int(after[-1])
+
+
+def _walk_echo_starts(words: NDArray[np.uint32], n: int) -> tuple[NDArray[np.intp], int]:
+    """The echo counts of a ``LaserEcho[]`` list starting at ``words[0]``, followed one by one."""
+    counts = words.tolist()
+    offsets = [0] * n
+    p = 0
+    for i in range(n):
+        if p >= len(counts):
+            raise _Mismatch
+        offsets[i] = p
+        p += 1 + counts[p]
+    if p > len(counts):
+        raise _Mismatch
+    return np.asarray(offsets, dtype=np.intp), p
+
+
 def _yaw(qx: float, qy: float, qz: float, qw: float) -> float:
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
@@ -474,6 +607,21 @@ def _scan_msg(msg: Any) -> _Scan:
         float(msg.range_min),
         float(msg.range_max),
         np.asarray(msg.ranges, dtype=np.float32),
+        _seq(msg.header),
+    )
+
+
+def _multi_echo_msg(msg: Any) -> _Scan:
+    """A MultiEchoLaserScan as a scan of its first echoes (NaN where a beam has none)."""
+    first = [e.echoes[0] if len(e.echoes) else np.nan for e in msg.ranges]
+    return _Scan(
+        _stamp(msg.header),
+        msg.header.frame_id,
+        float(msg.angle_min),
+        float(msg.angle_increment),
+        float(msg.range_min),
+        float(msg.range_max),
+        np.array(first, dtype=np.float32),
         _seq(msg.header),
     )
 
@@ -534,6 +682,14 @@ def _same(a: Any, b: Any) -> bool:
     return True
 
 
+_Decode = Callable[[bytes], _Scan]
+_SCAN_DECODERS: dict[str, tuple[_Decode, _Decode, Callable[[Any], _Scan]]] = {
+    SCAN_TYPE: (_scan_ros1, _scan_cdr, _scan_msg),
+    MULTI_ECHO_TYPE: (_multi_echo_ros1, _multi_echo_cdr, _multi_echo_msg),
+}
+"""Per scan message type: the fast ROS 1 and CDR decoders and the converter of rosbags' message."""
+
+
 # --- transforms ---------------------------------------------------------------------------
 
 
@@ -581,6 +737,14 @@ def _chain(parents: dict[str, _Edge], base: str, frame: str) -> list[_Edge] | No
     return chain[::-1]
 
 
+def _compose(edges: Sequence[_Edge]) -> NDArray[np.float64]:
+    """4×4 transform of the chain ``edges`` (its last child frame → its first parent frame)."""
+    m = np.eye(4)
+    for edge in edges:
+        m = m @ _matrix(edge)
+    return m
+
+
 def mounting(path: Path, edges: Sequence[_Edge]) -> tuple[F64, bool]:
     """``((x, y, yaw), upside_down)`` of the transform along ``edges`` projected to the plane.
 
@@ -588,9 +752,7 @@ def mounting(path: Path, edges: Sequence[_Edge]) -> tuple[F64, bool]:
     caller to negate its beam angles. :class:`DataError` when the scan plane tilts more than
     :data:`MAX_TILT_DEG` from the robot's.
     """
-    m = np.eye(4)
-    for edge in edges:
-        m = m @ _matrix(edge)
+    m = _compose(edges)
     normal_z = float(m[2, 2])
     if abs(normal_z) < math.cos(math.radians(MAX_TILT_DEG)):
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, abs(normal_z)))))
@@ -663,6 +825,8 @@ class _Streams:
     first_edge: dict[tuple[str, str], _Edge]
     imu: ImuStream | None
     fast_decoder: dict[str, bool]
+    imu_frames: set[str] = field(default_factory=set)
+    """``header.frame_id`` of the Imu messages."""
 
 
 def _odometry_at_scans(
@@ -730,7 +894,7 @@ def load_bag(
     with open_bag(path) as (reader, fmt):
         sel = select_topics(path, reader, options)
         static = _read_tf(reader, sel.tf_static)
-        first_scan = _first(reader, sel.scan, SCAN_TYPE, _scan_msg)
+        first_scan = _first(reader, sel.scan, sel.scan_type, _SCAN_DECODERS[sel.scan_type][2])
         if first_scan is None:
             raise DataError(f"{path}: {sel.scan_topic} holds no messages")
         laser_frame = first_scan.frame.lstrip("/")
@@ -739,11 +903,7 @@ def load_bag(
             first_odom = _first(reader, sel.odom, ODOM_TYPE, _odom_msg)
             base = (first_odom.child.lstrip("/") if first_odom else "") or "base_link"
         parents = {e.child: e for e in static}
-        need_tf = not sel.odom or (
-            lidar.use_log_laser_pose
-            and base != laser_frame
-            and _chain(parents, base or "", laser_frame) is None
-        )
+        need_tf = _need_tf(reader, sel, lidar, parents, base, laser_frame)
         _drop_unread_indexes(reader, [*sel.scan, *sel.odom, *sel.imu, *(sel.tf if need_tf else [])])
         streams = _stream(reader, sel, need_tf)
 
@@ -757,6 +917,7 @@ def load_bag(
     )
     if odometry is None and offset_source == "same frame":
         offset_source = LASER_AT_ORIGIN
+    imu, imu_meta = _imu_in_robot_frame(streams, parents, base, notes)
     scan_order = publication_order(scans.seq.array()[:, 0])
     moved = _reorder_scans(scans, scan_order)
     stream = _scan_stream(path, sel.scan_topic, scans, lidar, offset, upside_down)
@@ -766,6 +927,7 @@ def load_bag(
     meta: dict[str, Any] = {
         "format": fmt,
         "scan_topic": sel.scan_topic,
+        "scan_type": sel.scan_type,
         "scan_order": "bag" if scan_order is None else "header.seq",
         "scans_reordered": moved,
         "odom_source": odom_source,
@@ -784,6 +946,7 @@ def load_bag(
     }
     if sel.imu:
         meta["imu_topic"] = sel.imu[0].topic
+    meta.update(imu_meta)
     if notes:
         meta["notes"] = "; ".join(notes)
     return Log(
@@ -792,7 +955,7 @@ def load_bag(
         source=path,
         scans=stream,
         odometry=odometry,
-        imu=streams.imu,
+        imu=imu,
         meta=meta,
     )
 
@@ -931,6 +1094,26 @@ def _first(reader: Any, conns: list[Any], msgtype: str, convert: Callable[[Any],
     return None
 
 
+def _need_tf(
+    reader: Any,
+    sel: _Selection,
+    lidar: LidarConfig,
+    parents: dict[str, _Edge],
+    base: str | None,
+    laser: str,
+) -> bool:
+    """Whether the pass reads /tf: for odometry from the transforms (or none known yet), or for a
+    laser or IMU frame that tf_static does not hang below the robot frame ``base``."""
+    if not sel.odom or base is None:
+        return True
+    frames = [laser] if lidar.use_log_laser_pose else []
+    if sel.imu:
+        imu_frame = _first(reader, sel.imu, IMU_TYPE, lambda m: m.header.frame_id.lstrip("/"))
+        if imu_frame:
+            frames.append(imu_frame)
+    return any(f != base and _chain(parents, base, f) is None for f in frames)
+
+
 def _read_tf(reader: Any, conns: list[Any]) -> list[_Edge]:
     edges: list[_Edge] = []
     if conns:
@@ -959,7 +1142,8 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
     )
     imu_rows = _Rows(sum(c.msgcount for c in sel.imu), 7, np.float64) if sel.imu else None
     is2 = reader.is2
-    scan_decode = _decoder(reader, _scan_cdr if is2 else _scan_ros1, _scan_msg, SCAN_TYPE)
+    ros1, cdr, convert = _SCAN_DECODERS[sel.scan_type]
+    scan_decode = _decoder(reader, cdr if is2 else ros1, convert, sel.scan_type)
     odom_decode = _decoder(reader, _odom_cdr if is2 else _odom_ros1, _odom_msg, ODOM_TYPE)
     kinds = {id(c): "scan" for c in sel.scan}
     kinds.update({id(c): "odom" for c in sel.odom})
@@ -995,6 +1179,7 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
                 )
         else:
             m = reader.deserialize(raw, IMU_TYPE)
+            out.imu_frames.add(m.header.frame_id)
             av, la = m.angular_velocity, m.linear_acceleration
             t = _seconds(_stamp(m.header) or record_ns)
             imu_rows.append([t, av.x, av.y, av.z, la.x, la.y, la.z])  # type: ignore[union-attr]
@@ -1205,12 +1390,7 @@ def _laser_offset(
         return np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64), False, "config"
     if base == laser:
         return np.zeros(3), False, "same frame"
-    chain = _chain(parents, base, laser)
-    source = "tf_static"
-    if chain is None:
-        moving = {child: edge for (_, child), edge in streams.first_edge.items()}
-        chain = _chain({**moving, **parents}, base, laser)
-        source = "tf"
+    chain, source = _find_chain(parents, streams, base, laser)
     if chain is None:
         static = ", ".join(f"{e.parent} → {e.child}" for e in parents.values()) or "none"
         raise DataError(
@@ -1220,6 +1400,63 @@ def _laser_offset(
         )
     offset, upside_down = mounting(path, chain)
     return offset, upside_down, source
+
+
+def _find_chain(
+    parents: dict[str, _Edge], streams: _Streams, base: str, frame: str
+) -> tuple[list[_Edge] | None, str]:
+    """The edges from ``base`` down to ``frame`` and where they came from: ``tf_static``, else
+    ``tf`` (with the first /tf transform of each moving frame), else ``(None, "none")``."""
+    chain = _chain(parents, base, frame)
+    if chain is not None:
+        return chain, "tf_static"
+    moving = {child: edge for (_, child), edge in streams.first_edge.items()}
+    chain = _chain({**moving, **parents}, base, frame)
+    return chain, "none" if chain is None else "tf"
+
+
+def _imu_in_robot_frame(
+    streams: _Streams, parents: dict[str, _Edge], base: str, notes: list[str]
+) -> tuple[ImuStream | None, dict[str, Any]]:
+    """The IMU readings rotated into the robot frame ``base`` and the ``meta`` entries saying so.
+
+    The rotation is the full 3D one of the chain ``base → … → IMU frame`` (:func:`_find_chain`),
+    so row 2 of ``angular_velocity`` becomes the yaw rate about the robot's z axis. Readings in
+    the robot frame itself stay as they are; so do those without a chain (a line in ``notes``).
+    """
+    imu = streams.imu
+    if imu is None:
+        return None, {}
+    frames = sorted({f.lstrip("/") for f in streams.imu_frames})
+    frame = frames[0] if len(frames) == 1 else ""
+    chain: list[_Edge] | None = None
+    source = "none"
+    if frame == base:
+        source = "same frame"
+    elif frame:
+        chain, source = _find_chain(parents, streams, base, frame)
+    meta = {
+        "imu_frame": ", ".join(frames),
+        "imu_rotated": chain is not None,
+        "imu_frame_source": source,
+    }
+    if source == "none":
+        why = (
+            f"its messages name several frames ({', '.join(frames)})"
+            if len(frames) > 1
+            else f"no transform from the robot frame {base!r} to the IMU frame {frame!r}"
+            if frame
+            else "its messages name no frame"
+        )
+        notes.append(f"IMU readings as recorded, not rotated into the robot frame: {why}")
+    if chain is None:
+        return imu, meta
+    rotation = _compose(chain)[:3, :3]
+    return dataclasses.replace(
+        imu,
+        angular_velocity=rotation @ imu.angular_velocity,
+        linear_acceleration=rotation @ imu.linear_acceleration,
+    ), meta
 
 
 def _scan_stream(
@@ -1330,6 +1567,7 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
             sel = select_topics(path, reader, options)
             plan: dict[str, Any] = {
                 "scan_topic": sel.scan_topic,
+                "scan_type": sel.scan_type,
                 "odom_source": _planned_odometry(reader, sel, options, tf_edges),
             }
             if sel.imu:
@@ -1375,7 +1613,7 @@ def _planned_odometry(
     then the laser's), decided as it does from the frames of /tf and /tf_static."""
     source = sel.odom_topic
     if source == TF_TOPIC and options.odom_topic is None and options.base_frame is None:
-        first = _first(reader, sel.scan, SCAN_TYPE, _scan_msg)
+        first = _first(reader, sel.scan, sel.scan_type, _SCAN_DECODERS[sel.scan_type][2])
         parent_of = {c: p for p, c, static in tf_edges if static}
         moving = {c for _, c, static in tf_edges if not static}
         if (
