@@ -105,6 +105,10 @@ class RobotConfig(Validated):
     """... or this much turn (rad) since the last keyframe."""
     laser_odometry_window: int = bounded(8, ge=1, le=1000)
     """Laser odometry: the local map holds the last this many keyframes."""
+    laser_odometry_gyro: bool = True
+    """Laser odometry: where the log has an IMU (or ``Slam.add_imu`` feeds one), each scan's
+    predicted turn is the gyro's since the previous scan instead of the previous scan's turn;
+    a gyro whose turns disagree with the scans' is set aside (:mod:`slam.laser_odometry`)."""
 
 
 @dataclass(frozen=True)

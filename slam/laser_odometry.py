@@ -13,6 +13,18 @@ match wins; where neither fits, a search over every heading (a gap in the log, d
 robot turned), and the best of them is taken where it explains more of the scan than the start
 does. A scan that fits nowhere keeps the constant-velocity prediction.
 
+**The gyro.** Where the log has an IMU (a bag's ``sensor_msgs/Imu``, the ECE276A robot's) or
+``Slam.add_imu`` feeds one, the prediction turns by the gyro's turn since the previous scan
+(:meth:`slam.odometry.OdometryIntegrator.gyro_heading`: the samples at or before each scan only)
+instead of the previous scan's turn; the translation stays the previous step's
+(``robot.laser_odometry_gyro``); a scan whose time is not later than every earlier scan's, and
+the one after it, keep the previous turn (intel's clock runs backwards at 631 scans). A gyro that does not measure the robot's yaw (mounted in
+another frame than its messages say, dead, or scaled) would put every turning scan's start off:
+once the scans have turned by more than :data:`GYRO_MIN_TURN` on :data:`GYRO_MIN_STEPS` matched
+scans, the gyro's turns regressed on the scans' must have a slope of at least
+:data:`GYRO_MIN_SCALE`, else the gyro is set aside for the rest of the run
+(:attr:`LaserOdometry.gyro_set_aside_at`; ``slam run`` warns).
+
 The poses are causal — each depends on the scans before it only — so a batch run
 (:meth:`slam.scans.LogScans.from_log`) and :meth:`slam.online.Slam.update` fed the same scans
 without odometry agree bit for bit. They are in the frame of the first scan's robot pose. It is
@@ -33,9 +45,11 @@ from slam.config import Config
 from slam.errors import UsageError
 from slam.geometry import compose, relative, wrap_angle
 from slam.graph import MatchContext, empty_submap
+from slam.io.log import ImuStream
 from slam.kernels.field import FieldView, match_one
 from slam.kernels.graph import correlative_search, fit_counts
 from slam.mapping import ParticleMaps
+from slam.odometry import OdometryIntegrator
 from slam.scans import Scan
 
 F64 = NDArray[np.float64]
@@ -59,6 +73,14 @@ SEARCH_TH = 0.35
 SEARCH_TH_STEP = 0.0175
 """... in steps of this (rad, 1°), scored with ``loops.search_sigma`` on at most
 ``loops.search_beams`` returns, as the loop closing's search is."""
+GYRO_MIN_TURN = 0.01
+"""The gyro's agreement with the scans is measured on the matched scans that turned more than
+this since the previous one (rad) ..."""
+GYRO_MIN_STEPS = 20
+"""... once there are this many ..."""
+GYRO_MIN_SCALE = 0.5
+"""... and the gyro is set aside when its turns, regressed on the scans', have a slope under
+this (a reversed gyro: −1; a gyro that reads nothing: 0)."""
 
 
 class LaserOdometry:
@@ -70,8 +92,19 @@ class LaserOdometry:
     :attr:`unfit` lists the scans whose start did not fit.
     """
 
-    def __init__(self, config: Config) -> None:
+    def __init__(self, config: Config, gyro: OdometryIntegrator | None = None) -> None:
         self.config = config
+        self.gyro = gyro if config.robot.laser_odometry_gyro else None
+        """The gyro (its samples fed to an :class:`~slam.odometry.OdometryIntegrator`), or None."""
+        self.gyro_turns = 0
+        """Predictions whose turn came from the gyro."""
+        self.gyro_set_aside_at: int | None = None
+        """The scan (number, from 0) from which the gyro was set aside (module docstring)."""
+        self._gyro_headings: list[float | None] = []
+        """The gyro's heading at each scan (None: no gyro there, or the scan's time is not
+        later than every earlier scan's: a clock that ran backwards, as intel's does)."""
+        self._latest = -np.inf
+        self._agreement = [0.0, 0.0, 0]  # Σ gyro turn × scan turn, Σ scan turn², count
         self.tables = MatchContext.of(config)
         """The matcher's likelihood tables, as the loop closing's matches use them."""
         self.keyframes: deque[tuple[F64, F64]] = deque(maxlen=config.robot.laser_odometry_window)
@@ -89,19 +122,76 @@ class LaserOdometry:
         ex, ey = scan.hits(self.config.rbpf.register_beams)
         near = ex * ex + ey * ey <= MAX_RANGE * MAX_RANGE
         ex, ey = np.ascontiguousarray(ex[near]), np.ascontiguousarray(ey[near])
-        pose = self._match(self._predict(), ex, ey) if self.poses else np.zeros(3)
+        heading = None
+        in_order = scan.time > self._latest
+        self._latest = max(self._latest, scan.time)
+        if self.gyro is not None and self.gyro_set_aside_at is None and in_order:
+            heading = self.gyro.gyro_heading(scan.time)
+        if self.poses:
+            matched = self.matched
+            pose = self._match(self._predict(heading), ex, ey)
+            if self.matched > matched:
+                self._weigh_gyro(heading, pose)
+        else:
+            pose = np.zeros(3)
         self.poses.append(pose)
+        self._gyro_headings.append(heading)
         if ex.size and self._is_keyframe(pose):
             self.keyframes.append((pose, np.vstack([ex, ey])))
             self._rebuild()
         return pose.copy()
 
-    def _predict(self) -> F64:
-        """The last pose moved on by the last step (the first scans: the last pose)."""
+    def _predict(self, heading: float | None) -> F64:
+        """The last pose moved on by the last step (the first scans: not moved), turned by the
+        gyro's turn since the last scan instead where both have its ``heading``."""
         last = self.poses[-1]
-        if len(self.poses) < 2:
+        step = relative(self.poses[-2], last) if len(self.poses) >= 2 else np.zeros(3)
+        before = self._gyro_headings[-1]
+        if heading is not None and before is not None:
+            step[2] = heading - before
+            self.gyro_turns += 1
+        elif len(self.poses) < 2:
             return last.copy()
-        return compose(last, relative(self.poses[-2], last))
+        return compose(last, step)
+
+    def _weigh_gyro(self, heading: float | None, pose: F64) -> None:
+        """Add the matched scan's turn and the gyro's to their agreement; set the gyro aside
+        when it disagrees (module docstring)."""
+        before = self._gyro_headings[-1]
+        if heading is None or before is None:
+            return
+        turn = float(wrap_angle(pose[2] - self.poses[-1][2]))
+        if abs(turn) <= GYRO_MIN_TURN:
+            return
+        agreement = self._agreement
+        agreement[0] += (heading - before) * turn
+        agreement[1] += turn * turn
+        agreement[2] += 1
+        if agreement[2] >= GYRO_MIN_STEPS and self.gyro_scale < GYRO_MIN_SCALE:
+            self.gyro_set_aside_at = len(self.poses)
+
+    def counts(self) -> dict[str, float]:
+        """The counters for ``metrics.json`` / ``Result.stats``: ``matched``,
+        ``kept_prediction``, and with a gyro ``gyro_turns``, ``gyro_scale`` (once measured) and
+        ``gyro_set_aside_at`` (where it was)."""
+        counts: dict[str, float] = {
+            "matched": self.matched,
+            "kept_prediction": self.kept_prediction,
+        }
+        if self.gyro is not None:
+            counts["gyro_turns"] = self.gyro_turns
+            if self.gyro_scale is not None:
+                counts["gyro_scale"] = round(self.gyro_scale, 4)
+        if self.gyro_set_aside_at is not None:
+            counts["gyro_set_aside_at"] = self.gyro_set_aside_at
+        return counts
+
+    @property
+    def gyro_scale(self) -> float | None:
+        """The slope of the gyro's turns regressed on the matched scans' (1: they agree), over
+        the scans that turned more than :data:`GYRO_MIN_TURN`; None before any."""
+        products, squares, count = self._agreement
+        return products / squares if count else None
 
     def _match(self, start: F64, ex: F64, ey: F64) -> F64:
         """The scan's pose on the local map from ``start`` (module docstring), or ``start``."""
@@ -179,18 +269,20 @@ class LaserOdometry:
         self.maps = maps
 
 
-def start_for_update(config: Config, owner: str, started: bool, ask: str) -> LaserOdometry:
+def start_for_update(
+    config: Config, owner: str, started: bool, ask: str, gyro: OdometryIntegrator | None = None
+) -> LaserOdometry:
     """The laser odometry an online ``owner`` (``"Slam.update"``, ``"Localizer.update"``) starts
-    when its first scan comes without odometry; a :class:`~slam.errors.UsageError` naming what
-    to give instead (``ask``) with ``robot.odometry = "log"``, or when earlier scans
-    (``started``) came with odometry."""
+    when its first scan comes without odometry (turning with ``gyro`` where its IMU samples are
+    fed); a :class:`~slam.errors.UsageError` naming what to give instead (``ask``) with
+    ``robot.odometry = "log"``, or when earlier scans (``started``) came with odometry."""
     if config.robot.odometry == "log":
         raise UsageError(
             f'{owner}: {ask} (robot.odometry = "log"; "auto" or "laser" match the scans instead)'
         )
     if started:
         raise UsageError(f"{owner}: the earlier scans came with odometry; give it for this one too")
-    return LaserOdometry(config)
+    return LaserOdometry(config, gyro)
 
 
 def refuse_given(owner: str) -> UsageError:
@@ -201,9 +293,24 @@ def refuse_given(owner: str) -> UsageError:
     )
 
 
-def laser_odometry(scans: list[Scan], config: Config) -> tuple[F64, LaserOdometry]:
+def gyro_of(imu: ImuStream | None, config: Config) -> OdometryIntegrator | None:
+    """An :class:`~slam.odometry.OdometryIntegrator` fed the z gyro of ``imu`` (samples in time
+    order), for :class:`LaserOdometry`; None without an IMU or with
+    ``robot.laser_odometry_gyro = false``."""
+    if imu is None or len(imu) == 0 or not config.robot.laser_odometry_gyro:
+        return None
+    order = np.argsort(imu.time, kind="stable")
+    gyro = OdometryIntegrator(config.robot)
+    gyro.add_imu(np.asarray(imu.time)[order], np.asarray(imu.angular_velocity[2])[order])
+    return gyro
+
+
+def laser_odometry(
+    scans: list[Scan], config: Config, imu: ImuStream | None = None
+) -> tuple[F64, LaserOdometry]:
     """The :class:`LaserOdometry` pose ``(N, 3)`` at each of ``scans`` (resolved, in time
-    order), and the odometry that made them (its counters)."""
-    odometry = LaserOdometry(config)
+    order), turning with the gyro of ``imu`` where given (:func:`gyro_of`), and the odometry
+    that made them (its counters)."""
+    odometry = LaserOdometry(config, gyro_of(imu, config))
     poses = np.array([odometry.pose_at(scan) for scan in scans], dtype=np.float64)
     return poses.reshape(-1, 3), odometry

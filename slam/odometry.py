@@ -298,6 +298,29 @@ class OdometryIntegrator:
         slope = (self._headings[j + 1] - self._headings[j]) / (times[j + 1] - times[j])
         return slope * (t - times[j]) + self._headings[j]
 
+    @property
+    def has_imu(self) -> bool:
+        """Whether a gyro sample has been fed."""
+        return bool(self._imu_times)
+
+    @property
+    def has_encoders(self) -> bool:
+        """Whether an encoder reading has been fed."""
+        return bool(self._times)
+
+    def gyro_heading(self, t: float) -> float | None:
+        """The gyro's heading integral at ``t`` (rad, from its first sample) from the samples
+        at or before ``t`` only: the last one's integral moved on at its (low-passed) rate, or
+        ``None`` before the first sample or more than ``robot.max_imu_gap_s`` after the last
+        one at or before ``t``. Causal, so a batch fed the whole IMU stream and an online run
+        fed the samples up to each scan give the same value (laser odometry's turns,
+        :mod:`slam.laser_odometry`)."""
+        times = self._imu_times
+        j = bisect.bisect_right(times, t) - 1
+        if j < 0 or t - times[j] > self.robot.max_imu_gap_s:
+            return None
+        return self._headings[j] + self._rates[j] * (t - times[j])
+
     def add_encoders(self, time: ArrayLike, counts: ArrayLike) -> None:
         """Add encoder readings: ``counts`` ``(4,)`` or ``(4, K)`` ticks (FR, FL, RR, RL) since
         the previous reading, taken at ``time`` (s). The first reading ever only starts the clock

@@ -236,9 +236,10 @@ class Slam:
         ``odometry`` is the robot's odometry pose ``(x, y, θ)`` at the scan (any fixed frame: the
         map starts at the first one). Without it the pose comes from the encoder and IMU
         readings fed so far; ``encoders=(times, counts)`` and ``imu=(times, gyro_z)`` feed the
-        readings since the previous scan first. A robot with neither gives no odometry for any
-        scan, and laser odometry (:class:`slam.laser_odometry.LaserOdometry`) stands in — unless
-        ``robot.odometry = "log"``, which refuses the scan.
+        readings since the previous scan first. A robot without wheel odometry gives no odometry
+        for any scan, and laser odometry (:class:`slam.laser_odometry.LaserOdometry`) stands in,
+        turning with the gyro where IMU readings are fed (up to each scan's time, before it) —
+        unless ``robot.odometry = "log"``, which refuses the scan.
         """
         if self._finished:
             raise UsageError("Slam.update: the run is finished (make a new Slam)")
@@ -272,17 +273,26 @@ class Slam:
 
     def _odometry_at(self, scan: Scan) -> F64:
         """The odometry at ``scan`` when :meth:`update` got none: the encoder + IMU integrator's
-        where readings were fed, else laser odometry (:mod:`slam.laser_odometry`) unless
-        ``robot.odometry = "log"``."""
-        if self._odometry is not None:
-            return self._odometry.pose_at(scan.time)
+        where encoder readings were fed before the first scan, else laser odometry
+        (:mod:`slam.laser_odometry`, turning with the gyro where IMU readings were fed) unless
+        ``robot.odometry = "log"``; ``robot.odometry = "laser"`` leaves the encoders unread."""
+        readings = self._odometry
+        wheels = readings is not None and readings.has_encoders
+        if wheels and self.config.robot.odometry == "laser":
+            wheels = False  # asked for laser odometry: the encoders are not read
+        if self._laser is None and wheels:
+            return readings.pose_at(scan.time)
         if self._laser is None:
             from slam.laser_odometry import start_for_update
 
             self._laser = start_for_update(
                 self.config, "Slam.update", len(self.scans) > 0,
-                "give odometry= (a pose) or feed encoders and IMU readings",
+                "give odometry= (a pose) or feed encoders and IMU readings", readings,
             )  # fmt: skip
+        elif wheels:
+            from slam.laser_odometry import refuse_given
+
+            raise refuse_given("Slam.update")
         return self._laser.pose_at(scan)
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:
@@ -360,10 +370,7 @@ class Slam:
         if self._odometry is not None and self._odometry.wheel_yaw_intervals:
             stats["odometry_wheel_yaw_intervals"] = self._odometry.wheel_yaw_intervals
         if self._laser is not None:
-            stats["laser_odometry"] = {
-                "matched": self._laser.matched,
-                "kept_prediction": self._laser.kept_prediction,
-            }
+            stats["laser_odometry"] = self._laser.counts()
         seq = output.scans
         return Result(
             trajectory=Trajectory(seq.times.copy(), output.poses, seq.indices.copy()),

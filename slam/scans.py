@@ -687,21 +687,31 @@ class LogScans:
         from slam.laser_odometry import laser_odometry
 
         start = time.perf_counter()
-        poses, made = laser_odometry([self.scan(i) for i in range(len(self))], config)
-        counts = {
-            "matched": made.matched,
-            "kept_prediction": made.kept_prediction,
-            "seconds": round(time.perf_counter() - start, 3),
-        }
+        poses, made = laser_odometry([self.scan(i) for i in range(len(self))], config, self.log.imu)
+        counts = made.counts() | {"seconds": round(time.perf_counter() - start, 3)}
+        if made.gyro_set_aside_at is not None:
+            aside = made.gyro_set_aside_at
+            warnings.warn(
+                f"{self.log.name}: the gyro's turns disagree with the scans' (slope "
+                f"{made.gyro_scale:.2f} over the first turns; 1 where they agree), so laser "
+                f"odometry stops using it {self.times[aside] - self.times[0]:.1f} s into the "
+                "log: is the IMU mounted as its frame says? "
+                "(robot.laser_odometry_gyro = false leaves it out)",
+                DataWarning,
+                stacklevel=2,
+            )
         times = self.times
         pauses = np.intersect1d(scan_pauses(times) + 1, made.unfit) - 1  # moved while unseen
         if pauses.size:
+            seen = "sees nothing of that motion and guesses it"
+            if made.gyro is not None and made.gyro_set_aside_at is None:
+                seen = "sees only the gyro's turn of that motion and guesses the rest"
             longest = int(pauses[np.argmax(times[pauses + 1] - times[pauses])])
             warnings.warn(
                 f"{self.log.name}: after {pauses.size} pause(s) in the scans the next scan did "
                 f"not fit where the motion before put it (the robot moved meanwhile), the longest "
                 f"{times[longest + 1] - times[longest]:.2f} s at {times[longest] - times[0]:.1f} s "
-                "into the log; laser odometry sees nothing of that motion and guesses it "
+                f"into the log; laser odometry {seen} "
                 '(docs/slam.md, "A robot without odometry")',
                 DataWarning,
                 stacklevel=2,
