@@ -186,6 +186,36 @@ def test_tracking_without_odometry(intel, carmen_dir):
     assert localizer._laser.matched == SCANS - 1
 
 
+def test_tracking_without_odometry_turns_with_a_gyro(intel):
+    """``update(scan, imu=...)`` without odometry: the laser odometry turns with the gyro fed up
+    to each scan, the same poses as the batch laser odometry given the same IMU stream (what
+    ``slam localize`` computes on a log with one), and the map is tracked."""
+    from slam.io.log import ImuStream
+    from slam.laser_odometry import laser_odometry
+    from slam.localize.localizer import Localizer
+
+    _, slam_poses, scans, lmap = intel
+    n = 300
+    times = scans.times[:n]
+    samples = np.arange(times[0], times[-1], 0.01)
+    heading = np.interp(samples, np.maximum.accumulate(times), np.unwrap(slam_poses[:n, 2]))
+    rates = np.gradient(heading, samples)
+    config = load_config("intel")
+    localizer = Localizer(lmap, config, initial=(*slam_poses[0], 0.1))
+    fed = 0
+    for i in range(n):
+        upto = max(fed, int(np.searchsorted(samples, times[i], side="right")))  # clock glitches
+        last = localizer.update(scans.scan(i), imu=(samples[fed:upto], rates[fed:upto]))
+        fed = upto
+    imu = ImuStream(samples, np.vstack([0 * rates, 0 * rates, rates]), np.zeros((3, rates.size)))
+    batch, made = laser_odometry([scans.scan(i) for i in range(n)], config, imu)
+    np.testing.assert_array_equal(np.array(localizer._laser.poses), batch)
+    assert localizer._laser.gyro_turns == made.gyro_turns == 252  # 47 starts after clock glitches
+    assert made.gyro_set_aside_at is None and abs(made.gyro_scale - 1.0) < 0.1
+    err, _ = errors(np.array([last.pose]), slam_poses[n - 1 : n])
+    assert err[0] < 0.05
+
+
 def test_odometry_is_given_for_every_scan_or_for_none(intel):
     from slam.errors import UsageError
     from slam.localize.localizer import Localizer

@@ -159,6 +159,8 @@ class Localizer:
         self._started = False
         self._laser: Any = None
         """Laser odometry (:mod:`slam.laser_odometry`) when :meth:`update` gets no odometry."""
+        self._gyro: Any = None
+        """The gyro samples fed (:meth:`add_imu`), which turn the laser odometry."""
         self._odom_mcl = np.zeros(3)
         self._odom_hist = np.zeros(3)
         self._mcl_pose = np.zeros(3)
@@ -203,17 +205,36 @@ class Localizer:
         return cached
 
     # -- one scan
-    def update(self, scan: Scan, odometry: ArrayLike | None = None) -> LocalizationEstimate:
+    def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
+        """Feed gyro z samples (rad/s) at ``time`` (s), up to each scan's time and from the first
+        scan on: the laser odometry of a robot without odometry turns with them
+        (``robot.laser_odometry_gyro``), as ``slam localize`` does on a log with an IMU."""
+        if self._gyro is None:
+            from slam.odometry import OdometryIntegrator
+
+            self._gyro = OdometryIntegrator(self.config.robot)
+        self._gyro.add_imu(time, gyro_z)
+
+    def update(
+        self,
+        scan: Scan,
+        odometry: ArrayLike | None = None,
+        *,
+        imu: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> LocalizationEstimate:
         """Process one scan taken at the odometry pose ``odometry`` ``(x, y, θ)`` (any fixed
         frame; only its increments are used); return the estimate after it. A robot without
         odometry gives none for any scan: laser odometry (:mod:`slam.laser_odometry`) stands in,
-        unless ``robot.odometry = "log"``.
+        turning with the gyro where ``imu=(times, gyro_z)`` feeds the samples since the previous
+        scan (:meth:`add_imu`), unless ``robot.odometry = "log"``.
 
         What the scan leaves out (range semantics, laser offset) comes from ``[lidar]``, as for
         :meth:`slam.Slam.update`.
         """
         if not isinstance(scan, Scan):
             raise UsageError(f"Localizer.update: expected a slam.Scan, found {type(scan).__name__}")
+        if imu is not None:
+            self.add_imu(*imu)
         if odometry is None:
             odometry = self._laser_odometry(scan.resolved(self.config.lidar))
         elif self._laser is not None:
@@ -241,7 +262,7 @@ class Localizer:
             from slam.laser_odometry import start_for_update
 
             self._laser = start_for_update(
-                self.config, "Localizer.update", self._started, "give odometry="
+                self.config, "Localizer.update", self._started, "give odometry=", self._gyro
             )
         return self._laser.pose_at(scan)
 
