@@ -17,13 +17,13 @@ does. A scan that fits nowhere keeps the constant-velocity prediction.
 ``Slam.add_imu`` feeds one, the prediction turns by the gyro's turn since the previous scan
 (:meth:`slam.odometry.OdometryIntegrator.gyro_heading`: the samples at or before each scan only)
 instead of the previous scan's turn; the translation stays the previous step's
-(``robot.laser_odometry_gyro``); a scan whose time is not later than every earlier scan's, and
-the one after it, keep the previous turn (intel's clock runs backwards at 631 scans). A gyro that does not measure the robot's yaw (mounted in
-another frame than its messages say, dead, or scaled) would put every turning scan's start off:
-once the scans have turned by more than :data:`GYRO_MIN_TURN` on :data:`GYRO_MIN_STEPS` matched
-scans, the gyro's turns regressed on the scans' must have a slope of at least
-:data:`GYRO_MIN_SCALE`, else the gyro is set aside for the rest of the run
-(:attr:`LaserOdometry.gyro_set_aside_at`; ``slam run`` warns).
+(``robot.laser_odometry_gyro``). A scan whose time is not later than every earlier scan's, and
+the one after it, keep the previous turn (intel's clock runs backwards at 631 scans). A gyro
+that does not measure the robot's yaw (mounted in another frame than its messages say, dead,
+or scaled) would put every turning scan's start off: once the scans have turned by more than
+:data:`GYRO_MIN_TURN` on :data:`GYRO_MIN_STEPS` matched scans, the gyro's turns regressed on the
+scans' must have a slope of at least :data:`GYRO_MIN_SCALE`, else the gyro is set aside for the
+rest of the run (:attr:`LaserOdometry.gyro_set_aside_at`; ``slam run`` warns).
 
 The poses are causal — each depends on the scans before it only — so a batch run
 (:meth:`slam.scans.LogScans.from_log`) and :meth:`slam.online.Slam.update` fed the same scans

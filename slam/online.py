@@ -219,7 +219,9 @@ class Slam:
         self.odometry.add_encoders(time, counts)
 
     def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
-        """Feed gyro z samples (rad/s) at ``time`` (s)."""
+        """Feed gyro z samples (rad/s) at ``time`` (s): the yaw of the encoder odometry, or, for a
+        robot without wheel odometry, the turns of its laser odometry (fed from the first scan
+        on, up to each scan's time)."""
         self.odometry.add_imu(time, gyro_z)
 
     # -- the filter
