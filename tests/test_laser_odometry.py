@@ -465,6 +465,10 @@ def test_slam_run_on_a_bag_of_multi_echo_scans_and_an_imu(tmp_path, capsys):
             assert "the gyro's turns disagree with the scans' (slope -1.00" in err
         got = read_tum(out / "trajectory.tum")
         assert np.abs(got.poses[:, :2] - in_first_frame(truth)[:, :2]).max() < 0.12
+    assert main(["data", "inspect", str(bag)]) == 0
+    said = capsys.readouterr().out
+    assert "(MultiEchoLaserScan: first echoes), odometry none (laser odometry)" in said
+    assert "IMU /imu (its gyro turns the laser odometry)" in said
 
 
 def test_online_encoders_decide_at_the_first_scan():
