@@ -17,13 +17,21 @@ does. A scan that fits nowhere keeps the constant-velocity prediction.
 ``Slam.add_imu`` feeds one, the prediction turns by the gyro's turn since the previous scan
 (:meth:`slam.odometry.OdometryIntegrator.gyro_heading`: the samples at or before each scan only)
 instead of the previous scan's turn; the translation stays the previous step's
-(``robot.laser_odometry_gyro``). A scan whose time is not later than every earlier scan's, and
+(``robot.laser_odometry_gyro``). Where that start does not fit and the previous turn's fits
+better, the previous turn's is taken, so a gyro that reads wrongly costs no scan its match. A scan whose time is not later than every earlier scan's, and
 the one after it, keep the previous turn (intel's clock runs backwards at 631 scans). A gyro
-that does not measure the robot's yaw (mounted in another frame than its messages say, dead,
-or scaled) would put every turning scan's start off: once the scans have turned by more than
-:data:`GYRO_MIN_TURN` on :data:`GYRO_MIN_STEPS` matched scans, the gyro's turns regressed on the
-scans' must have a slope of at least :data:`GYRO_MIN_SCALE`, else the gyro is set aside for the
-rest of the run (:attr:`LaserOdometry.gyro_set_aside_at`; ``slam run`` warns).
+that does not measure the robot's yaw would put every turning scan's start off: once the scans
+have turned by more than :data:`GYRO_MIN_TURN` on :data:`GYRO_MIN_STEPS` matched scans, and
+until :data:`GYRO_TRUSTED_STEPS`, the gyro's turns on those scans are compared with the
+scans': a gyro that reads backwards (mounted
+upside down, its frame not saying so: their correlation under −:data:`GYRO_MIN_CORRELATION`),
+nothing (a dead gyro, or one whose z axis is not the robot's: its turns' RMS under
+:data:`GYRO_MIN_RATIO` of the scans'), or in other units (degrees for radians: over
+1 / :data:`GYRO_MIN_RATIO` of the scans', correlated over :data:`GYRO_MIN_CORRELATION`) is set
+aside for the rest of the run (:attr:`LaserOdometry.gyro_set_aside_at`; ``slam run`` warns).
+Scans that disagree with a good gyro because the laser odometry itself is lost (their turns
+then weakly correlated with the gyro's and larger) do not set it aside: the test needs a gyro
+an order of magnitude off, and ends once it has agreed for :data:`GYRO_TRUSTED_STEPS` turns.
 
 The poses are causal — each depends on the scans before it only — so a batch run
 (:meth:`slam.scans.LogScans.from_log`) and :meth:`slam.online.Slam.update` fed the same scans
@@ -77,10 +85,17 @@ GYRO_MIN_TURN = 0.01
 """The gyro's agreement with the scans is measured on the matched scans that turned more than
 this since the previous one (rad) ..."""
 GYRO_MIN_STEPS = 20
-"""... once there are this many ..."""
-GYRO_MIN_SCALE = 0.5
-"""... and the gyro is set aside when its turns, regressed on the scans', have a slope under
-this (a reversed gyro: −1; a gyro that reads nothing: 0)."""
+"""... once there are this many, and until there are :data:`GYRO_TRUSTED_STEPS` (a gyro that has
+agreed that long is kept: scans that disagree later are the laser odometry's loss) ..."""
+GYRO_TRUSTED_STEPS = 50
+"""See :data:`GYRO_MIN_STEPS`."""
+GYRO_MIN_CORRELATION = 0.5
+"""... and the gyro is set aside when its turns' correlation with the scans' is under minus this
+(a reversed gyro: −1) ..."""
+GYRO_MIN_RATIO = 0.1
+"""... or the RMS of its turns is under this share of the scans' (a gyro that reads nothing),
+or over its inverse while correlated over :data:`GYRO_MIN_CORRELATION` (degrees for radians:
+57)."""
 
 
 class LaserOdometry:
@@ -104,7 +119,7 @@ class LaserOdometry:
         """The gyro's heading at each scan (None: no gyro there, or the scan's time is not
         later than every earlier scan's: a clock that ran backwards, as intel's does)."""
         self._latest = -np.inf
-        self._agreement = [0.0, 0.0, 0]  # Σ gyro turn × scan turn, Σ scan turn², count
+        self._agreement = [0.0, 0.0, 0.0, 0]  # Σ gyro × scan turn, Σ scan², Σ gyro², count
         self.tables = MatchContext.of(config)
         """The matcher's likelihood tables, as the loop closing's matches use them."""
         self.keyframes: deque[tuple[F64, F64]] = deque(maxlen=config.robot.laser_odometry_window)
@@ -129,7 +144,11 @@ class LaserOdometry:
             heading = self.gyro.gyro_heading(scan.time)
         if self.poses:
             matched = self.matched
-            pose = self._match(self._predict(heading), ex, ey)
+            start, plain = self._predict(heading), None
+            if self._gyro_headings[-1] is not None and heading is not None:
+                self.gyro_turns += 1
+                plain = self._predict(None)
+            pose = self._match(start, ex, ey, plain)
             if self.matched > matched:
                 self._weigh_gyro(heading, pose)
         else:
@@ -145,12 +164,12 @@ class LaserOdometry:
         """The last pose moved on by the last step (the first scans: not moved), turned by the
         gyro's turn since the last scan instead where both have its ``heading``."""
         last = self.poses[-1]
-        step = relative(self.poses[-2], last) if len(self.poses) >= 2 else np.zeros(3)
+        moving = len(self.poses) >= 2
+        step = relative(self.poses[-2], last) if moving else np.zeros(3)
         before = self._gyro_headings[-1]
         if heading is not None and before is not None:
             step[2] = heading - before
-            self.gyro_turns += 1
-        elif len(self.poses) < 2:
+        elif not moving:
             return last.copy()
         return compose(last, step)
 
@@ -163,38 +182,56 @@ class LaserOdometry:
         turn = float(wrap_angle(pose[2] - self.poses[-1][2]))
         if abs(turn) <= GYRO_MIN_TURN:
             return
+        gyro = heading - before
         agreement = self._agreement
-        agreement[0] += (heading - before) * turn
+        agreement[0] += gyro * turn
         agreement[1] += turn * turn
-        agreement[2] += 1
-        if agreement[2] >= GYRO_MIN_STEPS and self.gyro_scale < GYRO_MIN_SCALE:
+        agreement[2] += gyro * gyro
+        agreement[3] += 1
+        if not GYRO_MIN_STEPS <= agreement[3] <= GYRO_TRUSTED_STEPS:
+            return
+        measured = self.gyro_agreement
+        assert measured is not None
+        correlation, ratio = measured
+        reversed_ = correlation < -GYRO_MIN_CORRELATION
+        other_units = ratio > 1.0 / GYRO_MIN_RATIO and correlation > GYRO_MIN_CORRELATION
+        if reversed_ or ratio < GYRO_MIN_RATIO or other_units:
             self.gyro_set_aside_at = len(self.poses)
 
     def counts(self) -> dict[str, float]:
         """The counters for ``metrics.json`` / ``Result.stats``: ``matched``,
-        ``kept_prediction``, and with a gyro ``gyro_turns``, ``gyro_scale`` (once measured) and
-        ``gyro_set_aside_at`` (where it was)."""
+        ``kept_prediction``, and with a gyro ``gyro_turns``, ``gyro_correlation`` and
+        ``gyro_ratio`` (:attr:`gyro_agreement`, once measured) and ``gyro_set_aside_at`` (where
+        it was)."""
         counts: dict[str, float] = {
             "matched": self.matched,
             "kept_prediction": self.kept_prediction,
         }
         if self.gyro is not None:
             counts["gyro_turns"] = self.gyro_turns
-            if self.gyro_scale is not None:
-                counts["gyro_scale"] = round(self.gyro_scale, 4)
+            if self.gyro_agreement is not None:
+                correlation, ratio = self.gyro_agreement
+                counts["gyro_correlation"] = round(correlation, 4)
+                counts["gyro_ratio"] = round(ratio, 4)
         if self.gyro_set_aside_at is not None:
             counts["gyro_set_aside_at"] = self.gyro_set_aside_at
         return counts
 
     @property
-    def gyro_scale(self) -> float | None:
-        """The slope of the gyro's turns regressed on the matched scans' (1: they agree), over
-        the scans that turned more than :data:`GYRO_MIN_TURN`; None before any."""
-        products, squares, count = self._agreement
-        return products / squares if count else None
+    def gyro_agreement(self) -> tuple[float, float] | None:
+        """The correlation of the gyro's turns with the matched scans' and the ratio of their
+        RMS (both 1 where they agree), over the scans that turned more than
+        :data:`GYRO_MIN_TURN`; None before any."""
+        products, scans, gyros, count = self._agreement
+        if not count:
+            return None
+        correlation = products / np.sqrt(scans * gyros) if gyros > 0 else 0.0
+        return float(correlation), float(np.sqrt(gyros / scans))
 
-    def _match(self, start: F64, ex: F64, ey: F64) -> F64:
-        """The scan's pose on the local map from ``start`` (module docstring), or ``start``."""
+    def _match(self, start: F64, ex: F64, ey: F64, plain: F64 | None = None) -> F64:
+        """The scan's pose on the local map from ``start`` (module docstring), or ``start``;
+        where ``start`` (the gyro's) does not fit and ``plain`` (the previous turn's) fits
+        better, from ``plain``."""
         lc = self.config.loops
         if self.maps is None or ex.size < lc.min_beams:
             self.kept_prediction += 1
@@ -202,6 +239,10 @@ class LaserOdometry:
         view = self.maps.field(0)
         need = MIN_FIT * ex.size
         _, close_start = fit_counts(view, start, ex, ey, FIT_DISTANCE)
+        if close_start < need and plain is not None:
+            _, close_plain = fit_counts(view, plain, ex, ey, FIT_DISTANCE)
+            if close_plain > close_start:
+                start, close_start = plain, close_plain
         starts = [start]
         if close_start < need:
             self.unfit.append(len(self.poses))

@@ -377,7 +377,10 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     if source.beam_geometry is not None:
         base["beam_geometry"] = source.beam_geometry
     beams = int(log.scans.ranges.shape[1])  # type: ignore[union-attr]
-    _check_memory(log.name, len(scans), beams, scans.odometry, scans.range_max, config)
+    _check_memory(
+        log.name, len(scans), beams, scans.odometry, scans.range_max, config,
+        scans.odometry_source == "laser",
+    )  # fmt: skip
     bar = ProgressObserver(len(scans), enabled=progress, label=f"{log.name} {method}")
     start, compiled = time.perf_counter(), compile_seconds()
     try:
@@ -419,14 +422,28 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
 
 
 def _check_memory(
-    name: str, scans: int, beams: int, poses: F64, range_max: float, config: Config
+    name: str,
+    scans: int,
+    beams: int,
+    poses: F64,
+    range_max: float,
+    config: Config,
+    laser_odometry: bool = False,
 ) -> None:
-    """Refuse, before the maps are allocated, a run that would not fit in memory."""
+    """Refuse, before the maps are allocated, a run that would not fit in memory; the message
+    names the odometry's extent, which sets the maps' size (with ``laser_odometry``, that it may
+    have run away where scans fitted nowhere)."""
     from slam.budget import check_run_memory, run_memory
 
     span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
     components = run_memory(config, scans, beams, float(span[0]), float(span[1]), range_max)
-    check_run_memory(name, components, config)
+    extent = f"{name} (its odometry spans {span[0]:.1f} m × {span[1]:.1f} m"
+    if laser_odometry:
+        extent += (
+            "; laser odometry that fits no scan for a while can run away: "
+            'docs/slam.md, "A robot without odometry"'
+        )
+    check_run_memory(extent + ")", components, config)
 
 
 def _up_to_scan(trajectory: Trajectory, log: Log, last: int) -> Trajectory:

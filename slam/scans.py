@@ -691,12 +691,14 @@ class LogScans:
         counts = made.counts() | {"seconds": round(time.perf_counter() - start, 3)}
         if made.gyro_set_aside_at is not None:
             aside = made.gyro_set_aside_at
+            correlation, ratio = made.gyro_agreement
             warnings.warn(
-                f"{self.log.name}: the gyro's turns disagree with the scans' (slope "
-                f"{made.gyro_scale:.2f} over the first turns; 1 where they agree), so laser "
-                f"odometry stops using it {self.times[aside] - self.times[0]:.1f} s into the "
-                "log: is the IMU mounted as its frame says? "
-                "(robot.laser_odometry_gyro = false leaves it out)",
+                f"{self.log.name}: the gyro's turns disagree with the scans' (correlation "
+                f"{correlation:.2f}, {ratio:.2f} times their size over the first turns; 1 and 1 "
+                f"where they agree), so laser odometry stops using it "
+                f"{self.times[aside] - self.times[0]:.1f} s into the log: is the IMU mounted as "
+                "its frame says, and its rate in rad/s? (robot.laser_odometry_gyro = false leaves "
+                "it out)",
                 DataWarning,
                 stacklevel=2,
             )

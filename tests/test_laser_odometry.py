@@ -354,7 +354,8 @@ def test_the_gyro_turns_the_prediction_where_a_constant_velocity_misses():
     assert alone.unfit == [1, 6, 12, 18, 24, 30, 36, 42, 48, 54] and alone.searched == 10
     assert with_gyro.unfit == [] and with_gyro.searched == 0
     assert with_gyro.gyro_turns == 59 and with_gyro.gyro_set_aside_at is None
-    assert abs(with_gyro.gyro_scale - 1.0) < 0.05
+    correlation, ratio = with_gyro.gyro_agreement
+    assert correlation > 0.99 and abs(ratio - 1.0) < 0.05
     for got in (poses, poses_alone):
         error = got - in_first_frame(truth)
         assert np.abs(error[:, :2]).max() < 0.12 and np.abs(error[:, 2]).max() < 0.02
@@ -384,23 +385,35 @@ def test_a_turn_in_a_gap_is_measured_by_the_gyro():
         assert np.abs(error[40:, :2]).max() < 0.12
 
 
-def test_a_gyro_that_reads_backwards_is_set_aside():
-    """A gyro whose sign is wrong (an IMU mounted upside down, its frame not saying so) turns
-    every start the wrong way: after 20 turning scans its slope against the scans' turns is
-    −1, it is set aside, and the scans alone carry the path on."""
+@pytest.mark.parametrize(
+    ("factor", "rule"),
+    [(-1.0, "reversed"), (0.0, "dead"), (np.degrees(1.0), "degrees")],
+)
+def test_a_gyro_that_does_not_read_the_yaw_is_set_aside(factor, rule):
+    """A gyro that reads backwards (an IMU upside down, its frame not saying so), nothing, or in
+    degrees per second: where its start does not fit, the previous turn's is taken, so it costs
+    no match (the starts that miss are the reversals every 10th scan, as without a gyro), and
+    after 20 turning scans it is set aside by its rule; the scans carry the path on."""
     truth = zigzag_path(120, turn=0.05, block=10)
     times = 0.1 * np.arange(120)
     config = gyro_config()
+    samples, rates = gyro_for(truth, times)
     gyro = slam.odometry.OdometryIntegrator(config.robot)
-    gyro.add_imu(*gyro_for(truth, times, sign=-1.0))
+    gyro.add_imu(samples, factor * rates)
     odometry = LaserOdometry(config, gyro)
     poses = np.array([odometry.pose_at(room_scan(p, t)) for p, t in zip(truth, times, strict=True)])
-    assert odometry.gyro_set_aside_at == 20 and odometry.gyro_scale < -0.95
-    assert odometry.gyro_turns == 20 and odometry.counts()["gyro_set_aside_at"] == 20
-    # every start the gyro turned missed; after it, only the reversals (every 10th scan)
-    assert odometry.unfit == list(range(1, 21)) + list(range(30, 120, 10))
+    correlation, ratio = odometry.gyro_agreement
+    assert odometry.gyro_set_aside_at == 20 and odometry.gyro_turns == 20
+    assert odometry.counts()["gyro_set_aside_at"] == 20
+    if rule == "reversed":
+        assert correlation < -0.99 and abs(ratio - 1.0) < 0.05
+    elif rule == "dead":
+        assert correlation == 0.0 and ratio == 0.0
+    else:
+        assert correlation > 0.99 and abs(ratio - 57.3) < 1.0
+    assert set(odometry.unfit) <= set(range(10, 120, 10))
     error = poses - in_first_frame(truth)
-    assert np.abs(error[:, :2]).max() < 0.08 and np.abs(error[:, 2]).max() < 0.01
+    assert np.abs(error[:, :2]).max() < 0.08 and np.abs(error[:, 2]).max() < 0.013
     off = LaserOdometry(slam.load_config("", None, ["robot.laser_odometry_gyro=false"]), gyro)
     assert off.gyro is None and "gyro_turns" not in off.counts()
 
@@ -459,10 +472,11 @@ def test_slam_run_on_a_bag_of_multi_echo_scans_and_an_imu(tmp_path, capsys):
         assert metrics["odometry_source"] == "laser" and counts["matched"] == 59
         if imu_tf:
             assert counts["gyro_turns"] == 59 and "gyro_set_aside_at" not in counts
-            assert abs(counts["gyro_scale"] - 1.0) < 0.05 and "gyro" not in err
+            assert counts["gyro_correlation"] > 0.99 and abs(counts["gyro_ratio"] - 1.0) < 0.05
+            assert "gyro" not in err
         else:
-            assert counts["gyro_set_aside_at"] == 20 and counts["gyro_scale"] < -0.9
-            assert "the gyro's turns disagree with the scans' (slope -1.00" in err
+            assert counts["gyro_set_aside_at"] == 20 and counts["gyro_correlation"] < -0.9
+            assert "the gyro's turns disagree with the scans' (correlation -1.00, 1.00 times" in err
         got = read_tum(out / "trajectory.tum")
         assert np.abs(got.poses[:, :2] - in_first_frame(truth)[:, :2]).max() < 0.12
     assert main(["data", "inspect", str(bag)]) == 0
@@ -485,3 +499,16 @@ def test_online_encoders_decide_at_the_first_scan():
     for k in range(3):
         laser.update(room_scan(truth[k], 0.1 * k))
     assert laser.finish().stats["laser_odometry"]["matched"] == 2
+
+
+def test_a_run_refused_for_memory_names_the_laser_odometrys_extent(tmp_path, capsys):
+    """The maps' size follows the odometry's extent; a run on laser odometry refused for memory
+    says how far it spans and that laser odometry can run away (a lost one went 5.7 km off)."""
+    log_path = tmp_path / "raw.clf"
+    log_path.write_text("\n".join(rawlaser_lines(room_path(60))) + "\n")
+    args = ["run", str(log_path), "--out", str(tmp_path / "r"), "--particles", "100000",
+            "--set", "checks.max_memory_share=0.01", "--no-record", "--quiet"]  # fmt: skip
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("slam: error: raw (its odometry spans 3.0 m × 0.1 m; laser odometry")
+    assert "can run away" in err and not (tmp_path / "r").exists()
