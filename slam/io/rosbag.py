@@ -411,52 +411,56 @@ def _end(raw: bytes, pos: int, padding: int) -> None:
         raise _Mismatch
 
 
-def _scan_ros1(raw: bytes) -> _Scan:
-    seq, sec, nsec = struct.unpack_from("<III", raw, 0)
-    frame, pos = _ros1_string(raw, 12)
-    amin, _, inc, _, _, rmin, rmax, n = struct.unpack_from("<7fI", raw, pos)
-    pos += 32
-    if pos + 4 * n + 4 > len(raw):
-        raise _Mismatch
-    ranges = np.frombuffer(raw, "<f4", n, pos)
-    pos += 4 * n
-    (m,) = struct.unpack_from("<I", raw, pos)
-    _end(raw, pos + 4 + 4 * m, 0)
-    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges, seq)
-
-
-def _scan_cdr(raw: bytes) -> _Scan:
-    e = _cdr_endian(raw)
-    sec, nsec = struct.unpack_from(e + "iI", raw, 4)
-    frame, pos = _cdr_string(raw, 12, e)
-    pos = _align(pos, 4)
-    amin, _, inc, _, _, rmin, rmax, n = struct.unpack_from(e + "7fI", raw, pos)
-    pos += 32
-    if pos + 4 * n + 4 > len(raw):
-        raise _Mismatch
-    ranges = np.frombuffer(raw, e + "f4", n, pos)
-    pos += 4 * n
-    (m,) = struct.unpack_from(e + "I", raw, pos)
-    _end(raw, pos + 4 + 4 * m, 3)
-    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
-
-
-def _multi_echo_ros1(raw: bytes) -> _Scan:
+def _head_ros1(raw: bytes) -> tuple[_Scan, int]:
+    """The header and beam geometry of a ROS 1 LaserScan or MultiEchoLaserScan (ranges still
+    empty) and the position of its ranges' count."""
     seq, sec, nsec = struct.unpack_from("<III", raw, 0)
     frame, pos = _ros1_string(raw, 12)
     amin, _, inc, _, _, rmin, rmax = struct.unpack_from("<7f", raw, pos)
-    ranges = _first_echoes(raw, pos + 28, "<", 0)
-    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges, seq)
+    empty = np.empty(0, np.float32)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, empty, seq), pos + 28
 
 
-def _multi_echo_cdr(raw: bytes) -> _Scan:
+def _head_cdr(raw: bytes) -> tuple[_Scan, int, str]:
+    """:func:`_head_ros1` of a CDR message (no ``seq``), and its byte order."""
     e = _cdr_endian(raw)
     sec, nsec = struct.unpack_from(e + "iI", raw, 4)
     frame, pos = _cdr_string(raw, 12, e)
     pos = _align(pos, 4)
     amin, _, inc, _, _, rmin, rmax = struct.unpack_from(e + "7f", raw, pos)
-    ranges = _first_echoes(raw, pos + 28, e, 3)
-    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, ranges)
+    empty = np.empty(0, np.float32)
+    return _Scan(sec * 10**9 + nsec, frame, amin, inc, rmin, rmax, empty), pos + 28, e
+
+
+def _ranges(raw: bytes, pos: int, e: str, padding: int) -> NDArray[np.float32]:
+    """A LaserScan's ``ranges`` (``float32[]`` at ``pos``), its ``intensities`` skipped to the
+    message's end (up to ``padding`` bytes after it)."""
+    (n,) = struct.unpack_from(e + "I", raw, pos)
+    pos += 4
+    if pos + 4 * n + 4 > len(raw):
+        raise _Mismatch
+    ranges = np.frombuffer(raw, e + "f4", n, pos)
+    pos += 4 * n
+    (m,) = struct.unpack_from(e + "I", raw, pos)
+    _end(raw, pos + 4 + 4 * m, padding)
+    return ranges
+
+
+def _fast_decoders(
+    read_ranges: Callable[[bytes, int, str, int], NDArray[np.float32]],
+) -> tuple[Callable[[bytes], _Scan], Callable[[bytes], _Scan]]:
+    """The ROS 1 and the CDR decoder of a scan type whose ranges ``read_ranges(raw, pos, byte
+    order, padding)`` reads after the header and beam geometry (:func:`_head_ros1`)."""
+
+    def ros1(raw: bytes) -> _Scan:
+        head, pos = _head_ros1(raw)
+        return dataclasses.replace(head, ranges=read_ranges(raw, pos, "<", 0))
+
+    def cdr(raw: bytes) -> _Scan:
+        head, pos, e = _head_cdr(raw)
+        return dataclasses.replace(head, ranges=read_ranges(raw, pos, e, 3))
+
+    return ros1, cdr
 
 
 def _first_echoes(raw: bytes, pos: int, e: str, padding: int) -> NDArray[np.float32]:
@@ -598,7 +602,8 @@ def _seq(header: Any) -> int:
     return int(getattr(header, "seq", -1))
 
 
-def _scan_msg(msg: Any) -> _Scan:
+def _scan_msg(msg: Any, ranges: Any = None) -> _Scan:
+    """A rosbags LaserScan message as a :class:`_Scan` (``ranges``: instead of its own)."""
     return _Scan(
         _stamp(msg.header),
         msg.header.frame_id,
@@ -606,24 +611,14 @@ def _scan_msg(msg: Any) -> _Scan:
         float(msg.angle_increment),
         float(msg.range_min),
         float(msg.range_max),
-        np.asarray(msg.ranges, dtype=np.float32),
+        np.asarray(msg.ranges if ranges is None else ranges, dtype=np.float32),
         _seq(msg.header),
     )
 
 
 def _multi_echo_msg(msg: Any) -> _Scan:
     """A MultiEchoLaserScan as a scan of its first echoes (NaN where a beam has none)."""
-    first = [e.echoes[0] if len(e.echoes) else np.nan for e in msg.ranges]
-    return _Scan(
-        _stamp(msg.header),
-        msg.header.frame_id,
-        float(msg.angle_min),
-        float(msg.angle_increment),
-        float(msg.range_min),
-        float(msg.range_max),
-        np.array(first, dtype=np.float32),
-        _seq(msg.header),
-    )
+    return _scan_msg(msg, [e.echoes[0] if len(e.echoes) else np.nan for e in msg.ranges])
 
 
 def _odom_msg(msg: Any) -> _Odom:
@@ -684,8 +679,8 @@ def _same(a: Any, b: Any) -> bool:
 
 _Decode = Callable[[bytes], _Scan]
 _SCAN_DECODERS: dict[str, tuple[_Decode, _Decode, Callable[[Any], _Scan]]] = {
-    SCAN_TYPE: (_scan_ros1, _scan_cdr, _scan_msg),
-    MULTI_ECHO_TYPE: (_multi_echo_ros1, _multi_echo_cdr, _multi_echo_msg),
+    SCAN_TYPE: (*_fast_decoders(_ranges), _scan_msg),
+    MULTI_ECHO_TYPE: (*_fast_decoders(_first_echoes), _multi_echo_msg),
 }
 """Per scan message type: the fast ROS 1 and CDR decoders and the converter of rosbags' message."""
 
