@@ -104,7 +104,9 @@ class LaserOdometry:
     Feed the scans in time order with :meth:`pose_at`; each call returns the robot's pose at that
     scan. :attr:`matched` counts the scans the matcher placed, :attr:`kept_prediction` those that
     kept the constant-velocity prediction, :attr:`searched` the brute-force searches;
-    :attr:`unfit` lists the scans whose start did not fit.
+    :attr:`unfit` lists the scans whose start did not fit. With a gyro, :attr:`gyro_turns` counts
+    the starts it turned, :attr:`gyro_agreement` compares its turns with the scans' and
+    :attr:`gyro_set_aside_at` says where it was set aside; :meth:`counts` gathers them.
     """
 
     def __init__(self, config: Config, gyro: OdometryIntegrator | None = None) -> None:

@@ -629,8 +629,9 @@ class LogScans:
     """Where :attr:`odometry` comes from: ``"log"`` the log's, ``"laser"`` scan matching
     (:mod:`slam.laser_odometry`; ``robot.odometry``)."""
     laser_odometry: dict[str, float] | None = None
-    """With laser odometry: the scans its matcher placed (``matched``), those that kept the
-    constant-velocity prediction (``kept_prediction``) and the time it took (``seconds``)."""
+    """With laser odometry: its :meth:`~slam.laser_odometry.LaserOdometry.counts` (the scans its
+    matcher placed, those that kept the constant-velocity prediction, and with a gyro its turns,
+    agreement and where it was set aside) and the time it took (``seconds``)."""
 
     @classmethod
     def from_log(cls, log: Log, config: Config) -> LogScans:
