@@ -29,7 +29,7 @@ def test_the_bench_spec_runs_the_six_logs_on_seeds_0_to_3_one_at_a_time():
     assert spec.logs == BENCH_LOGS
     assert spec.seeds == (0, 1, 2, 3)
     assert spec.workers == 1
-    assert spec.metric_of("mit-killian") == "quality"
+    assert spec.metric_of("mit-killian") == "auto"  # its re-timed relations
 
 
 def test_the_more_seeds_spec_runs_the_six_logs_on_seeds_4_to_11_with_the_defaults():
@@ -37,5 +37,5 @@ def test_the_more_seeds_spec_runs_the_six_logs_on_seeds_4_to_11_with_the_default
     assert spec.logs == BENCH_LOGS
     assert spec.seeds == tuple(range(4, 12))
     assert [s.overrides for s in spec.settings] == [()]
-    assert spec.metric_of("mit-killian") == "quality"
+    assert spec.metric_of("mit-killian") == "auto"
     assert len(spec.cells()) == 6 * 8

@@ -108,8 +108,8 @@ def run_eval(args: argparse.Namespace) -> int:
         except DataError as exc:
             if not implicit:
                 raise
-            # The dataset's own relations that match nothing (mit-killian's shared copy has
-            # synthetic times) must not cost the map score.
+            # The dataset's own relations that match nothing (a log whose times were lost and
+            # not re-timed) must not cost the map score.
             print(f"slam: warning: {exc}; left out", file=sys.stderr)
             relations = None
     if reference is not None:
@@ -233,7 +233,13 @@ def _dataset_ground_truth(
     if reference is not None:
         sources.ensure(ref, progress=sys.stderr.isatty())  # the demo, generated if absent
         reference = reference if reference.is_file() else None
-    relations = ref.relations if ref.relations is not None and ref.relations.is_file() else None
+    from slam.eval.retime import relations_file
+
+    try:  # mit-killian's shared copy lost its times: its relations are re-timed (cached)
+        relations = relations_file(ref, progress=sys.stderr.isatty())
+    except DataError as exc:
+        print(f"slam: warning: {exc}; the relations are left out", file=sys.stderr)
+        relations = None
     if relations is None and reference is None:
         expected = sources.GROUND_TRUTH_FILE if ref.reference is not None else "relations file"
         why = f"{where}: dataset {name!r} ({ref.kind}) has no ground truth (no {expected}); {usage}"

@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 
 LOADERS: tuple[str, ...] = ("ece276a", "carmen")
 """Loaders the registry may name."""
+RELATIONS_TIMES: tuple[str, ...] = ("log", "retime")
+"""What a dataset's relations' times are: the log's scan times, or the original log's (re-timed)."""
 
 FILE_STREAMS: tuple[str, ...] = (
     "encoders",
@@ -139,6 +141,10 @@ class Dataset:
     """ECE276A dataset number (the ``NN`` in ``EncodersNN.npz``)."""
     relations: str | None = None
     """Ground-truth relations file, relative to the data directory (CARMEN)."""
+    relations_times: str = "log"
+    """``"log"``: the relations' times are the log's scan times; ``"retime"``: they are the
+    original log's, which this copy lost (synthetic times), and are put back on its scans by
+    :mod:`slam.eval.retime`."""
     expect: Mapping[str, Expectation] = field(default_factory=dict)
     """Expected figures per stream (keys of :meth:`Log.summary`)."""
 
@@ -229,6 +235,7 @@ class _DatasetTable(Validated):
         expected="a dataset number such as 20",
     )
     relations: str | None = bounded(None, test=_is_relative, expected=_RELATIVE)
+    relations_times: str = bounded("log", choices=RELATIONS_TIMES)
     expect: dict[str, Expectation] = bounded(factory=dict, choices=EXPECT_STREAMS)
 
 
@@ -280,6 +287,7 @@ def _dataset(name: str, value: Any, source: str) -> Dataset:
         source=table.source,
         number=None if table.number is None else str(table.number),
         relations=table.relations,
+        relations_times=table.relations_times,
         expect=table.expect,
     )
 

@@ -87,6 +87,9 @@ class DatasetRef:
     ``dataRGBD/RGBNN`` folders."""
     relations: Path | None = None
     """Ground-truth relations file (registry CARMEN logs), when the registry names one."""
+    relations_retime: bool = False
+    """Whether the relations carry the original log's times, which this copy lost: they are
+    re-timed onto its scans (:func:`slam.eval.retime.relations_file`)."""
     shipped_config: bool = True
     """Whether ``configs/<config_name>.toml`` applies. A bag carries its geometry (LaserScan
     fields, tf_static): it never picks up a shipped configuration by its file name."""
@@ -225,6 +228,7 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
             data_dir=data_dir,
             number=entry.number,
             relations=relations,
+            relations_retime=entry.relations_times == "retime",
         )
     path = Path(name)
     if name and path.exists():

@@ -80,7 +80,11 @@ def evaluate_run_folder(
     metrics = json.loads((run_dir / "metrics.json").read_text())
     ref = sources.resolve(log, data_dir, where="sweep log")
     trajectory = read_tum(run_dir / "trajectory.tum")
-    has_relations = ref.relations is not None and ref.relations.is_file()
+    from slam.eval.retime import relations_file
+
+    # re-timed where the log lost its times (cached); not read for another metric
+    relations = relations_file(ref) if metric in ("auto", "relations") else None
+    has_relations = relations is not None
     if metric == "auto":
         if has_relations:
             metric = "relations"
@@ -94,8 +98,11 @@ def evaluate_run_folder(
             raise DataError(
                 f"{log}: evaluation 'relations' asked for, but the log has no relations file"
             )
-        out["relations"] = _relations(trajectory, ref.relations)
+        out["relations"] = _relations(trajectory, relations)
         out["error"] = out["relations"]["trans_mean"]
+        quality = metrics.get("quality")  # the run's own map score comes along
+        if isinstance(quality, dict) and quality.get("score") is not None:
+            out["quality"] = {k: v for k, v in quality.items() if k != "worst"}
     elif metric == "ate":
         if "ate_rmse" in metrics:
             out["ate"] = metrics["ground_truth"]
