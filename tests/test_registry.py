@@ -48,6 +48,8 @@ def test_shipped_registry_names_every_dataset():
         assert d.relations == f"carmen/relations/{name}.relations"
         assert d.file_for("relations").path == d.relations
     assert registry["mit-killian"].log_file().path == "carmen/mit-killian-synthtime.clf.gz"
+    # only mit-killian's relations carry the times its shared copy lost
+    assert [n for n in NAMES if registry[n].relations_times == "retime"] == ["mit-killian"]
     assert registry["intel"].log_file().path == "carmen/intel.clf.gz"
     assert registry["intel"].expect["scans"].count == 13631
 
@@ -169,6 +171,11 @@ _DELETE = object()
         ("datasets", {}, "datasets: expected at least one dataset"),
         ("datasets.toy.loader", "rosbag", "datasets.toy.loader: expected one of ece276a, carmen"),
         ("datasets.toy.loader", _DELETE, "datasets.toy.loader: required key is missing"),
+        (
+            "datasets.toy.relations_times",
+            "shift",
+            "datasets.toy.relations_times: expected one of log, retime, found 'shift'",
+        ),
         ("datasets.toy.colour", "red", "datasets.toy.colour: unknown key"),
         (
             "datasets.toy.number",
