@@ -477,6 +477,22 @@ class LoopConfig(Validated):
     ``fit_distance`` of a surface). A scan that fits as well a metre along a corridor says where
     across the corridor the robot was, not where along it (docs/accuracy.md, "Closures that could
     be a metre elsewhere")."""
+    pass_path: float = bounded(15.0, ge=0.0, le=1e6)
+    """A closure, local or global, must also place its scan uniquely on the earlier pass: on the
+    map of the nodes within about this distance (m) of path of the matched node (but at least
+    ``min_path / 2`` behind the keyframe), moved ``unique_shift`` to ``pass_shift`` metres in any
+    of 32 directions, the scan must fit fewer beams than where it matched (0: no such test).
+    A corridor whose doors repeat every few metres fits a scan as well one period along, and a
+    submap of one stretch may not hold the true place at all: mit-killian's corridors, where a
+    filter 6 m off closed its loop on the wrong door (docs/accuracy.md, "Closures that fit as
+    well a door further along")."""
+    pass_shift: float = bounded(10.0, gt=0.0, le=1000.0)
+    """See ``pass_path``: the farthest shift tried (m), in steps of ``pass_shift_step``."""
+    pass_shift_step: float = bounded(0.25, gt=0.0, le=100.0)
+    """See ``pass_shift``."""
+    pass_ratio: float = bounded(1.0, gt=0.0, le=10.0)
+    """See ``pass_path``: a shift at which this many times the beams that fit at the match lie
+    within ``fit_distance`` of a surface makes the match ambiguous (1: as many)."""
     sigma_xy: float = bounded(0.02, gt=0.0, le=100.0)
     """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""
     sigma_th: float = bounded(0.005, gt=0.0, le=10.0)

@@ -41,6 +41,7 @@ from slam.kernels.field import FieldView, match_one, normal_equations
 from slam.kernels.graph import (
     correlative_search,
     fit_counts,
+    fits_when_shifted,
     linearize,
     shifted_fit,
     solve_system,
@@ -161,6 +162,11 @@ def _detect(
     candidates = _candidates(poses, path, lc)
     windows = [_submap_window(path, j, i, lc) for j, i in candidates]
     context = MatchContext.of(config)
+    passes = None
+    if lc.pass_path > 0.0:  # the earlier passes' maps, shared by the threads
+        from slam.backend.submaps import SubmapCache
+
+        passes = SubmapCache(seq, steps, poses, config, keep=PASS_MAPS_KEPT, table=table)
     ranges = window_chunks(windows, 4 * threads())
     parts = in_threads(
         [
@@ -174,6 +180,8 @@ def _detect(
                 context,
                 candidates[a:b],
                 windows[a:b],
+                path,
+                passes,
             )
             for a, b in ranges
         ]
@@ -213,9 +221,13 @@ def _detect_range(
     context: MatchContext,
     candidates: list[tuple[int, int]],
     windows: list[tuple[int, int]],
+    path: F64,
+    passes=None,
 ) -> list:
     """The loop edges of ``candidates`` (their submaps ``windows``): :func:`_detect`'s work on one
-    range of candidates, a submap built once for consecutive candidates that share it."""
+    range of candidates, a submap built once for consecutive candidates that share it. With
+    ``loops.pass_path``, ``passes`` (a :class:`slam.backend.submaps.SubmapCache`) gives the maps
+    of the earlier passes (:func:`pass_window` along ``path``)."""
     lc, rc = config.loops, config.rbpf
     luts, step_inv = context.luts, context.step_inv
     edges = []
@@ -248,6 +260,10 @@ def _detect_range(
             continue
         if not unique_fit(view, refined, ex, ey, close, lc):
             continue
+        if passes is not None:
+            plo, phi = pass_window(path, j, i, lc)
+            if fits_elsewhere_on_pass(passes.field_view(plo, phi), refined, ex, ey, lc):
+                continue
         hessian, gradient = np.zeros((3, 3)), np.zeros(3)
         normal_equations(
             view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
@@ -274,6 +290,38 @@ def unique_fit(view: FieldView, pose: F64, ex: F64, ey: F64, close: int, lc: Loo
         return True
     moved = shifted_fit(view, pose, ex, ey, lc.fit_distance, lc.unique_shift, UNIQUE_DIRECTIONS)
     return moved < lc.unique_ratio * close
+
+
+PASS_MAPS_KEPT = 16
+"""Maps of earlier passes the local search keeps at a time, shared by its threads (a map of
+``2 · pass_path`` metres of path is about 1 MB)."""
+
+PASS_DIRECTIONS = 32
+"""Directions :func:`fits_elsewhere_on_pass` moves a matched scan in (every 11.25°)."""
+
+
+def pass_window(path: F64, j: int, i: int, lc: LoopConfig) -> tuple[int, int]:
+    """Nodes ``[lo, hi)`` of the earlier pass around node ``j`` (``loops.pass_path`` of path either
+    side, at least ``min_path / 2`` behind node ``i``), its ends on a grid of a third of
+    ``pass_path`` so that neighbouring candidates share one map."""
+    grid = lc.pass_path / 3.0
+    start = np.floor((path[j] - lc.pass_path) / grid) * grid
+    stop = min(np.ceil((path[j] + lc.pass_path) / grid) * grid, path[i] - lc.min_path / 2)
+    return int(np.searchsorted(path, start)), int(np.searchsorted(path, stop, "right"))
+
+
+def fits_elsewhere_on_pass(view: FieldView, pose: F64, ex: F64, ey: F64, lc: LoopConfig) -> bool:
+    """Whether scan ``(ex, ey)``, matched at ``pose``, fits the map of the earlier pass ``view``
+    (:func:`pass_window`) as well somewhere else: moved ``unique_shift`` to ``pass_shift``
+    metres in any of :data:`PASS_DIRECTIONS` directions, at least ``pass_ratio`` times the beams
+    within ``fit_distance`` of a surface at ``pose``. Always false with ``pass_path`` 0."""
+    if lc.pass_path <= 0.0:
+        return False
+    _, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
+    need = int(np.ceil(lc.pass_ratio * max(close, 1)))
+    first = max(lc.unique_shift, lc.pass_shift_step)
+    shifts = np.arange(first, lc.pass_shift + 1e-9, lc.pass_shift_step)
+    return fits_when_shifted(view, pose, ex, ey, lc.fit_distance, shifts, PASS_DIRECTIONS, need)
 
 
 def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:

@@ -289,6 +289,59 @@ def test_a_scan_that_fits_as_well_a_metre_along_a_corridor_is_not_a_unique_match
     assert unique_fit(corridor_view, pose, ex, ey, 200, off)
 
 
+def _doors(at: list[float]) -> np.ndarray:
+    """A corridor 2 m wide and 38 m long whose upper wall has a door (a 1 m gap with a 1 m
+    recess behind it) at each of ``at`` (m along the corridor)."""
+    x = np.arange(0.0, 38.0, 0.025)
+    upper = x[[all(abs(xi - a) > 0.5 for a in at) for xi in x]]
+    parts = [np.c_[x, 0.0 * x], np.c_[upper, 0.0 * upper + 2.0]]
+    for a in at:
+        t = np.arange(0.0, 1.0, 0.025)
+        parts += [np.c_[a - 0.5 + 0.0 * t, 2.0 + t], np.c_[a + 0.5 + 0.0 * t, 2.0 + t],
+                  np.c_[a - 0.5 + t, 3.0 + 0.0 * t]]  # fmt: skip
+    return np.vstack(parts)
+
+
+def test_a_scan_that_fits_as_well_a_door_further_along_is_rejected_on_the_earlier_pass():
+    """A corridor whose doors repeat every 6 m: a scan that sees 7 m either way fits as well one
+    door along, so its match on the earlier pass is ambiguous (:func:`fits_elsewhere_on_pass`;
+    mit-killian's corridors, where a filter 6 m off closed the loop on the wrong door). It
+    passes the metre test (moved 1 m, the door gaps miss). With the doors at irregular places
+    the same scan fits nowhere else within 10 m. ``pass_path = 0`` turns the test off."""
+    from slam.config import LoopConfig
+    from slam.graph import fits_elsewhere_on_pass, unique_fit
+    from slam.kernels.graph import fit_counts
+
+    lc = LoopConfig()
+    assert lc.pass_path > 0.0
+    pose = np.array([19.0, 1.0, 0.1])
+    for doors, ambiguous in (([4, 10, 16, 22, 28, 34], True), ([3, 11, 16, 24, 31], False)):
+        corridor = _doors(doors)
+        view = _field_of(corridor)
+        seen = corridor[np.abs(corridor[:, 0] - pose[0]) < 7.0]
+        ex, ey = _scan(seen, pose, 240)
+        _, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
+        assert close == 240
+        assert unique_fit(view, pose, ex, ey, close, lc)  # a metre along, the doors miss
+        assert fits_elsewhere_on_pass(view, pose, ex, ey, lc) == ambiguous
+        assert not fits_elsewhere_on_pass(view, pose, ex, ey, LoopConfig(pass_path=0.0))
+
+
+def test_the_earlier_pass_is_the_path_around_the_matched_node_behind_the_keyframe():
+    """:func:`pass_window`: the nodes within ``pass_path`` of path either side of node ``j``,
+    the ends on a grid of a third of it (neighbouring candidates share a map), and never within
+    ``min_path / 2`` of the keyframe ``i``."""
+    from slam.config import LoopConfig
+    from slam.graph import pass_window
+
+    path = np.arange(0.0, 200.0, 0.5)  # node k at 0.5 k m
+    lc = LoopConfig(pass_path=15.0, min_path=10.0)
+    assert pass_window(path, 100, 380, lc) == (70, 131)  # node 100 at 50 m: 35 m ... 65 m
+    assert pass_window(path, 102, 380, lc) == (70, 141)  # at 51 m: 35 m ... 70 m (grid 5 m)
+    assert pass_window(path, 108, 380, lc) == (70, 141)  # at 54 m: the same map
+    assert pass_window(path, 100, 120, lc) == (70, 111)  # at most 55 m: 5 m behind node 120
+
+
 def test_candidates_in_turn_cover_the_rest_keyframe_by_keyframe():
     """After a loop that drifted tens of metres, the submaps nearest the drifted estimate are the
     wrong stretch of the right pass: the extra candidates taken in turn search the rest, two

@@ -28,7 +28,10 @@ module adds, in the same pose graph and the same rounds:
    the scan's beams (:func:`_fitting`), and the match must be unique: moved ``loops.unique_shift``
    in any direction the scan fits clearly worse (:func:`slam.graph.unique_fit`; a corridor's
    scan fits as well a metre along it, and two such matches from neighbouring keyframes agree
-   with each other, step 4). A submap that a local closure already joins to the
+   with each other, step 4), and moved up to ``loops.pass_shift`` on the map of the earlier pass
+   around the matched node it fits worse too (:func:`slam.graph.fits_elsewhere_on_pass`: a
+   door further along a corridor whose doors repeat; aliases of a repeated structure are
+   consistent with each other as well). A submap that a local closure already joins to the
    keyframe's neighbourhood is searched like any other; its match is dropped when it puts the
    keyframe where that local closure does, or fits the submap no better than where the local
    closure puts it (:func:`_held_locally`). The local search looks only ±``loops.search_xy``
@@ -68,12 +71,15 @@ from slam.geometry import (
     wrap_angle,
 )
 from slam.graph import (
+    PASS_MAPS_KEPT,
     LoopResult,
     _edge_information,
+    fits_elsewhere_on_pass,
     keyframe_edges,
     loop_rounds,
     node_hits,
     optimize,
+    pass_window,
     unique_fit,
 )
 from slam.kernels.bnb import bnb_search
@@ -180,6 +186,8 @@ class _Search(NamedTuple):
     config: Config
     cache: SubmapCache
     st: _Stretches
+    passes: SubmapCache | None
+    """The maps of the earlier passes (``loops.pass_path``; None without the test)."""
 
 
 def detect_global(
@@ -214,7 +222,10 @@ def detect_global(
     turns = np.arange(frames.size)
     st = _Stretches.of(x, path, bc.submap_length, list(local))
     cache = SubmapCache(seq, steps, x, config, keep=SUBMAPS_KEPT, table=table)
-    search = partial(_search_keyframes, _Search(seq, steps, x, path, config, cache, st))
+    passes = None
+    if config.loops.pass_path > 0.0:
+        passes = SubmapCache(seq, steps, x, config, keep=PASS_MAPS_KEPT, table=table)
+    search = partial(_search_keyframes, _Search(seq, steps, x, path, config, cache, st, passes))
     edges, searched = _in_ranges(search, frames, turns, False)
     if far and bc.far_drift_xy > 0 and bc.far_candidates > 0:
         held = np.concatenate([st.closed_node, [i for _, i, _, _ in edges]]).astype(np.int64)
@@ -260,7 +271,7 @@ def _search_keyframes(
     among all keyframes, for :func:`candidate_order`): their verified closures and the searches
     made; within the drift window (``backend.drift_xy``), or with ``beyond`` the
     ``backend.far_candidates`` submaps beyond it (``backend.far_drift_xy``)."""
-    seq, steps, x, path, config, cache, st = search
+    seq, steps, x, path, config, cache, st, passes = search
     bc, lc, rc = config.backend, config.loops, config.rbpf
     luts, step_inv = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     edges, searched = [], 0
@@ -299,6 +310,11 @@ def _search_keyframes(
             close = _fitting(view, refined, ex, ey, config)
             if close is None or not unique_fit(view, refined, ex, ey, close, lc):
                 continue
+            j = lo + int(np.argmin(np.hypot(*(x[lo:hi, :2] - refined[:2]).T)))
+            if passes is not None:
+                plo, phi = pass_window(path, j, int(i), lc)
+                if fits_elsewhere_on_pass(passes.field_view(plo, phi), refined, ex, ey, lc):
+                    continue
             if joined.any() and _held_locally(
                 st, joined, view, (ex, ey), refined, close, int(i), x, path, config
             ):
@@ -307,7 +323,6 @@ def _search_keyframes(
             normal_equations(
                 view, *refined, ex, ey, luts[-1, 0], luts[-1, 1], step_inv, hessian, gradient
             )
-            j = lo + int(np.argmin(np.hypot(*(x[lo:hi, :2] - refined[:2]).T)))
             edges.append(
                 (j, int(i), relative(x[j], refined), _edge_information(hessian, refined, lc, rc))
             )

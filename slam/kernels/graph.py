@@ -455,3 +455,43 @@ def shifted_fit(
         _, close = fit_counts(view, moved, ex, ey, distance)
         best = max(best, close)
     return best
+
+
+@njit(cache=True, nogil=True)
+def fits_when_shifted(
+    view: FieldView,
+    pose: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    distance: float,
+    shifts: np.ndarray,
+    directions: int,
+    need: int,
+) -> bool:
+    """Whether a scan at ``pose`` moved by any of ``shifts`` metres in any of ``directions``
+    directions evenly spread over the circle (heading unchanged) has at least ``need`` beams
+    within ``distance`` of a surface: :func:`shifted_fit` over several shifts, each placement
+    given up as soon as too few beams are left to reach ``need``."""
+    c = np.cos(pose[2])
+    s = np.sin(pose[2])
+    n = ex.shape[0]
+    wx = np.empty(n)
+    wy = np.empty(n)
+    for b in range(n):
+        wx[b] = pose[0] + c * ex[b] - s * ey[b]
+        wy[b] = pose[1] + s * ex[b] + c * ey[b]
+    for shift in shifts:
+        for k in range(directions):
+            a = 2.0 * np.pi * k / directions
+            dx = shift * np.cos(a)
+            dy = shift * np.sin(a)
+            close = 0
+            for b in range(n):
+                if close + (n - b) < need:
+                    break
+                d, _, _ = surface_at(view, wx[b] + dx, wy[b] + dy)
+                if not np.isnan(d) and abs(d) < distance:
+                    close += 1
+                    if close >= need:
+                        return True
+    return False
