@@ -481,7 +481,8 @@ class LoopConfig(Validated):
     """A closure, local or global, must also place its scan uniquely on the earlier pass: on the
     map of the nodes within about this distance (m) of path of the matched node (but at least
     ``min_path / 2`` behind the keyframe), moved ``unique_shift`` to ``pass_shift`` metres in any
-    of 32 directions, the scan must fit fewer beams than where it matched (0: no such test).
+    of 32 directions, the scan must fit fewer than ``unique_ratio`` of the beams that fit where it
+    matched (0: no such test).
     A corridor whose doors repeat every few metres fits a scan as well one period along, and a
     submap of one stretch may not hold the true place at all: mit-killian's corridors, where a
     filter 6 m off closed its loop on the wrong door (docs/accuracy.md, "Closures that fit as
@@ -490,9 +491,6 @@ class LoopConfig(Validated):
     """See ``pass_path``: the farthest shift tried (m), in steps of ``pass_shift_step``."""
     pass_shift_step: float = bounded(0.25, gt=0.0, le=100.0)
     """See ``pass_shift``."""
-    pass_ratio: float = bounded(1.0, gt=0.0, le=10.0)
-    """See ``pass_path``: a shift at which this many times the beams that fit at the match lie
-    within ``fit_distance`` of a surface makes the match ambiguous (1: as many)."""
     sigma_xy: float = bounded(0.02, gt=0.0, le=100.0)
     """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""
     sigma_th: float = bounded(0.005, gt=0.0, le=10.0)

@@ -312,13 +312,14 @@ def pass_window(path: F64, j: int, i: int, lc: LoopConfig) -> tuple[int, int]:
 
 def fits_elsewhere_on_pass(view: FieldView, pose: F64, ex: F64, ey: F64, lc: LoopConfig) -> bool:
     """Whether scan ``(ex, ey)``, matched at ``pose``, fits the map of the earlier pass ``view``
-    (:func:`pass_window`) as well somewhere else: moved ``unique_shift`` to ``pass_shift``
-    metres in any of :data:`PASS_DIRECTIONS` directions, at least ``pass_ratio`` times the beams
-    within ``fit_distance`` of a surface at ``pose``. Always false with ``pass_path`` 0."""
+    (:func:`pass_window`) about as well somewhere else: moved ``unique_shift`` to ``pass_shift``
+    metres in any of :data:`PASS_DIRECTIONS` directions, at least ``unique_ratio`` of the beams
+    within ``fit_distance`` of a surface at ``pose`` (the criterion of :func:`unique_fit`, over
+    the wider map and further). Always false with ``pass_path`` 0."""
     if lc.pass_path <= 0.0:
         return False
     _, close = fit_counts(view, pose, ex, ey, lc.fit_distance)
-    need = int(np.ceil(lc.pass_ratio * max(close, 1)))
+    need = int(np.ceil(lc.unique_ratio * max(close, 1)))
     first = max(lc.unique_shift, lc.pass_shift_step)
     shifts = np.arange(first, lc.pass_shift + 1e-9, lc.pass_shift_step)
     return fits_when_shifted(view, pose, ex, ey, lc.fit_distance, shifts, PASS_DIRECTIONS, need)

@@ -79,7 +79,7 @@ def test_the_parts_table_shows_each_runs_parts_and_their_sum():
     cells = " | ".join(tables.fixed(v, 2) for v in intel.values())
     assert f"| intel | {cells} | {tables.fixed(sum(intel.values()), 1)} |" in performance
     assert "| run | filter | loop closing |" in performance
-    killian = benches["slam.mit-killian"]["quality"]["rbpf"]["estimate_parts_s"]
+    killian = benches["slam.mit-killian"]["rbpf"]["estimate_parts_s"]
     assert f"| mit-killian | {tables.fixed(killian['filter'], 2)} |" in performance
     broken = json.loads(json.dumps(benches))
     del broken["slam.aces"]["rbpf"]["estimate_parts_s"]
@@ -119,7 +119,16 @@ def test_prose_claims_hold_for_the_json():
     )
     aces_mean = sum(s["trans_mean"] for s in aces_seeds) / len(aces_seeds)
     aces_max = max(s["trans_mean"] for s in aces_seeds)
-    assert f"(aces {aces_mean:.4f} on average over seeds 0–3, at most {aces_max:.4f})" in flat
+    mean_fig = f"<!-- fig:slam.seed_mean_aces -->{aces_mean:.4f}<!-- /fig -->"
+    max_fig = f"<!-- fig:slam.seed_max_aces -->{aces_max:.4f}<!-- /fig -->"
+    assert f"(aces {mean_fig} on average over seeds 0–3, at most {max_fig})" in flat
+    # mit-killian against Cartographer's 0.0395: the seeds below and above it, as written
+    killian = [s["trans_mean"] for s in benches["slam.mit-killian"]["rbpf"]["per_seed"]]
+    below = [k for k, v in enumerate(killian) if v < 0.0395]
+    above = [k for k, v in enumerate(killian) if v >= 0.0395]
+    assert (below, above) == ([1, 3], [0, 2])
+    assert "below Cartographer on seeds 1 and 3, above on 0 and 2" in flat
+    assert max(killian) < 0.122  # GMapping's published figure
     clinic = [s["trans_mean"] for s in benches["slam.fr-clinic"]["rbpf"]["per_seed"]]
     clinic_range = (
         f"<!-- fig:slam.seeds_fr-clinic -->{min(clinic):.3f}–{max(clinic):.3f}<!-- /fig -->"
@@ -264,11 +273,27 @@ def test_localize_and_quality_tables_show_the_json_figures():
     assert r["bad_stretches"] > 0
     bad = f"| {r['bad_stretches']} ({r['bad_stretches_judged']} / {r['bad_stretches_flagged']}) |"
     assert bad in row
-    assert "| mit-killian | 17 480 |" in evaluation and "| — | — | — |" in evaluation
+    killian = quality["quality.mit_killian"]["relations"]  # re-timed relations
+    row = next(r for r in evaluation.splitlines() if r.startswith("| mit-killian | 17 480 |"))
+    assert (
+        f"| {tables.fixed(killian['trans_mean'], 3)} / {tables.fixed(killian['trans_max'], 2)} |"
+        in row
+    )
 
 
 def test_the_quality_table_lists_logs_scored_without_relations():
-    """mit-killian (metric "quality"): seed 0's score in bold, the range over seeds, wall, memory."""
+    """A log scored by the map quality score alone (metric "quality"): seed 0's score in bold, the
+    range over seeds, wall, memory; mit-killian's relations bench carries the score beside its
+    relations and is listed the same way."""
+    benches = slam_benches()
+    killian = benches["slam.mit-killian"]
+    rows = tables.slam_quality_table(benches).splitlines()
+    scores = [s["quality_score"] for s in killian["rbpf"]["per_seed"]]
+    spread = f"{tables.fixed(min(scores), 3)}–{tables.fixed(max(scores), 3)} (seeds 0–3)"
+    assert rows[3].startswith(
+        f"| mit-killian | **slam rbpf** | **{tables.fixed(killian['rbpf']['quality_score'], 3)}**"
+        f" | {spread} |"
+    )
     benches = slam_benches()
     block = {"quality_score": 0.9, "wall_s": 100.04, "peak_rss_mb": 1000.4}
     block["per_seed"] = [{"seed": 0, "quality_score": 0.9}, {"seed": 1, "quality_score": 0.75}]

@@ -492,11 +492,19 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "slam.seeds_aces": seed_range("aces"),
     "slam.seeds_fr079": seed_range("fr079"),
     "slam.seeds_fr-clinic": seed_range("fr-clinic"),
+    "slam.seeds_mit-killian": seed_range("mit-killian"),
     "slam.seed_mean_intel": _figure(
         "slam.intel", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
     ),
     "slam.seed_mean_fr-clinic": _figure(
         "slam.fr-clinic", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
+    ),
+    "slam.seed_mean_aces": _figure(
+        "slam.aces", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
+    ),
+    "slam.seed_max_aces": _figure("slam.aces", "rbpf", "over_seeds", "trans_mean", "max", digits=4),
+    "slam.seed_mean_mit-killian": _figure(
+        "slam.mit-killian", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
     ),
     "slam.demo_scans": _figure("slam.demo_100", "scans"),
     "slam.classic_path": _figure("slam.demo_classic_100", "path_length_m", digits=1),
