@@ -30,7 +30,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,6 +49,9 @@ from slam.kernels.graph import (
 from slam.kernels.threads import in_threads, threads
 from slam.mapping import ParticleMaps, likelihood_tables
 from slam.scans import ScanHits
+
+if TYPE_CHECKING:
+    from slam.backend.submaps import SubmapCache
 
 F64 = NDArray[np.float64]
 
@@ -222,7 +225,7 @@ def _detect_range(
     candidates: list[tuple[int, int]],
     windows: list[tuple[int, int]],
     path: F64,
-    passes=None,
+    passes: SubmapCache | None = None,
 ) -> list:
     """The loop edges of ``candidates`` (their submaps ``windows``): :func:`_detect`'s work on one
     range of candidates, a submap built once for consecutive candidates that share it. With
