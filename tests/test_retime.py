@@ -50,10 +50,31 @@ def test_only_even_gaps_still_give_the_scan_period_when_the_log_has_the_scans():
 def test_times_that_are_not_scan_times_are_refused():
     rng = np.random.default_rng(3)
     times = np.sort(rng.uniform(0.0, 1000.0, 500))
-    with pytest.raises(DataError, match=r"whole multiples of a period .*not scan times"):
-        relation_period(times, 10000)
+    with pytest.raises(
+        DataError, match=r"^r\.relations: only .* whole multiples of a period .*not"
+    ):
+        relation_period(times, 10000, where="r.relations")
     with pytest.raises(DataError, match=r"more than the log's 100 scans"):
         relation_period(PERIOD * np.arange(0, 400, 2.0), 100)
+
+
+def test_relations_that_never_turn_cannot_be_placed_and_the_file_is_named(tmp_path):
+    """Over a straight stretch every offset gives the same relative motions: relations without
+    a turn leave the segment unplaced, and the refusal names the relations file and why."""
+    rng = np.random.default_rng(5)
+    times, picks = _times_with_gaps(rng, 500, PERIOD)
+    first, second = picks[:-1], picks[1:]
+    relations = Relations(
+        t1=times[first], t2=times[second], x=0.4 * (second - first), y=0.0 * first,
+        yaw=0.0 * first, source=tmp_path / "straight.relations",
+    )  # fmt: skip
+
+    def never(k):
+        raise AssertionError("no scan is registered without turning relations")
+
+    synthetic = 1e9 + 0.1 * np.arange(500)
+    with pytest.raises(DataError, match=r"straight\.relations: no segment .*0 turning relations"):
+        retime_relations(relations, synthetic, np.zeros((500, 3)), never, load_config())
 
 
 @pytest.fixture(scope="module")

@@ -108,6 +108,7 @@ class Retimed:
     period: float
     """The original scan period (s)."""
     segments: list[Segment]
+    """The runs of whole-period gaps, each with its offset or why it was left out."""
     kept: I64
     """Rows of the source relations that were placed."""
     scan_index: tuple[I64, I64]
@@ -129,16 +130,18 @@ def _distinct_times(relations: Relations) -> tuple[F64, I64, I64]:
     return times, inverse[:n].astype(np.int64), inverse[n:].astype(np.int64)
 
 
-def relation_period(times: F64, scans: int, tolerance: float = 0.1) -> float:
+def relation_period(
+    times: F64, scans: int, tolerance: float = 0.1, where: str = "relations"
+) -> float:
     """The scan period (s) of which the gaps between the sorted distinct ``times`` are whole
     multiples: the median of the shortest gaps, refined by least squares over every gap within
     ``tolerance`` of a whole multiple, then the shortest submultiple ``P / k`` for which the
     times still span at most ``scans − 1`` periods. :class:`DataError` when the gaps share no
-    period."""
+    period, its message starting with ``where`` (the relations file)."""
     gaps = np.diff(np.asarray(times, dtype=np.float64))
     gaps = gaps[gaps > 0]
     if gaps.size < 2:
-        raise DataError("relations: fewer than three distinct times, no scan period to read")
+        raise DataError(f"{where}: fewer than three distinct times, no scan period to read")
     shortest = gaps[gaps <= 1.5 * gaps.min()]
     period = float(np.median(shortest))
     for _ in range(3):  # refine: each gap's quotient, then the period that fits them best
@@ -146,7 +149,7 @@ def relation_period(times: F64, scans: int, tolerance: float = 0.1) -> float:
         whole = (np.abs(q - np.round(q)) <= tolerance) & (np.round(q) >= 1)
         if whole.mean() < 0.9:
             raise DataError(
-                f"relations: only {whole.mean():.0%} of the gaps between their times are whole "
+                f"{where}: only {whole.mean():.0%} of the gaps between their times are whole "
                 f"multiples of a period near {period:.4f} s (expected at least 90 %): the times "
                 "are not scan times of a steady laser"
             )
@@ -157,7 +160,7 @@ def relation_period(times: F64, scans: int, tolerance: float = 0.1) -> float:
         k += 1
     if span / (period / k) > scans - 1:
         raise DataError(
-            f"relations: their times span {span:.1f} s, {span / period:.0f} periods of "
+            f"{where}: their times span {span:.1f} s, {span / period:.0f} periods of "
             f"{period:.4f} s, more than the log's {scans} scans"
         )
     return period / k
@@ -199,6 +202,9 @@ def _place(segment: Segment, rows: I64, local_i: I64, local_j: I64, candidates: 
     from slam.calibration import CalibrationSettings, pair_motions
 
     st = ev.settings
+    if rows.size < st.min_pairs:  # a straight stretch: every offset gives the same motions
+        segment.why = f"{rows.size} turning relations (expected at least {st.min_pairs})"
+        return
     yaw = ev.relations.yaw[rows]
     n = ev.odometry.shape[0]
     fitted: dict[int, int] = {}
@@ -240,11 +246,13 @@ def retime_relations(
     lost (module docstring). ``log_times`` ``(N,)`` and ``odometry`` ``(N, 3)`` are the log's
     scans' times and odometry poses in file order, ``hits_of(k)`` scan ``k``'s returns in the
     robot frame, ``config`` the log's :class:`slam.config.Config` (the matcher's settings).
-    :class:`DataError` when no segment can be placed."""
+    :class:`DataError`, naming the relations file, when their times share no period or no
+    segment can be placed."""
     st = settings or RetimeSettings()
+    where = str(relations.source) if relations.source is not None else "relations"
     times, ti, tj = _distinct_times(relations)
     n = int(np.asarray(log_times).shape[0])
-    period = relation_period(times, n, st.tolerance)
+    period = relation_period(times, n, st.tolerance, where)
     segments, local = _segments(times, period, st.tolerance)
     seg_of = np.zeros(times.size, dtype=np.int64)
     for s, segment in enumerate(segments):
@@ -279,7 +287,8 @@ def retime_relations(
     if not any(s.offset is not None for s in segments):
         why = "; ".join(f"segment {k}: {s.why}" for k, s in enumerate(segments))
         raise DataError(
-            f"relations: no segment of their times could be placed on the scans ({why})"
+            f"{where}: no segment of the relations' times could be placed on the log's scans "
+            f"({why})"
         )
     i, j = index[ti], index[tj]
     kept = np.flatnonzero((i >= 0) & (j >= 0) & (i < n) & (j < n))
