@@ -162,6 +162,10 @@ class Slam:
     (:func:`slam.stages.default_stages`). ``scan_period`` is the sensor's nominal time between
     scans, the clock of ``rbpf``'s interval update rule; without it the median time step of the
     scans so far stands in (a recorded log's batch run passes the median over the whole log).
+    ``odometry_source`` says where the ``odometry=`` poses come from: ``"log"`` dead reckoning
+    (wheels, encoders + IMU), ``"laser"`` scan matching (a laser odometry of the caller's, or
+    the log's laser odometry in a batch run): the :class:`~slam.stages.Recovery` stage starts
+    again only from dead reckoning. Laser odometry that :meth:`update` runs itself sets it.
     """
 
     def __init__(
@@ -172,6 +176,7 @@ class Slam:
         observers: Iterable[Observer] = (),
         stages: Iterable[Stage] | None = None,
         scan_period: float | None = None,
+        odometry_source: str = "log",
     ) -> None:
         config = config_for("Slam", config, seed)
         if config.filter.method not in ("rbpf", "classic"):
@@ -181,9 +186,14 @@ class Slam:
             )
         if scan_period is not None and not scan_period >= 0:
             raise UsageError(f"scan_period: expected seconds ≥ 0, found {scan_period}")
+        if odometry_source not in ("log", "laser"):
+            raise UsageError(
+                f"odometry_source: expected 'log' or 'laser', found {odometry_source!r}"
+            )
         self.config = config
         self.scans = ScanSequence()
         """Every scan processed so far, with its odometry (what the stages read)."""
+        self.scans.odometry_source = odometry_source
         self.stages: list[Stage] = default_stages(config) if stages is None else list(stages)
         self._observers: list[Observer] = list(observers)
         self._observer = CompositeObserver(self._observers) if self._observers else None
@@ -291,6 +301,7 @@ class Slam:
                 self.config, "Slam.update", len(self.scans) > 0,
                 "give odometry= (a pose) or feed encoders and IMU readings", readings,
             )  # fmt: skip
+            self.scans.odometry_source = "laser"
         elif wheels:
             from slam.laser_odometry import refuse_given
 

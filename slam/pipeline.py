@@ -386,7 +386,10 @@ def _estimate(source: Source, config: Config, progress: bool, observers: list[Ob
     try:
         with on_compile(bar.compiling):
             reach_stage("filter")
-            slam = Slam(config, observers=[bar, *observers], scan_period=scans.scan_period())
+            slam = Slam(
+                config, observers=[bar, *observers], scan_period=scans.scan_period(),
+                odometry_source=scans.odometry_source,
+            )  # fmt: skip
             for scan, odometry in scans:
                 slam.update(scan, odometry=odometry)
             reach_stage("finish")  # loop closing, re-registration, final map

@@ -351,6 +351,9 @@ class ScanSequence:
         self._odometry = np.empty((capacity, 3))
         self._indices = np.empty(capacity, dtype=np.int64)
         self._beams = 0
+        self.odometry_source = "log"
+        """Where the odometry comes from: ``"log"`` dead reckoning, ``"laser"`` scan matching
+        (:attr:`LogScans.odometry_source`)."""
 
     def __len__(self) -> int:
         return len(self._scans)
@@ -523,6 +526,7 @@ class ScanSequence:
     def from_scans(cls, source: LogScans) -> ScanSequence:
         """The scans of ``source``, with their odometry, in a sequence."""
         seq = cls(len(source))
+        seq.odometry_source = source.odometry_source
         for scan, odometry in source:
             seq.append(scan, odometry)
         return seq

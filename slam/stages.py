@@ -16,9 +16,12 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
    as far as the log's odometry deserves (``rbpf.smooth_odometry``); 4 and 5 run
    ``rbpf.register_rounds`` times, each round's map built from the node scans at the poses the
    previous round smoothed;
-6. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
+6. :class:`Recovery` — when the result's map-quality score says the filter lost track
+   (``rbpf.recover_below``), stages 1–5 again from dead reckoning (the odometry's poses as the
+   nodes), the better-scoring result kept;
+7. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
-``rbpf`` runs all six (:func:`default_stages`); ``classic`` none (its filter outputs every
+``rbpf`` runs all seven (:func:`default_stages`); ``classic`` none (its filter outputs every
 scan's pose and its own map). A stage is anything with a ``name`` and a ``run(output, config)``
 method (:class:`Stage`), so a caller can drop, reorder or add stages.
 """
@@ -291,6 +294,96 @@ def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) ->
     )  # fmt: skip
 
 
+class Recovery:
+    """Stages 1–5 again from dead reckoning when the result scores as a filter that lost track.
+
+    A filter can lose track where its scans say too little (a laser that sees 8 m in a hall 20 m
+    wide; docs/accuracy.md, "A laser that sees less far"), and the stages after it start from
+    its nodes. The same stages started from the odometry's poses instead close the loops the
+    odometry left open (the global loop search looks as far as the drift) and register every
+    scan; where the filter was lost, that is the better trajectory. So: the result's map-quality
+    score (on every ``rbpf.smooth_choice_every``-th scan, as the smoothing choice scores) below
+    ``rbpf.recover_below`` runs
+    ``again`` (fresh stages 1–5, :func:`default_stages`) on the filter's output with the
+    odometry's poses as its nodes, and the better of the two by the score is kept, the filter's
+    unless the other beats it by the smoothing choice's margin and standard errors
+    (:func:`smoothing_pick`). The stats record both scores (``recovery_scores``) and which was
+    kept (``recovered``); keeping the odometry's start warns. On every default run of the six
+    benchmark logs the score is above the threshold and nothing runs again. Only from dead
+    reckoning: where the odometry is the laser's (``ScanSequence.odometry_source``), it is a scan
+    matcher that lost its way with the filter (fr-clinic without its wheels: lost either way,
+    and chosen between by a score that cannot tell two wrong maps apart).
+    """
+
+    name = "recovery"
+
+    def run(self, output: FilterOutput, config: Config) -> FilterOutput:
+        """``output``, or the stages' result from dead reckoning when it scores better."""
+        rc = config.rbpf
+        seq = output.scans
+        if rc.recover_below <= 0.0 or output.poses is None or len(output.steps) < 2:
+            return output
+        if seq.odometry_source != "log":
+            return output  # laser odometry is a scan matcher too: no dead reckoning to start from
+        import warnings
+
+        picks = np.arange(0, len(seq), rc.smooth_choice_every)
+        rays = quality_rays(seq, picks, config)
+        score, judged = _score(output.poses, seq, picks, rays, config)
+        if not np.isfinite(score) or score >= rc.recover_below:
+            return output
+        again = [stage for stage in default_stages(config) if _redone(stage)]
+        start = dataclasses.replace(
+            output,
+            node_poses=np.asarray(seq.odometry, dtype=np.float64)[output.steps].copy(),
+            poses=None,
+            grid=None,
+            stats={k: v for k, v in output.stats.items() if k in _FILTER_STATS},
+        )
+        other = run_stages(start, again, config)
+        other_score, other_judged = _score(other.poses, seq, picks, rays, config)
+        scores = [score, other_score]
+        kept = smoothing_pick(
+            scores, [judged, other_judged], rc.smooth_choice_margin, rc.smooth_choice_z
+        )
+        result = other if kept == 1 else output
+        stats = {
+            **result.stats,
+            "recovery_scores": [round(v, 4) if np.isfinite(v) else None for v in scores],
+            "recovered": kept == 1,
+        }
+        if kept == 1:
+            warnings.warn(
+                f"the filter lost track (map quality {score:.3f}, below rbpf.recover_below = "
+                f"{rc.recover_below:g}): the stages after it, run again from dead reckoning, "
+                f"score {other_score:.3f}, and the run keeps that trajectory",
+                stacklevel=2,
+            )
+        return dataclasses.replace(result, stats=stats)
+
+
+_FILTER_STATS = frozenset(
+    {"updates", "resamples", "match_fallbacks", "match_retries", "basin_probes", "gross_turns",
+     "shift_probes", "gross_shifts", "peak_tiles", "peak_particle_map_mb"}
+)  # fmt: skip
+"""The filter's own counters, which a result started from dead reckoning keeps."""
+
+
+def _redone(stage: Stage) -> bool:
+    """Whether :class:`Recovery` runs ``stage`` again (stages 1–5: not itself nor the map)."""
+    return not isinstance(stage, Recovery | FinalMap)
+
+
+def _score(
+    poses: F64, seq: ScanSequence, picks: NDArray[np.int64], rays: Rays, config: Config
+) -> tuple[float, int]:
+    """The map-quality score of ``poses`` on the scans ``picks`` and the returns it judged."""
+    from slam.eval.quality import map_quality
+
+    result = map_quality(seq.times[picks], poses[picks], rays, config.quality, config.map)
+    return float(result.score), int(result.totals()["checked"])
+
+
 class FinalMap:
     """The occupancy grid of the node scans at their final poses (after :class:`BetweenUpdates`)."""
 
@@ -314,7 +407,7 @@ def default_stages(config: Config) -> list[Stage]:
             for _ in range(config.rbpf.register_rounds)
             for stage in (ScanRegistration(), OdometrySmoothing(measured))
         ]
-        return [LoopClosing(), Reregistration(), BetweenUpdates(), *rounds, FinalMap()]
+        return [LoopClosing(), Reregistration(), BetweenUpdates(), *rounds, Recovery(), FinalMap()]
     return []
 
 

@@ -169,6 +169,7 @@ def test_online_without_odometry_equals_the_batch_run(small, gyro):
         upto = int(np.searchsorted(imu_times, scan.time, side="right"))
         s.update(scan, imu=(imu_times[fed:upto], gyro_z[fed:upto]))
         fed = upto
+    assert s.scans.odometry_source == "laser"  # what the recovery stage reads
     online = s.finish()
     np.testing.assert_array_equal(online.trajectory.poses, batch.trajectory.poses)
     np.testing.assert_array_equal(online.grid.log_odds, batch.grid.log_odds)

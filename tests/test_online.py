@@ -327,6 +327,10 @@ def test_api_errors_are_one_clear_line(small):
         slam.Slam(slam.load_config("", None, ['filter.method="odometry"']))
     with pytest.raises(UsageError, match="expected a slam.Config"):
         slam.Slam("intel")  # type: ignore[arg-type]
+    with pytest.raises(
+        UsageError, match="odometry_source: expected 'log' or 'laser', found 'wheels'"
+    ):
+        slam.Slam(odometry_source="wheels")
     s = slam.Slam()
     with pytest.raises(UsageError, match="no scan was processed"):
         s.finish()

@@ -387,3 +387,78 @@ def test_the_lasers_noise_sets_the_smoothing_multiple():
         most.size == RANGE_NOISE_SCANS and most[0] == 0 and most[-1] == 10 * RANGE_NOISE_SCANS - 1
     )
     assert noise_picks(0).size == 0
+
+
+def _output(seq: ScanSequence, poses: np.ndarray, every: int = 3):
+    """A filter's output over ``seq`` whose nodes (every ``every``-th scan) and scans sit at
+    ``poses``, as the stages before :class:`slam.stages.Recovery` leave it."""
+    from slam.particle_filter import FilterOutput
+
+    steps = np.arange(0, len(seq), every)
+    n = len(seq)
+    return FilterOutput(
+        scans=seq, steps=steps, node_poses=poses[steps].copy(), n_eff=np.ones(n),
+        max_weight=np.ones(n), stats={"updates": int(steps.size), "loop_closures": 7},
+        poses=poses.copy(),
+    )  # fmt: skip
+
+
+def test_a_lost_filter_is_recovered_from_dead_reckoning(long_room):
+    """A result that turned away from the room (1° more each scan, the filter lost) scores under
+    ``rbpf.recover_below``: the stages run again from the exact odometry, score far better, and
+    that trajectory is kept, with a warning and both scores in the stats; the filter's own
+    counters stay, its loop figures are the new run's."""
+    from slam.geometry import accumulate, relative
+
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    steps = relative(truth[:-1], truth[1:])
+    steps[:, 2] += np.radians(1.0)
+    lost = accumulate(steps, truth[0])
+    assert np.hypot(*(lost[:, :2] - truth[:, :2]).T).max() > 1.0
+    with pytest.warns(UserWarning, match="the filter lost track .* keeps that trajectory"):
+        out = stages.Recovery().run(_output(seq, lost), config)
+    assert out.stats["recovered"] is True
+    before, after = out.stats["recovery_scores"]
+    assert before < config.rbpf.recover_below < after
+    assert after - before > 0.3
+    # the room's shape back (the stages may shift the whole by a few centimetres)
+    assert np.hypot(*(out.poses[:, :2] - truth[:, :2]).T).max() < 0.1
+    apart = relative(out.poses[:-20], out.poses[20:]) - relative(truth[:-20], truth[20:])
+    assert np.hypot(*apart[:, :2].T).max() < 0.02
+    assert out.stats["updates"] == 40 and out.stats.get("loop_closures") != 7
+    never = load_config("", None, ["rbpf.recover_below=0"], base=config)
+    kept = _output(seq, lost)
+    assert stages.Recovery().run(kept, never) is kept
+
+
+def test_no_recovery_from_laser_odometry(long_room, monkeypatch):
+    """Where the odometry is the laser's, there is no dead reckoning to start again from: the
+    lost result is kept as it is."""
+    from slam.geometry import accumulate, relative
+
+    seq, config = long_room
+    steps = relative(seq.odometry[:-1], seq.odometry[1:])
+    steps[:, 2] += np.radians(1.0)
+    lost = _output(seq, accumulate(steps, seq.odometry[0]))
+    monkeypatch.setattr(seq, "odometry_source", "laser")
+    assert stages.Recovery().run(lost, config) is lost
+
+
+def test_a_result_that_scores_well_is_not_run_again(long_room, monkeypatch):
+    """A result at the true poses scores above ``rbpf.recover_below``: returned as it is, and
+    no stage runs again."""
+    seq, config = long_room
+    ran = []
+    monkeypatch.setattr(stages, "run_stages", lambda *a, **k: ran.append(a))
+    good = _output(seq, seq.odometry.copy())
+    assert stages.Recovery().run(good, config) is good
+    assert ran == [] and "recovered" not in good.stats
+
+
+def test_the_default_stages_recover_before_the_final_map():
+    """``rbpf`` runs the recovery after the rounds of registration and smoothing, before the
+    map, which is then built once from the trajectory kept."""
+    names = [s.name for s in stages.default_stages(load_config())]
+    assert names[-2:] == ["recovery", "final map"]
+    assert stages.default_stages(load_config("", None, ['filter.method="classic"'])) == []

@@ -39,3 +39,11 @@ def test_the_more_seeds_spec_runs_the_six_logs_on_seeds_4_to_11_with_the_default
     assert [s.overrides for s in spec.settings] == [()]
     assert spec.metric_of("mit-killian") == "auto"
     assert len(spec.cells()) == 6 * 8
+
+
+def test_the_short_range_spec_runs_the_six_logs_with_an_8_m_laser():
+    spec = load("short_range.toml")
+    assert spec.logs == BENCH_LOGS
+    assert spec.seeds == (0, 1)
+    assert [s.overrides for s in spec.settings] == [("lidar.range_max=8",)]
+    assert len(spec.cells()) == 6 * 2
