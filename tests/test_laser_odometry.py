@@ -105,19 +105,31 @@ def test_a_log_whose_odometry_never_moves_runs_on_laser_odometry(tmp_path):
     assert kept.odometry_source == "log" and not np.any(kept.odometry)
 
 
-def test_slam_run_on_raw_scans_without_odometry(tmp_path, capsys):
+def test_slam_run_on_raw_scans_without_odometry(tmp_path, capsys, monkeypatch):
     """RAWLASER1 lines and no ODOM line: the log loads without odometry, ``slam run`` says it
-    matches the scans and tracks the path; with ``robot.odometry = "log"`` it is one error."""
+    matches the scans and tracks the path, and tells the stages so (the recovery stage starts
+    again only from dead reckoning); with ``robot.odometry = "log"`` it is one error."""
+    import slam.stages
+
     truth = room_path(120)
     log_path = tmp_path / "raw.clf"
     log_path.write_text("\n".join(rawlaser_lines(truth)) + "\n")
     log = load_carmen(log_path)
     assert log.odometry is None and log.scans.odometry is None and not has_odometry(log)
     out = tmp_path / "run"
+    seen = []
+    recover = slam.stages.Recovery.run
+
+    def watching(self, output, config):
+        seen.append(output.scans.odometry_source)
+        return recover(self, output, config)
+
+    monkeypatch.setattr(slam.stages.Recovery, "run", watching)
     assert (
         main(["run", str(log_path), "--out", str(out), "--no-texture", "--no-record", "--quiet"])
         == 0
     )
+    assert seen == ["laser"]
     assert "the log has no odometry" in capsys.readouterr().err
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["odometry_source"] == "laser"
