@@ -390,8 +390,8 @@ class RbpfConfig(Validated):
     recover_below: float = bounded(0.75, ge=0.0, le=1.0)
     """When the result's map-quality score is below this, the filter lost track: the stages
     after it run again from dead reckoning and the better-scoring result is kept
-    (:class:`slam.stages.Recovery`; 0: never). At ``quality.warn_below``: under every default
-    run of the six benchmark logs."""
+    (:class:`slam.stages.Recovery`; 0: never). At ``quality.warn_below``: under every run of
+    the bench's default (six logs, seeds 0–3)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)
     """The score that chooses among :attr:`smooth_scales` judges every this-many-th scan only
     (and builds its maps from those): the choice costs a quarter of a full score per scale ..."""
