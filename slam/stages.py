@@ -301,13 +301,12 @@ class Recovery:
     wide; docs/accuracy.md, "A laser that sees less far"), and the stages after it start from
     its nodes. The same stages started from the odometry's poses instead close the loops the
     odometry left open (the global loop search looks as far as the drift) and register every
-    scan; where the filter was lost, that is the better trajectory. So: the result's map-quality
-    score (on every ``rbpf.smooth_choice_every``-th scan, as the smoothing choice scores) below
-    ``rbpf.recover_below`` runs
-    ``again`` (fresh stages 1–5, :func:`default_stages`) on the filter's output with the
-    odometry's poses as its nodes, and the better of the two by the score is kept, the filter's
-    unless the other beats it by the smoothing choice's margin and standard errors
-    (:func:`smoothing_pick`). The stats record both scores (``recovery_scores``) and which was
+    scan; where the filter was lost, that is the better trajectory. So: when the result's
+    map-quality score (on every ``rbpf.smooth_choice_every``-th scan, as the smoothing choice
+    scores) is below ``rbpf.recover_below``, stages 1–5 run again (fresh instances,
+    :func:`default_stages`) on the filter's output with the odometry's poses as its nodes, and
+    the better of the two by the score is kept, the filter's unless the other beats it by the
+    smoothing choice's margin and standard errors (:func:`smoothing_pick`). The stats record both scores (``recovery_scores``) and which was
     kept (``recovered``); keeping the odometry's start warns. On the bench's default runs (six
     logs, seeds 0–3) the score is above the threshold and nothing runs again. Only from dead
     reckoning: where the odometry is the laser's (``ScanSequence.odometry_source``), it is a scan

@@ -462,3 +462,25 @@ def test_the_default_stages_recover_before_the_final_map():
     names = [s.name for s in stages.default_stages(load_config())]
     assert names[-2:] == ["recovery", "final map"]
     assert stages.default_stages(load_config("", None, ['filter.method="classic"'])) == []
+
+
+def test_the_recovery_keeps_every_counter_the_filter_hands_over(long_room):
+    """The counters a result started from dead reckoning keeps are exactly those the ``rbpf``
+    filter hands to the stages (a counter added to the filter is not silently dropped)."""
+    import slam
+
+    seq, config = long_room
+    handed = []
+
+    class Watch:
+        name = "watch"
+
+        def run(self, output, config):
+            handed.append(set(output.stats))
+            return output
+
+    s = slam.Slam(config, stages=[Watch(), stages.BetweenUpdates()])
+    for k in range(len(seq)):
+        s.update(seq.scan(k), odometry=seq.odometry[k])
+    s.finish()
+    assert handed == [set(stages._FILTER_STATS)]
