@@ -306,12 +306,13 @@ class Recovery:
     scores) is below ``rbpf.recover_below``, stages 1–5 run again (fresh instances,
     :func:`default_stages`) on the filter's output with the odometry's poses as its nodes, and
     the better of the two by the score is kept, the filter's unless the other beats it by the
-    smoothing choice's margin and standard errors (:func:`smoothing_pick`). The stats record both scores (``recovery_scores``) and which was
-    kept (``recovered``); keeping the odometry's start warns. On the bench's default runs (six
-    logs, seeds 0–3) the score is above the threshold and nothing runs again. Only from dead
-    reckoning: where the odometry is the laser's (``ScanSequence.odometry_source``), it is a scan
-    matcher that lost its way with the filter (fr-clinic without its wheels: lost either way,
-    and chosen between by a score that cannot tell two wrong maps apart).
+    smoothing choice's margin and standard errors (:func:`smoothing_pick`). The stats record
+    both scores (``recovery_scores``) and which was kept (``recovered``); keeping the odometry's
+    start warns. On the bench's default runs (six logs, seeds 0–3) the score is above the
+    threshold and nothing runs again. Only from dead reckoning: where the odometry is the
+    laser's (``ScanSequence.odometry_source``), it is a scan matcher that lost its way with the
+    filter (fr-clinic without its wheels: lost either way, and chosen between by a score that
+    cannot tell two wrong maps apart).
     """
 
     name = "recovery"

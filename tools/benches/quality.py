@@ -7,9 +7,10 @@ second pass lays its walls beside the first pass's).
 One bench per benchmark log (``intel``, ``aces``, ``fr079``, ``fr-clinic``, ``mit-csail``,
 ``mit-killian``): ``slam run LOG`` with the default configuration (texture and recording off),
 the score it writes to metrics.json, its cost beside the filter's, and, where the log has
-relations (mit-killian's re-timed onto its scans), how the per-stretch scores line up with the relation errors of the same trajectory
-(:func:`slam.eval.quality.stretch_relation_errors`): a relation counts for the stretch of each
-of its ends; "bad" stretches are those with a relation error above 0.5 m.
+relations (mit-killian's re-timed onto its scans), how the per-stretch scores line up with the
+relation errors of the same trajectory (:func:`slam.eval.quality.stretch_relation_errors`): a
+relation counts for the stretch of each of its ends; "bad" stretches are those with a relation
+error above 0.5 m.
 """
 
 from __future__ import annotations
