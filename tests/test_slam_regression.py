@@ -129,23 +129,43 @@ window (1 m + 3 % of the path), within the search beyond it (docs/accuracy.md, "
 elsewhere")."""
 
 
-def _cut_run(carmen_dir: Path, tmp_path: Path, overrides: tuple[str, ...] = ()):
-    """Seed 0 on fr-clinic cut at :data:`CUT`: its relation errors, and which of them close
-    the long loop (first time 1740–1970 s, second 4400–4445 s, from the log's first relation)."""
+@pytest.fixture(scope="module")
+def cut_run(carmen_dir: Path, tmp_path_factory: pytest.TempPathFactory):
+    """Seed 0 on fr-clinic cut at :data:`CUT`, run by ``slam.run``: its trajectory, and the
+    filter's output and configuration the post-filter stages started from, so that a test can run
+    the stages again with another setting without running the filter again (the setting it
+    changes is read by the loop closing only)."""
     import slam
-    from slam.eval.relations import relation_errors
-    from slam.io.relations import read_relations
+    import slam.online
 
-    cut = tmp_path / "fr-clinic-cut.clf.gz"
+    cut = tmp_path_factory.mktemp("fr-clinic-cut") / "fr-clinic-cut.clf.gz"
     assert (
         load_tool("crop_log").main(
             [str(carmen_dir / "fr-clinic.clf.gz"), str(cut), "--from", str(CUT)]
         )
         == 0
     )
-    result = slam.run(str(cut), seed=0, data_dir=carmen_dir.parent, overrides=overrides)
+    seen = {}
+    stages_of_the_run = slam.online.run_stages
+
+    def keep_the_filter_output(output, stages, config, seconds=None):
+        seen["output"], seen["config"] = output, config
+        return stages_of_the_run(output, stages, config, seconds)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(slam.online, "run_stages", keep_the_filter_output)
+        result = slam.run(str(cut), seed=0, data_dir=carmen_dir.parent)
+    return result.trajectory, seen["output"], seen["config"]
+
+
+def _cut_errors(carmen_dir: Path, trajectory):
+    """The cut run's relation errors, and which of them close the long loop (first time
+    1740–1970 s, second 4400–4445 s, from the log's first relation)."""
+    from slam.eval.relations import relation_errors
+    from slam.io.relations import read_relations
+
     relations = read_relations(carmen_dir / "relations" / "fr-clinic.relations")
-    errors = relation_errors(result.trajectory, relations)
+    errors = relation_errors(trajectory, relations)
     t1 = relations.t1[errors.matched_index] - relations.t1.min()
     t2 = relations.t2[errors.matched_index] - relations.t1.min()
     loop = (t1 > 1740) & (t1 < 1970) & (t2 > 4400) & (t2 < 4445)
@@ -153,17 +173,28 @@ def _cut_run(carmen_dir: Path, tmp_path: Path, overrides: tuple[str, ...] = ()):
     return errors, loop
 
 
-def test_fr_clinic_started_elsewhere_closes_its_long_loop(carmen_dir, tmp_path):
+def test_fr_clinic_started_elsewhere_closes_its_long_loop(carmen_dir, cut_run):
     """With the search beyond the drift window (the default) the loop closes: its relations
     within 2 m (0.27–1.08 m measured, 31 m without), the cut run's mean within 0.2 m."""
-    errors, loop = _cut_run(carmen_dir, tmp_path)
+    errors, loop = _cut_errors(carmen_dir, cut_run[0])
     assert errors.trans[loop].max() < 2.0
     assert errors.trans.mean() < 0.2
     assert errors.unmatched > 0  # the relations before the cut are not the run's
 
 
-def test_fr_clinic_started_elsewhere_stays_open_within_the_window_alone(carmen_dir, tmp_path):
+def test_fr_clinic_started_elsewhere_stays_open_within_the_window_alone(carmen_dir, cut_run):
     """The stretch the search beyond the window repairs is the one that broke: without it the
-    loop's relations are 31 m off."""
-    errors, loop = _cut_run(carmen_dir, tmp_path, ("backend.far_drift_xy=0",))
+    loop's relations are 31 m off (the same filter output, its stages run again with
+    ``backend.far_drift_xy = 0``)."""
+    from slam.config import load_config
+    from slam.stages import default_stages, run_stages
+    from slam.trajectory import Trajectory
+
+    _, output, config = cut_run
+    window_alone = load_config("", None, ["backend.far_drift_xy=0"], base=config)
+    assert window_alone.backend.far_drift_xy == 0.0
+    assert config.backend.far_drift_xy > 0.0
+    again = run_stages(output, default_stages(window_alone), window_alone)
+    seq = again.scans
+    errors, loop = _cut_errors(carmen_dir, Trajectory(seq.times, again.poses, seq.indices))
     assert errors.trans[loop].min() > 20.0
