@@ -392,6 +392,11 @@ class RbpfConfig(Validated):
     after it run again from dead reckoning and the better-scoring result is kept
     (:class:`slam.stages.Recovery`; 0: never). At ``quality.warn_below``: under every run of
     the bench's default (six logs, seeds 0–3)."""
+    repair_below: float = bounded(0.5, ge=0.0, le=1.0)
+    """A stretch of the result (``quality.stretch_m`` of path) whose returns agree with the
+    other stretches' map less than this share contradicts them: the stages after the filter run
+    again with the loop closing's chain ``loops.flex_factor`` times looser there, and the
+    better-scoring result is kept (:class:`slam.stages.Repair`; 0: never)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)
     """The score that chooses among :attr:`smooth_scales` judges every this-many-th scan only
     (and builds its maps from those): the choice costs a quarter of a full score per scale ..."""
@@ -509,6 +514,10 @@ class LoopConfig(Validated):
     seq_sigma_rel: float = bounded(0.02, ge=0.0, le=10.0)
     """... plus this fraction of the edge's translation (and rotation): where the filter failed
     to close a loop, its drift is of this order, and the chain must be able to absorb it."""
+    flex_factor: float = bounded(5.0, ge=1.0, le=1000.0)
+    """The chain's sigmas are this many times larger across a stretch whose scans contradict the
+    map of the others (``rbpf.repair_below``, :class:`slam.stages.Repair`): there the filter's
+    relative poses are what is wrong, and the loop closures must be able to bend them."""
     min_correction: float = bounded(0.15, ge=0.0, le=1000.0)
     """Keep the filter's trajectory when the optimisation would move no node this far (m):
     loop edges are only about as precise as the filter's own relative poses, so they are used to

@@ -346,14 +346,31 @@ def _edge_information(hessian: F64, matched: F64, lc: LoopConfig, rc) -> F64:
     return 0.5 * (info + info.T)
 
 
-def _chain_information(seq_z: F64, lc: LoopConfig) -> F64:
-    """``(E, 3, 3)`` diagonal information of the sequential edges ``seq_z``."""
+def _chain_information(seq_z: F64, lc: LoopConfig, loose: F64 | None = None) -> F64:
+    """``(E, 3, 3)`` diagonal information of the sequential edges ``seq_z``, each edge's sigmas
+    multiplied by ``loose[k]`` when given (:func:`chain_looseness`)."""
     sigma_xy = lc.seq_sigma_xy + lc.seq_sigma_rel * np.hypot(seq_z[:, 0], seq_z[:, 1])
     sigma_th = lc.seq_sigma_th + lc.seq_sigma_rel * np.abs(seq_z[:, 2])
+    if loose is not None:
+        sigma_xy, sigma_th = sigma_xy * loose, sigma_th * loose
     info = np.zeros((seq_z.shape[0], 3, 3))
     info[:, 0, 0] = info[:, 1, 1] = 1.0 / sigma_xy**2
     info[:, 2, 2] = 1.0 / sigma_th**2
     return info
+
+
+def chain_looseness(
+    loose_nodes: NDArray[np.bool_] | None, keys: NDArray[np.int64], factor: float
+) -> F64 | None:
+    """``(K - 1,)`` multiple of the sigmas of each chain edge between the keyframes ``keys``:
+    ``factor`` where a node from one keyframe to the next is in ``loose_nodes`` (``(U,)``, the
+    nodes of the stretches the map-quality score flagged, :class:`slam.stages.Repair`), else 1;
+    ``None`` when no node is."""
+    if loose_nodes is None or not loose_nodes.any() or len(keys) < 2:
+        return None
+    counts = np.concatenate([[0], np.cumsum(loose_nodes)])  # loose nodes before each index
+    inside = counts[keys[1:] + 1] - counts[keys[:-1]] > 0
+    return np.where(inside, factor, 1.0)
 
 
 class PoseGraph(NamedTuple):
@@ -371,10 +388,13 @@ class PoseGraph(NamedTuple):
     """``(E,)`` robust-kernel (Cauchy) scale of every edge; 0: none."""
 
 
-def chain_graph(poses: F64, edges: list, robust: F64, lc: LoopConfig) -> PoseGraph:
+def chain_graph(
+    poses: F64, edges: list, robust: F64, lc: LoopConfig, loose: F64 | None = None
+) -> PoseGraph:
     """The pose graph of the chain of ``poses`` (each pose to the next, measuring their relative
-    pose with :func:`_chain_information`, no robust kernel) followed by the loop ``edges``
-    ``(i, j, z, info)``, loop edge ``k`` with robust scale ``robust[k]``."""
+    pose with :func:`_chain_information`, its sigmas times ``loose`` where given, no robust
+    kernel) followed by the loop ``edges`` ``(i, j, z, info)``, loop edge ``k`` with robust scale
+    ``robust[k]``."""
     n = poses.shape[0]
     seq_z = relative(poses[:-1], poses[1:])
     loop_info = np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3)
@@ -384,7 +404,7 @@ def chain_graph(poses: F64, edges: list, robust: F64, lc: LoopConfig) -> PoseGra
         z=np.ascontiguousarray(
             np.concatenate([seq_z, np.array([e[2] for e in edges]).reshape(-1, 3)])
         ),
-        info=np.concatenate([_chain_information(seq_z, lc), loop_info]),
+        info=np.concatenate([_chain_information(seq_z, lc, loose), loop_info]),
         robust=np.concatenate([np.zeros(n - 1), np.asarray(robust, dtype=np.float64)]),
     )
 
@@ -395,14 +415,16 @@ def optimize(
     lc: LoopConfig,
     robust: F64 | None = None,
     start: F64 | None = None,
+    loose: F64 | None = None,
 ) -> F64:
     """Gauss-Newton on the :func:`chain_graph` of ``poses`` and loop ``edges`` (node 0 stays
     fixed), every loop edge with robust scale ``lc.robust`` unless ``robust`` gives one per edge
-    (0: none), the iterations starting from ``start`` (default: ``poses``)."""
+    (0: none), the iterations starting from ``start`` (default: ``poses``), the chain's sigmas
+    times ``loose`` where given (:func:`chain_looseness`)."""
     if robust is None:
         robust = np.full(len(edges), lc.robust)
     x = (poses if start is None else start).copy()
-    return gauss_newton(x, chain_graph(poses, edges, robust, lc), lc)
+    return gauss_newton(x, chain_graph(poses, edges, robust, lc, loose), lc)
 
 
 def gauss_newton(
@@ -533,11 +555,19 @@ def loop_rounds(
     return LoopResult(x, examined, len(edges), moved)
 
 
-def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> LoopResult:
+def close_loops(
+    seq,
+    steps: NDArray[np.int64],
+    poses: F64,
+    config: Config,
+    loose_nodes: NDArray[np.bool_] | None = None,
+) -> LoopResult:
     """Detect loop closures along ``poses`` (the nodes at scans ``steps``) and optimise.
 
     The graph's nodes are keyframes — every ``stride``-th node, where loop closures are looked
-    for, plus the last; the nodes in between follow their keyframes' corrections.
+    for, plus the last; the nodes in between follow their keyframes' corrections. The chain's
+    sigmas are ``loops.flex_factor`` times larger between keyframes around ``loose_nodes``
+    (:func:`chain_looseness`).
     """
     lc = config.loops
 
@@ -547,7 +577,8 @@ def close_loops(seq, steps: NDArray[np.int64], poses: F64, config: Config) -> Lo
         if not found:
             return [], None, 0
         edges = keyframe_edges(found, x, keys, key_of)
-        return edges, optimize(poses[keys], edges, lc), 0
+        loose = chain_looseness(loose_nodes, keys, lc.flex_factor)
+        return edges, optimize(poses[keys], edges, lc, loose=loose), 0
 
     path, table = path_along(poses), node_hits(seq, steps, config)
     return loop_rounds(seq, steps, poses, path, table, config, one_round)

@@ -16,12 +16,15 @@ order, each taking an output and returning the next (:meth:`slam.online.Slam.fin
    as far as the log's odometry deserves (``rbpf.smooth_odometry``); 4 and 5 run
    ``rbpf.register_rounds`` times, each round's map built from the node scans at the poses the
    previous round smoothed;
-6. :class:`Recovery` — when the result's map-quality score says the filter lost track
+6. :class:`Repair` — when stretches of the result contradict the map of the others
+   (``rbpf.repair_below``), stages 1–5 again from the filter's nodes with the loop closing's
+   chain looser across them (``loops.flex_factor``), the better-scoring result kept;
+7. :class:`Recovery` — when the result's map-quality score says the filter lost track
    (``rbpf.recover_below``), stages 1–5 again from dead reckoning (the odometry's poses as the
    nodes), the better-scoring result kept;
-7. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
+8. :class:`FinalMap` — the occupancy grid of the node scans at their final poses (:func:`build_map`).
 
-``rbpf`` runs all seven (:func:`default_stages`); ``classic`` none (its filter outputs every
+``rbpf`` runs all eight (:func:`default_stages`); ``classic`` none (its filter outputs every
 scan's pose and its own map). A stage is anything with a ``name`` and a ``run(output, config)``
 method (:class:`Stage`), so a caller can drop, reorder or add stages.
 """
@@ -68,19 +71,41 @@ class Stage(Protocol):
 
 
 class LoopClosing:
-    """Close loops over the nodes with a pose graph (``[loops]``; skipped when disabled)."""
+    """Close loops over the nodes with a pose graph (``[loops]``; skipped when disabled).
+
+    ``start``: a dict that the instances of one run share with :class:`Repair`, which keeps the
+    output this stage was handed (the filter's) under ``"output"`` to start from again.
+    ``loose``: time spans ``(t0, t1)`` (the log's clock) across which the chain's sigmas are
+    ``loops.flex_factor`` times larger (:func:`slam.graph.chain_looseness`).
+    """
 
     name = "loop closing"
 
+    def __init__(
+        self, start: dict | None = None, loose: list[tuple[float, float]] | None = None
+    ) -> None:
+        self.start = start
+        self.loose = loose or []
+
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """Optimise the node poses; the stats get the candidates, closures and correction."""
+        if self.start is not None:
+            self.start["output"] = output
         if not config.loops.enabled or len(output.steps) <= 1:
             return output
         from slam.backend.global_loops import close_loops_global
         from slam.graph import close_loops
 
+        loose_nodes = None
+        if self.loose:
+            times = output.scans.times[output.steps]
+            loose_nodes = np.zeros(len(times), dtype=bool)
+            for t0, t1 in self.loose:
+                loose_nodes |= (times >= t0) & (times <= t1)
         close = close_loops_global if config.backend.global_search else close_loops
-        closed = close(output.scans, output.steps, output.node_poses, config)
+        closed = close(
+            output.scans, output.steps, output.node_poses, config, loose_nodes=loose_nodes
+        )
         stats = {
             **output.stats,
             "loop_candidates": closed.candidates,
@@ -294,6 +319,76 @@ def quality_rays(seq: ScanSequence, picks: NDArray[np.int64], config: Config) ->
     )  # fmt: skip
 
 
+class Repair:
+    """Stages 1–5 again with a looser chain across the stretches that contradict the others.
+
+    The loop closing trusts the filter's relative poses between keyframes to ``loops.seq_sigma_xy
+    + seq_sigma_rel`` of each step, which fits a filter that kept its shape. Where it did not (a
+    laser that sees 8 m down a corridor, where a metre's drift along it goes unseen), the right
+    closures would bend the chain further than that, fail the χ² gate after their pull-in, and
+    leave the stretch where the filter put it: its walls then lie off the walls that the other
+    passes through the same place saw. The map-quality score finds such stretches without
+    ground truth: a stretch (``quality.stretch_m`` of path) whose returns agree with the others'
+    map less than ``rbpf.repair_below`` contradicts them. When any does, stages 1–5 run again
+    from the filter's output (kept by :class:`LoopClosing` in ``start``) with the chain's sigmas
+    ``loops.flex_factor`` times larger between the keyframes across those stretches, the
+    smoothing at the multiple the first pass chose (``measured``, shared with its
+    :class:`OdometrySmoothing`), and the better-scoring result is kept, the first unless the
+    other beats it by the smoothing choice's margin and standard errors (:func:`smoothing_pick`).
+    The stats record the stretches (``repair_stretches``), both scores (``repair_scores``) and
+    which was kept (``repaired``). Scored on every ``rbpf.smooth_choice_every``-th scan, as the
+    smoothing's choice and :class:`Recovery` score.
+    """
+
+    name = "repair"
+
+    def __init__(self, start: dict, measured: dict) -> None:
+        self.start = start
+        self.measured = measured
+
+    def run(self, output: FilterOutput, config: Config) -> FilterOutput:
+        """``output``, or the stages' result with the looser chain when it scores better."""
+        rc = config.rbpf
+        first = self.start.pop("output", None)  # not kept beyond the run
+        seq = output.scans
+        if (
+            first is None
+            or first.scans is not seq
+            or rc.repair_below <= 0.0
+            or config.loops.flex_factor == 1.0
+            or not config.loops.enabled
+            or output.poses is None
+            or len(output.steps) < 2
+        ):
+            return output
+        from slam.eval.quality import map_quality
+
+        picks = np.arange(0, len(seq), rc.smooth_choice_every)
+        rays = quality_rays(seq, picks, config)
+        result = map_quality(
+            seq.times[picks], output.poses[picks], rays, config.quality, config.map
+        )
+        loose = [(s.t_start, s.t_end) for s in result.judged() if s.score < rc.repair_below]
+        if not loose:
+            return output
+        again = [LoopClosing(loose=loose), Reregistration(), BetweenUpdates()]
+        for _ in range(rc.register_rounds):
+            again += [ScanRegistration(), OdometrySmoothing(self.measured)]
+        other = run_stages(first, again, config)
+        other_score, other_judged = _score(other.poses, seq, picks, rays, config)
+        scores = [float(result.score), other_score]
+        judged = [int(result.totals()["checked"]), other_judged]
+        kept = smoothing_pick(scores, judged, rc.smooth_choice_margin, rc.smooth_choice_z)
+        chosen = other if kept == 1 else output
+        stats = {
+            **chosen.stats,
+            "repair_stretches": len(loose),
+            "repair_scores": [round(v, 4) if np.isfinite(v) else None for v in scores],
+            "repaired": kept == 1,
+        }
+        return dataclasses.replace(chosen, stats=stats)
+
+
 class Recovery:
     """Stages 1–5 again from dead reckoning when the result scores as a filter that lost track.
 
@@ -370,8 +465,9 @@ _FILTER_STATS = frozenset(
 
 
 def _redone(stage: Stage) -> bool:
-    """Whether :class:`Recovery` runs ``stage`` again (stages 1–5: not itself nor the map)."""
-    return not isinstance(stage, Recovery | FinalMap)
+    """Whether :class:`Recovery` runs ``stage`` again (stages 1–5: not the repair, itself nor
+    the map)."""
+    return not isinstance(stage, Repair | Recovery | FinalMap)
 
 
 def _score(
@@ -402,12 +498,16 @@ def default_stages(config: Config) -> list[Stage]:
     """The stages a run of ``config.filter.method`` goes through after its filter."""
     if config.filter.method == "rbpf":
         measured: dict = {}  # the odometry's disagreement, measured once for every round
+        start: dict = {}  # the filter's output, for the repair to start from again
         rounds = [
             stage
             for _ in range(config.rbpf.register_rounds)
             for stage in (ScanRegistration(), OdometrySmoothing(measured))
         ]
-        return [LoopClosing(), Reregistration(), BetweenUpdates(), *rounds, Recovery(), FinalMap()]
+        return [
+            LoopClosing(start), Reregistration(), BetweenUpdates(), *rounds,
+            Repair(start, measured), Recovery(), FinalMap(),
+        ]  # fmt: skip
     return []
 
 

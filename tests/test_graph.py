@@ -392,3 +392,51 @@ def test_search_beyond_the_window_only_in_the_first_round(small_log, monkeypatch
     gl.close_loops_global(seq, steps, opened_loop(truth[steps]), config)
     assert len(asked) == config.loops.rounds >= 2  # the opened loop is closed: both rounds run
     assert asked == [True] + [False] * (len(asked) - 1)
+
+
+def test_chain_looseness_marks_the_keyframe_edges_around_the_loose_nodes():
+    """An edge between two keyframes is loose when any node from one to the other (both
+    included) is; no loose node: no multiple at all."""
+    from slam.graph import chain_looseness
+
+    keys = np.array([0, 5, 10, 12])
+    loose = np.zeros(13, dtype=bool)
+    assert chain_looseness(loose, keys, 5.0) is None
+    assert chain_looseness(None, keys, 5.0) is None
+    loose[3] = True
+    np.testing.assert_array_equal(chain_looseness(loose, keys, 5.0), [5.0, 1.0, 1.0])
+    loose[:] = False
+    loose[5] = True  # a keyframe: both edges that meet there
+    np.testing.assert_array_equal(chain_looseness(loose, keys, 4.0), [4.0, 4.0, 1.0])
+    loose[:] = False
+    loose[12] = True
+    np.testing.assert_array_equal(chain_looseness(loose, keys, 3.0), [1.0, 1.0, 3.0])
+
+
+def test_a_loose_stretch_of_the_chain_takes_the_loop_correction():
+    """A straight chain of 21 poses 0.5 m apart and a closure that puts the last one 1 m to the
+    side: with the chain's sigmas five times larger on four edges in the middle, those edges
+    take most of the bend (the rest stay straight), where the stiff chain spreads it evenly;
+    the loose edges' information is the stiff one's over 25."""
+    poses = accumulate(np.tile([0.5, 0.0, 0.0], (20, 1)))
+    side = [(0, 20, np.array([10.0, 1.0, 0.0]), np.diag([1e4, 1e4, 1e5]))]
+    lc = LoopConfig(robust=0.0)
+    loose = np.ones(20)
+    loose[8:12] = 5.0
+    stiff_graph, loose_graph = (
+        chain_graph(poses, side, np.zeros(1), lc),
+        chain_graph(poses, side, np.zeros(1), lc, loose),
+    )
+    np.testing.assert_allclose(loose_graph.info[8:12], stiff_graph.info[8:12] / 25.0)
+    np.testing.assert_array_equal(loose_graph.info[:8], stiff_graph.info[:8])
+
+    stiff = optimize(poses, side, lc, np.zeros(1))
+    bent = optimize(poses, side, lc, np.zeros(1), loose=loose)
+    assert np.hypot(*(bent[20, :2] - [10.0, 1.0])) < 0.05
+    assert np.hypot(*(stiff[20, :2] - [10.0, 1.0])) < 0.05
+    # the sideways step of each edge: the loose edges take 0.19 m each, the others 0.008 m;
+    # the stiff chain 0.032 m on every edge
+    lateral = relative(bent[:-1], bent[1:])[:, 1]
+    assert np.abs(lateral[8:12]).min() > 20 * np.abs(np.delete(lateral, range(8, 12))).max()
+    even = relative(stiff[:-1], stiff[1:])[:, 1]
+    assert even.min() > 0.95 * even.max() > 0.0

@@ -457,11 +457,105 @@ def test_a_result_that_scores_well_is_not_run_again(long_room, monkeypatch):
 
 
 def test_the_default_stages_recover_before_the_final_map():
-    """``rbpf`` runs the recovery after the rounds of registration and smoothing, before the
-    map, which is then built once from the trajectory kept."""
-    names = [s.name for s in stages.default_stages(load_config())]
-    assert names[-2:] == ["recovery", "final map"]
+    """``rbpf`` runs the repair and then the recovery after the rounds of registration and
+    smoothing, before the map, which is then built once from the trajectory kept; the loop
+    closing and the repair share one dict (the filter's output), the smoothings and the repair
+    another (the odometry's disagreement and the multiple chosen)."""
+    default = stages.default_stages(load_config())
+    names = [s.name for s in default]
+    assert names[-3:] == ["repair", "recovery", "final map"]
+    closing, repair = default[0], default[-3]
+    assert isinstance(closing, stages.LoopClosing) and isinstance(repair, stages.Repair)
+    assert closing.start is repair.start
+    smoothings = [s for s in default if isinstance(s, stages.OdometrySmoothing)]
+    assert len(smoothings) == 2 and all(s.measured is repair.measured for s in smoothings)
     assert stages.default_stages(load_config("", None, ['filter.method="classic"'])) == []
+
+
+def _shifted(poses: np.ndarray, first: int, last: int, by: float) -> np.ndarray:
+    """``poses`` with the scans ``first`` to ``last`` moved ``by`` metres sideways (in y)."""
+    moved = poses.copy()
+    moved[first : last + 1, 1] += by
+    return moved
+
+
+def test_a_stretch_that_contradicts_the_others_is_repaired(long_room):
+    """A result with 20 scans (1 m of the room) moved 0.4 m sideways: their stretches agree
+    with the others' map less than ``rbpf.repair_below``, so the stages run again from the
+    filter's output (kept by the loop closing) with the chain looser there; that result
+    scores better and is kept, with both scores, the stretches and ``repaired`` in the stats,
+    the room's shape back; the filter's output is not kept beyond the run."""
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    start = {"output": dataclasses.replace(_output(seq, truth), poses=None)}
+    bad = _output(seq, _shifted(truth, 50, 69, 0.4))
+    out = stages.Repair(start, {}).run(bad, config)
+    assert start == {}
+    assert out.stats["repaired"] is True and out.stats["repair_stretches"] >= 1
+    before, after = out.stats["repair_scores"]
+    assert before < after and after - before > 0.05
+    assert np.hypot(*(out.poses[:, :2] - truth[:, :2]).T).max() < 0.1
+    assert out.stats["updates"] == 40
+
+
+def test_the_repair_keeps_a_result_that_scores_better(long_room, monkeypatch):
+    """When the stages run again and score worse (here: they give the same bad poses back),
+    the result handed in is kept, with ``repaired`` false and both scores."""
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    bad = _output(seq, _shifted(truth, 50, 69, 0.4))
+    worse = _output(seq, _shifted(truth, 30, 89, 0.4))
+    monkeypatch.setattr(stages, "run_stages", lambda *a, **k: worse)
+    start = {"output": dataclasses.replace(_output(seq, truth), poses=None)}
+    out = stages.Repair(start, {}).run(bad, config)
+    assert out.stats["repaired"] is False
+    np.testing.assert_array_equal(out.poses, bad.poses)
+    before, after = out.stats["repair_scores"]
+    assert after < before
+
+
+def test_a_result_without_contradicting_stretches_is_not_repaired(long_room, monkeypatch):
+    """At the true poses no stretch scores under ``rbpf.repair_below``: the result is returned
+    as it is and no stage runs again; nor with ``rbpf.repair_below = 0``, ``loops.flex_factor
+    = 1``, or without the filter's output to start from (a caller's own list of stages)."""
+    seq, config = long_room
+    ran = []
+    monkeypatch.setattr(stages, "run_stages", lambda *a, **k: ran.append(a))
+    truth = seq.odometry.copy()
+    first = dataclasses.replace(_output(seq, truth), poses=None)
+    good = _output(seq, truth)
+    assert stages.Repair({"output": first}, {}).run(good, config) is good
+    bad = _output(seq, _shifted(truth, 50, 69, 0.4))
+    for off in (["rbpf.repair_below=0"], ["loops.flex_factor=1"]):
+        start = {"output": first}
+        assert stages.Repair(start, {}).run(bad, load_config("", None, off, base=config)) is bad
+        assert start == {}
+    assert stages.Repair({}, {}).run(bad, config) is bad
+    assert ran == [] and "repaired" not in good.stats
+
+
+def test_the_loop_closing_keeps_its_input_for_the_repair(long_room, monkeypatch):
+    """``LoopClosing(start)`` keeps the output it was handed (the filter's), whatever it does
+    with it; ``LoopClosing(loose=...)`` hands the graph the nodes within those times."""
+    import slam.backend.global_loops as global_loops
+
+    seq, config = long_room
+    start: dict = {}
+    handed = dataclasses.replace(_output(seq, seq.odometry.copy()), poses=None)
+    stages.LoopClosing(start).run(handed, config)
+    assert start["output"] is handed
+    seen = []
+    real = global_loops.close_loops_global
+
+    def spy(*args, loose_nodes=None, **kwargs):
+        seen.append(loose_nodes)
+        return real(*args, loose_nodes=loose_nodes, **kwargs)
+
+    monkeypatch.setattr(global_loops, "close_loops_global", spy)
+    times = seq.times[handed.steps]
+    stages.LoopClosing(loose=[(times[10], times[14])]).run(handed, config)
+    stages.LoopClosing().run(handed, config)
+    assert np.flatnonzero(seen[0]).tolist() == [10, 11, 12, 13, 14] and seen[1] is None
 
 
 def test_the_recovery_keeps_every_counter_the_filter_hands_over(long_room):

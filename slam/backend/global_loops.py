@@ -74,6 +74,7 @@ from slam.graph import (
     PASS_MAPS_KEPT,
     LoopResult,
     _edge_information,
+    chain_looseness,
     fits_elsewhere_on_pass,
     keyframe_edges,
     loop_rounds,
@@ -468,14 +469,20 @@ def _chi2(keys_x: F64, edge: tuple) -> float:
 
 
 def close_loops_global(
-    seq, steps: NDArray[np.int64], poses: F64, config: Config, path: F64 | None = None
+    seq,
+    steps: NDArray[np.int64],
+    poses: F64,
+    config: Config,
+    path: F64 | None = None,
+    loose_nodes: NDArray[np.bool_] | None = None,
 ) -> LoopResult:
     """:func:`slam.graph.close_loops` with the global closures added (module docstring).
 
     ``path`` is each node's distance along the trajectory (default: summed from ``poses``;
     a caller that passes a piece of a trajectory gives the whole one's). ``candidates`` counts
     the local candidates and the global searches; ``accepted`` the loop edges of the last
-    round's graph, local and global.
+    round's graph, local and global. ``loose_nodes``: the chain is looser around them
+    (:func:`slam.graph.chain_looseness`).
     """
     lc, bc = config.loops, config.backend
     if path is None:
@@ -496,18 +503,19 @@ def close_loops_global(
         local_edges = keyframe_edges(local, x, keys, key_of)
         global_edges = keyframe_edges(glob, x, keys, key_of)
         edges = local_edges + global_edges
+        loose = chain_looseness(loose_nodes, keys, lc.flex_factor)
         start = None
         if global_edges:  # pull the verified global closures in, then gate them
             # without a robust kernel: their error at the drifted estimate is metres, which a
             # Cauchy kernel would treat as an outlier and never pull in
             robust = np.array([lc.robust] * len(local_edges) + [0.0] * len(global_edges))
-            pulled = optimize(poses[keys], edges, lc, robust)
+            pulled = optimize(poses[keys], edges, lc, robust, loose=loose)
             passed = [e for e in global_edges if _chi2(pulled, e) <= bc.chi2_gate]
             edges = local_edges + passed
             if len(passed) == len(global_edges):
                 return edges, pulled, searched  # every closure agrees: nothing to redo
             start = pulled if passed else None
-        new_keys = optimize(poses[keys], edges, lc, start=start)
+        new_keys = optimize(poses[keys], edges, lc, start=start, loose=loose)
         return edges, new_keys, searched
 
     return loop_rounds(seq, steps, poses, path, table, config, one_round)
