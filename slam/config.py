@@ -499,7 +499,7 @@ class LoopConfig(Validated):
     well a door further along")."""
     pass_shift: float = bounded(10.0, gt=0.0, le=1000.0)
     """See ``pass_path``: the farthest shift tried (m), in steps of ``pass_shift_step``."""
-    pass_shift_step: float = bounded(0.25, gt=0.0, le=100.0)
+    pass_shift_step: float = bounded(0.25, ge=0.01, le=100.0)
     """See ``pass_shift``."""
     sigma_xy: float = bounded(0.02, gt=0.0, le=100.0)
     """Floor of a loop edge's standard deviation in x and y (m), added to the match's own."""
@@ -556,10 +556,12 @@ class BackendConfig(Validated):
 
     global_search: bool = True
     """Run the global search (with ``loops.enabled``)."""
-    keyframe_path: float = bounded(2.0, gt=0.0, le=10000.0)
-    """Path (m) between two keyframes whose scans are searched for."""
-    submap_length: float = bounded(10.0, gt=0.0, le=10000.0)
-    """Path (m) covered by one submap (consecutive node scans at their current poses)."""
+    keyframe_path: float = bounded(2.0, ge=0.01, le=10000.0)
+    """Path (m) between two keyframes whose scans are searched for (at least 1 cm: the keyframes
+    are laid along the path at this spacing, so a vanishing one would lay billions)."""
+    submap_length: float = bounded(10.0, ge=0.1, le=10000.0)
+    """Path (m) covered by one submap (consecutive node scans at their current poses; at least
+    10 cm, for the same reason)."""
     submap_range: float = bounded(15.0, gt=0.0, le=1000.0)
     """Only hits within this distance (m) of their scan enter submaps and searched scans."""
     resolution: float = bounded(0.1, ge=0.01, le=1.0)
@@ -711,7 +713,7 @@ class QualityConfig(Validated):
     resolution: float = bounded(0.1, ge=0.005, le=10.0)
     """Cell size of the count grids the score uses (m): half the map's resolution halves the
     cost and changes the figures by about 0.01 (docs/evaluation.md)."""
-    stretch_m: float = bounded(10.0, gt=0.0, le=1e6)
+    stretch_m: float = bounded(10.0, ge=0.1, le=1e6)
     """A stretch is this much path (m) of consecutive scans."""
     separation_m: float = bounded(10.0, ge=0.0, le=1e6)
     """A stretch is judged against the scans more than this much path (m) away from it."""

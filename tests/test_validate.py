@@ -467,3 +467,15 @@ def test_a_vanishing_search_step_is_a_config_error_not_an_overflow():
     OverflowError (``math.ceil(inf)``) instead of refusing the value."""
     with pytest.raises(ConfigError, match="candidate poses"):
         load_config("", overrides=["loops.search_th_step=1e-323"])
+
+
+@pytest.mark.parametrize(
+    "key", ["backend.keyframe_path", "backend.submap_length", "loops.pass_shift_step",
+            "quality.stretch_m"],
+)  # fmt: skip
+def test_a_spacing_too_fine_to_lay_out_is_refused(key):
+    """A spacing along the path that would lay out billions of keyframes, submaps, shifts or
+    stretches (the fuzz above drew ``backend.keyframe_path = 1e-323``, and the run crashed in
+    NumPy) is refused when the configuration is built, with the key named."""
+    with pytest.raises(ConfigError, match=key.split(".")[1]):
+        load_config("", overrides=[f"{key}=1e-323"])
