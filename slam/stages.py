@@ -337,14 +337,16 @@ class Repair:
     other beats it by the smoothing choice's margin and standard errors (:func:`smoothing_pick`).
     The stats record the stretches (``repair_stretches``), both scores (``repair_scores``) and
     which was kept (``repaired``). Scored on every ``rbpf.smooth_choice_every``-th scan, as the
-    smoothing's choice and :class:`Recovery` score.
+    smoothing's choice and :class:`Recovery` score; ``scored``, a dict shared with the run's
+    :class:`Recovery`, hands it the score of the result returned, so that it is not computed twice.
     """
 
     name = "repair"
 
-    def __init__(self, start: dict, measured: dict) -> None:
+    def __init__(self, start: dict, measured: dict, scored: dict | None = None) -> None:
         self.start = start
         self.measured = measured
+        self.scored = scored
 
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """``output``, or the stages' result with the looser chain when it scores better."""
@@ -368,18 +370,21 @@ class Repair:
         result = map_quality(
             seq.times[picks], output.poses[picks], rays, config.quality, config.map
         )
+        score, checked = float(result.score), int(result.totals()["checked"])
         loose = [(s.t_start, s.t_end) for s in result.judged() if s.score < rc.repair_below]
         if not loose:
+            _remember(self.scored, output.poses, picks, rays, score, checked)
             return output
         again = [LoopClosing(loose=loose), Reregistration(), BetweenUpdates()]
         for _ in range(rc.register_rounds):
             again += [ScanRegistration(), OdometrySmoothing(self.measured)]
         other = run_stages(first, again, config)
         other_score, other_judged = _score(other.poses, seq, picks, rays, config)
-        scores = [float(result.score), other_score]
-        judged = [int(result.totals()["checked"]), other_judged]
+        scores = [score, other_score]
+        judged = [checked, other_judged]
         kept = smoothing_pick(scores, judged, rc.smooth_choice_margin, rc.smooth_choice_z)
         chosen = other if kept == 1 else output
+        _remember(self.scored, chosen.poses, picks, rays, scores[kept], judged[kept])
         stats = {
             **chosen.stats,
             "repair_stretches": len(loose),
@@ -412,19 +417,30 @@ class Recovery:
 
     name = "recovery"
 
+    def __init__(self, scored: dict | None = None) -> None:
+        self.scored = scored
+
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
-        """``output``, or the stages' result from dead reckoning when it scores better."""
+        """``output``, or the stages' result from dead reckoning when it scores better (the
+        score :class:`Repair` left in ``scored`` for the same poses is taken, not computed
+        again)."""
         rc = config.rbpf
         seq = output.scans
+        known = self.scored.copy() if self.scored is not None else {}
+        if self.scored is not None:
+            self.scored.clear()  # not kept beyond the run
         if rc.recover_below <= 0.0 or output.poses is None or len(output.steps) < 2:
             return output
         if seq.odometry_source != "log":
             return output  # laser odometry is a scan matcher too: no dead reckoning to start from
         import warnings
 
-        picks = np.arange(0, len(seq), rc.smooth_choice_every)
-        rays = quality_rays(seq, picks, config)
-        score, judged = _score(output.poses, seq, picks, rays, config)
+        if known.get("poses") is output.poses:
+            picks, rays, score, judged = (known[k] for k in ("picks", "rays", "score", "judged"))
+        else:
+            picks = np.arange(0, len(seq), rc.smooth_choice_every)
+            rays = quality_rays(seq, picks, config)
+            score, judged = _score(output.poses, seq, picks, rays, config)
         if not np.isfinite(score) or score >= rc.recover_below:
             return output
         again = [stage for stage in default_stages(config) if _redone(stage)]
@@ -470,6 +486,20 @@ def _redone(stage: Stage) -> bool:
     return not isinstance(stage, Repair | Recovery | FinalMap)
 
 
+def _remember(
+    scored: dict | None,
+    poses: F64 | None,
+    picks: NDArray[np.int64],
+    rays: Rays,
+    score: float,
+    judged: int,
+) -> None:
+    """Keep in ``scored`` (when given) the score of ``poses`` on the scans ``picks`` and the
+    returns it judged, for :class:`Recovery` to take (keyed by the poses array itself)."""
+    if scored is not None:
+        scored.update(poses=poses, picks=picks, rays=rays, score=score, judged=judged)
+
+
 def _score(
     poses: F64, seq: ScanSequence, picks: NDArray[np.int64], rays: Rays, config: Config
 ) -> tuple[float, int]:
@@ -499,6 +529,7 @@ def default_stages(config: Config) -> list[Stage]:
     if config.filter.method == "rbpf":
         measured: dict = {}  # the odometry's disagreement, measured once for every round
         start: dict = {}  # the filter's output, for the repair to start from again
+        scored: dict = {}  # the repair's score of its result, for the recovery to take
         rounds = [
             stage
             for _ in range(config.rbpf.register_rounds)
@@ -506,7 +537,7 @@ def default_stages(config: Config) -> list[Stage]:
         ]
         return [
             LoopClosing(start), Reregistration(), BetweenUpdates(), *rounds,
-            Repair(start, measured), Recovery(), FinalMap(),
+            Repair(start, measured, scored), Recovery(scored), FinalMap(),
         ]  # fmt: skip
     return []
 

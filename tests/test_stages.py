@@ -469,6 +469,8 @@ def test_the_default_stages_recover_before_the_final_map():
     assert closing.start is repair.start
     smoothings = [s for s in default if isinstance(s, stages.OdometrySmoothing)]
     assert len(smoothings) == 2 and all(s.measured is repair.measured for s in smoothings)
+    recovery = default[-2]
+    assert isinstance(recovery, stages.Recovery) and recovery.scored is repair.scored is not None
     assert stages.default_stages(load_config("", None, ['filter.method="classic"'])) == []
 
 
@@ -578,3 +580,34 @@ def test_the_recovery_keeps_every_counter_the_filter_hands_over(long_room):
         s.update(seq.scan(k), odometry=seq.odometry[k])
     s.finish()
     assert handed == [set(stages._FILTER_STATS)]
+
+
+def test_the_recovery_takes_the_repairs_score_of_the_same_poses(long_room, monkeypatch):
+    """The repair scores the result it returns; the recovery that follows takes that score
+    instead of scoring the same poses again (and forgets it); for other poses it scores anew,
+    to the same figure."""
+    import slam.eval.quality as quality
+
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    start = {"output": dataclasses.replace(_output(seq, truth), poses=None)}
+    scored: dict = {}
+    good = _output(seq, truth)
+    assert stages.Repair(start, {}, scored).run(good, config) is good
+    assert scored["poses"] is good.poses and scored["score"] > config.rbpf.recover_below
+    real, calls = quality.map_quality, []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(quality, "map_quality", counted)
+    kept = dict(scored)
+    assert stages.Recovery(scored).run(good, config) is good
+    assert calls == [] and scored == {}
+    again = _output(seq, truth)  # the same poses in another array
+    assert stages.Recovery().run(again, config) is again
+    assert calls == [1]
+    picks = np.arange(0, len(seq), config.rbpf.smooth_choice_every)
+    rays = stages.quality_rays(seq, picks, config)
+    assert stages._score(again.poses, seq, picks, rays, config) == (kept["score"], kept["judged"])
