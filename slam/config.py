@@ -396,7 +396,8 @@ class RbpfConfig(Validated):
     """A stretch of the result (``quality.stretch_m`` of path) whose returns agree with the
     other stretches' map less than this share contradicts them: the stages after the filter run
     again with the loop closing's chain ``loops.flex_factor`` times looser there, and the
-    better-scoring result is kept (:class:`slam.stages.Repair`; 0: never)."""
+    better-scoring result is kept unless it breaks a stretch that agreed
+    (:class:`slam.stages.Repair`; 0: never)."""
     smooth_choice_every: int = bounded(4, ge=1, le=1000)
     """The score that chooses among :attr:`smooth_scales` judges every this-many-th scan only
     (and builds its maps from those): the choice costs a quarter of a full score per scale ..."""

@@ -55,7 +55,7 @@ from slam.particle_filter import FilterOutput, particle_maps
 from slam.scans import ScanHits, ScanSequence
 
 if TYPE_CHECKING:
-    from slam.eval.quality import Rays
+    from slam.eval.quality import QualityResult, Rays, StretchScore
 
 F64 = NDArray[np.float64]
 
@@ -334,11 +334,13 @@ class Repair:
     ``loops.flex_factor`` times larger between the keyframes across those stretches, the
     smoothing at the multiple the first pass chose (``measured``, shared with its
     :class:`OdometrySmoothing`), and the better-scoring result is kept, the first unless the
-    other beats it by the smoothing choice's margin and standard errors (:func:`smoothing_pick`).
-    The stats record the stretches (``repair_stretches``), both scores (``repair_scores``) and
-    which was kept (``repaired``). Scored on every ``rbpf.smooth_choice_every``-th scan, as the
-    smoothing's choice and :class:`Recovery` score; ``scored``, a dict shared with the run's
-    :class:`Recovery`, hands it the score of the result returned, so that it is not computed twice.
+    other beats it by the smoothing choice's margin and standard errors (:func:`smoothing_pick`)
+    and breaks no stretch that agreed (:func:`broken_stretches`). The stats record the
+    stretches (``repair_stretches``), both scores (``repair_scores``), the stretches the rerun
+    broke (``repair_broke``, their times) and which was kept (``repaired``). Scored on every
+    ``rbpf.smooth_choice_every``-th scan, as the smoothing's choice and :class:`Recovery` score;
+    ``scored``, a dict shared with the run's :class:`Recovery`, hands it the score of the result
+    returned, so that it is not computed twice.
     """
 
     name = "repair"
@@ -379,16 +381,20 @@ class Repair:
         for _ in range(rc.register_rounds):
             again += [ScanRegistration(), OdometrySmoothing(self.measured)]
         other = run_stages(first, again, config)
-        other_score, other_judged = _score(other.poses, seq, picks, rays, config)
-        scores = [score, other_score]
-        judged = [checked, other_judged]
+        after = map_quality(seq.times[picks], other.poses[picks], rays, config.quality, config.map)
+        scores = [score, float(after.score)]
+        judged = [checked, int(after.totals()["checked"])]
         kept = smoothing_pick(scores, judged, rc.smooth_choice_margin, rc.smooth_choice_z)
+        broken = broken_stretches(result, after, rc.smooth_choice_margin, rc.smooth_choice_z)
+        if broken:
+            kept = 0
         chosen = other if kept == 1 else output
         _remember(self.scored, chosen.poses, picks, rays, scores[kept], judged[kept])
         stats = {
             **chosen.stats,
             "repair_stretches": len(loose),
             "repair_scores": [round(v, 4) if np.isfinite(v) else None for v in scores],
+            "repair_broke": [[round(s.t_start, 3), round(s.t_end, 3)] for s in broken],
             "repaired": kept == 1,
         }
         return dataclasses.replace(chosen, stats=stats)
@@ -484,6 +490,30 @@ def _redone(stage: Stage) -> bool:
     """Whether :class:`Recovery` runs ``stage`` again (stages 1–5: not the repair, itself nor
     the map)."""
     return not isinstance(stage, Repair | Recovery | FinalMap)
+
+
+def broken_stretches(
+    before: QualityResult, after: QualityResult, margin: float, z: float
+) -> list[StretchScore]:
+    """The stretches of ``before`` that agreed and that ``after`` makes doubtful: judged in
+    ``before`` with a score at least ``quality.flag_below``, and over the same scans
+    (:meth:`~slam.eval.quality.QualityResult.score_over`) judged on at least
+    ``quality.min_checked`` returns of ``after``, below ``flag_below`` and lower by ``margin``
+    and ``z`` standard errors (:func:`smoothing_pick`'s rule). :class:`Repair` keeps no rerun
+    that breaks one: a looser chain that mends the stretches it was loosened for can let a
+    closure pull a stretch that held out of place (mit-killian read every third scan:
+    docs/accuracy.md, "Stretches that contradict the others, repaired")."""
+    qc = before.config
+    broken = []
+    for s in before.judged():
+        if s.score < qc.flag_below:
+            continue
+        share, checked = after.score_over(s.first, s.last)
+        if checked < qc.min_checked or not share < qc.flag_below:
+            continue
+        if smoothing_pick([share, s.score], [checked, s.checked], margin, z) == 1:
+            broken.append(s)
+    return broken
 
 
 def _remember(

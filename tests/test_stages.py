@@ -500,20 +500,69 @@ def test_a_stretch_that_contradicts_the_others_is_repaired(long_room):
     assert out.stats["updates"] == 40
 
 
-def test_the_repair_keeps_a_result_that_scores_better(long_room, monkeypatch):
-    """When the stages run again and score worse (here: they give the same bad poses back),
-    the result handed in is kept, with ``repaired`` false and both scores."""
+def _repaired_with(long_room, monkeypatch, rerun: np.ndarray):
+    """:class:`slam.stages.Repair` run on the room's scans 50-69 moved 0.4 m sideways, the
+    stages that run again giving the poses ``rerun``: its output and the result handed in."""
     seq, config = long_room
     truth = seq.odometry.copy()
     bad = _output(seq, _shifted(truth, 50, 69, 0.4))
-    worse = _output(seq, _shifted(truth, 30, 89, 0.4))
-    monkeypatch.setattr(stages, "run_stages", lambda *a, **k: worse)
+    monkeypatch.setattr(stages, "run_stages", lambda *a, **k: _output(seq, rerun))
     start = {"output": dataclasses.replace(_output(seq, truth), poses=None)}
-    out = stages.Repair(start, {}).run(bad, config)
+    return stages.Repair(start, {}).run(bad, config), bad
+
+
+def test_the_repair_keeps_a_result_that_scores_better(long_room, monkeypatch):
+    """When the stages run again and score worse (here: they move more of the room), the
+    result handed in is kept, with ``repaired`` false and both scores."""
+    worse = _shifted(long_room[0].odometry, 30, 89, 0.4)
+    out, bad = _repaired_with(long_room, monkeypatch, worse)
     assert out.stats["repaired"] is False
     np.testing.assert_array_equal(out.poses, bad.poses)
     before, after = out.stats["repair_scores"]
     assert after < before
+
+
+def test_the_repair_keeps_no_rerun_that_breaks_a_stretch_that_agreed(long_room, monkeypatch):
+    """A rerun that mends the contradicting stretch (scans 50-69 back in place) but moves the
+    last 20 scans 0.4 m sideways scores better over the run (0.917 against 0.885), by more than
+    the margin: the score alone would keep it. The last stretch agreed (1.0) and now does not
+    (0.69 on the same scans), so the result handed in is kept, and ``repair_broke`` gives that
+    stretch's times."""
+    seq = long_room[0]
+    out, bad = _repaired_with(long_room, monkeypatch, _shifted(seq.odometry, 100, 119, 0.4))
+    before, after = out.stats["repair_scores"]
+    assert after - before > 0.03  # 0.885 -> 0.917
+    assert out.stats["repaired"] is False
+    np.testing.assert_array_equal(out.poses, bad.poses)
+    assert out.stats["repair_broke"] == [[round(seq.times[90], 3), round(seq.times[119], 3)]]
+
+
+def test_broken_stretches_are_those_that_agreed_and_no_longer_do(long_room):
+    """:func:`slam.stages.broken_stretches`: a stretch's score over its own scans is what the
+    result itself says (:meth:`QualityResult.score_over`); a result breaks none of its own; the
+    last 20 scans moved 0.4 m break the last stretch (it agreed, 1.0, and scores 0.69 on the
+    same scans); a drop that is not significant (z = 100) breaks nothing."""
+    from slam.eval.quality import map_quality
+    from slam.stages import broken_stretches, quality_rays
+
+    seq, config = long_room
+    truth = seq.odometry.copy()
+    picks = np.arange(len(seq))
+    rays = quality_rays(seq, picks, config)
+
+    def scored(poses):
+        return map_quality(seq.times, poses, rays, config.quality, config.map)
+
+    bad = scored(_shifted(truth, 50, 69, 0.4))
+    for s in bad.stretches:
+        share, checked = bad.score_over(s.first, s.last)
+        assert checked == s.checked and (share == s.score or (np.isnan(share) and s.checked == 0))
+    assert broken_stretches(bad, bad, 0.005, 2.0) == []
+    worse = scored(_shifted(truth, 100, 119, 0.4))
+    broken = broken_stretches(bad, worse, 0.005, 2.0)
+    assert [(s.first, s.last) for s in broken] == [(90, 119)]
+    assert broken[0].score >= config.quality.flag_below > worse.score_over(90, 119)[0]
+    assert broken_stretches(bad, worse, 0.005, 100.0) == []
 
 
 def test_a_result_without_contradicting_stretches_is_not_repaired(long_room, monkeypatch):

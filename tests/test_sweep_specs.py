@@ -47,3 +47,12 @@ def test_the_short_range_spec_runs_the_six_logs_with_an_8_m_laser():
     assert spec.seeds == (0, 1)
     assert [s.overrides for s in spec.settings] == [("lidar.range_max=8",)]
     assert len(spec.cells()) == 6 * 2
+
+
+def test_the_scan_rate_spec_runs_the_six_logs_at_a_half_and_a_third_of_their_rate():
+    spec = load("scan_rate.toml")
+    assert spec.logs == BENCH_LOGS
+    assert spec.seeds == (0, 1)
+    assert [s.overrides for s in spec.settings] == [("filter.every=2",), ("filter.every=3",)]
+    assert spec.metric_of("mit-killian") == "auto"
+    assert len(spec.cells()) == 6 * 2 * 2

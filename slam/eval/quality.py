@@ -299,6 +299,15 @@ class QualityResult:
         """Judged stretches whose score is below ``flag_below``."""
         return [s for s in self.judged() if s.score < self.config.flag_below]
 
+    def score_over(self, first: int, last: int) -> tuple[float, int]:
+        """The share of the judged returns that agree over the scans ``first`` to ``last``
+        (inclusive; NaN if none) and how many were judged: another run's stretch scored on this
+        run's verdicts, scan for scan, whatever this run's own stretches are."""
+        v = self.verdict[first : last + 1]
+        checked = int(np.count_nonzero(v >= AGREE))
+        agree = int(np.count_nonzero(v == AGREE))
+        return (agree / checked if checked else math.nan), checked
+
     def conflict_points(self) -> F64:
         """World positions ``(M, 2)`` of every conflicting endpoint."""
         rows, beams = np.nonzero(self.verdict >= CONFLICT_FREE)
