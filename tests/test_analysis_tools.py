@@ -1,5 +1,5 @@
-"""The analysis scripts of docs/accuracy.md: ``tools/short_relations.py`` and
-``tools/beam_step_check.py``, on inputs whose answers are known."""
+"""The analysis scripts of docs/accuracy.md: ``tools/short_relations.py``,
+``tools/beam_step_check.py`` and ``tools/same_relations.py``, on inputs whose answers are known."""
 
 from __future__ import annotations
 
@@ -16,12 +16,17 @@ def _straight(n: int) -> Trajectory:
     return Trajectory(times, np.c_[times, np.zeros(n), np.zeros(n)])
 
 
+def _two_second_relations(n: int) -> Relations:
+    """Relations from every whole second ``t`` to ``t + 2`` along :func:`_straight`'s line."""
+    t1 = np.arange(n - 2, dtype=np.float64)
+    return Relations(t1, t1 + 2.0, np.full(n - 2, 2.0), np.zeros(n - 2), np.zeros(n - 2))
+
+
 def test_short_relations_count_where_slam_is_worse_than_dead_reckoning():
     tool = load_tool("short_relations")
     n = 40
     truth = _straight(n)
-    t1 = np.arange(n - 2, dtype=np.float64)
-    relations = Relations(t1, t1 + 2.0, np.full(n - 2, 2.0), np.zeros(n - 2), np.zeros(n - 2))
+    relations = _two_second_relations(n)
     slam = Trajectory(truth.times, truth.poses.copy())
     slam.poses[10, 1] = 0.5  # one pose 0.5 m aside: relations 8->10 and 10->12 are 0.5 m off
     odometry = Trajectory(truth.times, truth.poses.copy())
@@ -128,3 +133,28 @@ def test_icp_residual_is_least_for_the_true_beam_geometry():
     # the same ranges read at angles stretched by 0.56 % (the 180/179 spread) fit worse
     stretched = tool._points(ranges, angles * (180 / 179 / 1.0), 15.0)
     assert tool.icp_residual(stretched, dst, np.zeros(3)) > 0.005
+
+
+def test_same_relations_scores_the_base_run_on_each_runs_own_subset():
+    """A run at half the rate (even times only) matches the relations between even times; the
+    base run (every time, 0.3 m off after time 20) is scored on exactly those: 19 relations of
+    the 38, where it is off on the 1 that crosses the slip, so 0.3 / 19; the half-rate run, off
+    0.1 m after time 10, on its own: 0.1 / 19. A run that matches none gets None."""
+    tool = load_tool("same_relations")
+    n = 40
+    truth = _straight(n)
+    relations = _two_second_relations(n)
+    base = Trajectory(truth.times, truth.poses.copy())
+    base.poses[20:, 1] += 0.3  # relations 18->20 and 19->21 are 0.3 m off
+    even = truth.times[::2]
+    half = Trajectory(even, np.c_[even, np.zeros(even.size), np.zeros(even.size)])
+    half.poses[5:, 1] += 0.1  # from time 10: relation 8->10 is 0.1 m off
+    none = Trajectory(truth.times + 0.5, truth.poses.copy())
+    rows = tool.on_same_relations(relations, base, {"half": half, "none": none})
+    assert rows[0] == {
+        "run": "half",
+        "relations": 19,
+        "run_mean_m": round(0.1 / 19, 4),
+        "base_mean_m": round(0.3 / 19, 4),
+    }
+    assert rows[1] == {"run": "none", "relations": 0, "run_mean_m": None, "base_mean_m": None}
