@@ -365,25 +365,19 @@ class Repair:
             or len(output.steps) < 2
         ):
             return output
-        from slam.eval.quality import map_quality
-
         picks = np.arange(0, len(seq), rc.smooth_choice_every)
         rays = quality_rays(seq, picks, config)
-        result = map_quality(
-            seq.times[picks], output.poses[picks], rays, config.quality, config.map
-        )
-        score, checked = float(result.score), int(result.totals()["checked"])
+        result = _quality(output.poses, seq, picks, rays, config)
+        score, checked = _score_of(result)
         loose = [(s.t_start, s.t_end) for s in result.judged() if s.score < rc.repair_below]
         if not loose:
             _remember(self.scored, output.poses, picks, rays, score, checked)
             return output
-        again = [LoopClosing(loose=loose), Reregistration(), BetweenUpdates()]
-        for _ in range(rc.register_rounds):
-            again += [ScanRegistration(), OdometrySmoothing(self.measured)]
+        again = _stages_one_to_five(LoopClosing(loose=loose), self.measured, config)
         other = run_stages(first, again, config)
-        after = map_quality(seq.times[picks], other.poses[picks], rays, config.quality, config.map)
-        scores = [score, float(after.score)]
-        judged = [checked, int(after.totals()["checked"])]
+        after = _quality(other.poses, seq, picks, rays, config)
+        other_score, other_judged = _score_of(after)
+        scores, judged = [score, other_score], [checked, other_judged]
         kept = smoothing_pick(scores, judged, rc.smooth_choice_margin, rc.smooth_choice_z)
         broken = broken_stretches(result, after, rc.smooth_choice_margin, rc.smooth_choice_z)
         if broken:
@@ -530,14 +524,37 @@ def _remember(
         scored.update(poses=poses, picks=picks, rays=rays, score=score, judged=judged)
 
 
+def _quality(
+    poses: F64, seq: ScanSequence, picks: NDArray[np.int64], rays: Rays, config: Config
+) -> QualityResult:
+    """The map quality of ``poses`` on the scans ``picks`` (their ``rays``)."""
+    from slam.eval.quality import map_quality
+
+    return map_quality(seq.times[picks], poses[picks], rays, config.quality, config.map)
+
+
+def _score_of(result: QualityResult) -> tuple[float, int]:
+    """A map quality's score and the returns it judged."""
+    return float(result.score), int(result.totals()["checked"])
+
+
 def _score(
     poses: F64, seq: ScanSequence, picks: NDArray[np.int64], rays: Rays, config: Config
 ) -> tuple[float, int]:
     """The map-quality score of ``poses`` on the scans ``picks`` and the returns it judged."""
-    from slam.eval.quality import map_quality
+    return _score_of(_quality(poses, seq, picks, rays, config))
 
-    result = map_quality(seq.times[picks], poses[picks], rays, config.quality, config.map)
-    return float(result.score), int(result.totals()["checked"])
+
+def _stages_one_to_five(closing: LoopClosing, measured: dict, config: Config) -> list[Stage]:
+    """Stages 1–5 of ``rbpf``: ``closing``, the re-registration, the placement between updates,
+    and ``rbpf.register_rounds`` rounds of registration and smoothing, whose smoothings share
+    ``measured`` (the odometry's disagreement and the multiple chosen)."""
+    rounds = [
+        stage
+        for _ in range(config.rbpf.register_rounds)
+        for stage in (ScanRegistration(), OdometrySmoothing(measured))
+    ]
+    return [closing, Reregistration(), BetweenUpdates(), *rounds]
 
 
 class FinalMap:
@@ -560,13 +577,8 @@ def default_stages(config: Config) -> list[Stage]:
         measured: dict = {}  # the odometry's disagreement, measured once for every round
         start: dict = {}  # the filter's output, for the repair to start from again
         scored: dict = {}  # the repair's score of its result, for the recovery to take
-        rounds = [
-            stage
-            for _ in range(config.rbpf.register_rounds)
-            for stage in (ScanRegistration(), OdometrySmoothing(measured))
-        ]
         return [
-            LoopClosing(start), Reregistration(), BetweenUpdates(), *rounds,
+            *_stages_one_to_five(LoopClosing(start), measured, config),
             Repair(start, measured, scored), Recovery(scored), FinalMap(),
         ]  # fmt: skip
     return []

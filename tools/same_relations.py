@@ -7,11 +7,13 @@ fr079 the 95 relations of every 3rd scan average 0.060 m at the full rate, again
 all of them). For a base run folder (the full rate) and other run folders of the same log, this
 scores each other run on the relations it matched and the base run on exactly those, so that
 the difference is the run's, not the subset's (docs/accuracy.md, "A robot that scans less
-often"). The relations are the log's as ``slam eval`` reads them (mit-killian's re-timed copy).
+often"). The relations are the log's as ``slam eval`` reads them (mit-killian's re-timed copy),
+or ``--relations FILE`` (a copy of a log under another path, such as ``tools/perturb_ranges.py``
+writes).
 
 Usage::
 
-    uv run python tools/same_relations.py fr079 BASE_RUN RUN [RUN ...] [--json]
+    uv run python tools/same_relations.py fr079 BASE_RUN RUN [RUN ...] [--relations FILE] [--json]
 """
 
 from __future__ import annotations
@@ -75,13 +77,19 @@ def main() -> int:
     parser.add_argument("log", help="registry name or path of the log (its relations file)")
     parser.add_argument("base", type=Path, help="run folder scored on every run's relations")
     parser.add_argument("runs", type=Path, nargs="+", help="run folders to compare with it")
+    parser.add_argument("--relations", type=Path, help="relations file (default: the log's)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     try:
-        data_dir = resolve_data_dir(None)
-        path = relations_file(sources.resolve(args.log, data_dir, where="log"))
+        path = args.relations
         if path is None:
-            raise SlamError(f"{args.log}: no relations file in {data_dir}")
+            data_dir = resolve_data_dir(None)
+            path = relations_file(sources.resolve(args.log, data_dir, where="log"))
+        if path is None:
+            raise SlamError(
+                f"{args.log}: expected a log with a relations file in {data_dir}, found none "
+                "(give one with --relations)"
+            )
         relations = read_relations(path)
         base = _trajectory(args.base)
         runs = {str(folder): _trajectory(folder) for folder in args.runs}
