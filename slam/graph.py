@@ -169,7 +169,7 @@ def _detect(
     if lc.pass_path > 0.0:  # the earlier passes' maps, shared by the threads
         from slam.backend.submaps import SubmapCache
 
-        passes = SubmapCache(seq, steps, poses, config, keep=PASS_MAPS_KEPT, table=table)
+        passes = SubmapCache(seq, steps, poses, config, table=table)
     ranges = window_chunks(windows, 4 * threads())
     parts = in_threads(
         [
@@ -294,10 +294,6 @@ def unique_fit(view: FieldView, pose: F64, ex: F64, ey: F64, close: int, lc: Loo
     moved = shifted_fit(view, pose, ex, ey, lc.fit_distance, lc.unique_shift, UNIQUE_DIRECTIONS)
     return moved < lc.unique_ratio * close
 
-
-PASS_MAPS_KEPT = 16
-"""Maps of earlier passes the local search keeps at a time, shared by its threads (a map of
-``2 · pass_path`` metres of path is about 1 MB)."""
 
 PASS_DIRECTIONS = 32
 """Directions :func:`fits_elsewhere_on_pass` moves a matched scan in (every 11.25°)."""

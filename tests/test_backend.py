@@ -149,11 +149,11 @@ def test_submap_cache_shared_by_threads_builds_each_submap_once():
     steps = np.arange(60)
     keys = [(0, 10), (10, 20), (20, 30), (30, 40), (40, 50), (50, 60)]
     asks = [keys[(i * 7) % len(keys)] for i in range(48)]
-    shared = SubmapCache(_SlowScans(_room()), steps, poses, config, keep=32)
+    shared = SubmapCache(_SlowScans(_room()), steps, poses, config)
     with ThreadPoolExecutor(max_workers=4) as pool:
         got = list(pool.map(lambda key: shared.pyramid(*key), asks))
     assert shared.builds == len(keys)
-    serial = SubmapCache(_SlowScans(_room()), steps, poses, config, keep=32)
+    serial = SubmapCache(_SlowScans(_room()), steps, poses, config)
     for key, pyr in zip(asks, got, strict=True):
         assert pyr is shared.pyramid(*key)  # still cached: the very same object
         alone = serial.pyramid(*key)
@@ -161,14 +161,35 @@ def test_submap_cache_shared_by_threads_builds_each_submap_once():
     assert shared.builds == len(keys) and serial.builds == len(keys)
 
 
-def test_submap_cache_keeps_the_most_recently_used():
+def test_submap_cache_keeps_the_most_recently_used_within_its_budget():
     from slam.backend.submaps import SubmapCache
 
-    cache = SubmapCache(_SlowScans(_room()), np.arange(30), np.zeros((30, 3)), Config(), keep=2)
+    def cache(budget_mb: float) -> SubmapCache:
+        return SubmapCache(
+            _SlowScans(_room()), np.arange(30), np.zeros((30, 3)), Config(), budget_mb
+        )
+
+    keys = [(0, 10), (10, 20), (20, 30)]
+    sizes = {}
+    for key in keys:  # each pyramid's bytes, alone in a cache
+        one = cache(100.0)
+        one.pyramid(*key)
+        sizes[key] = one.held
+    assert min(sizes.values()) > 0
+    # room for (0, 10) with either other one, not for all three
+    two = cache(max(sizes[(0, 10)] + sizes[k] for k in keys[1:]) / 1e6)
     for key in [(0, 10), (10, 20), (0, 10), (20, 30), (0, 10), (10, 20)]:
-        cache.pyramid(*key)
-    # (10, 20) was evicted by (20, 30) ((0, 10) was used since): built again at the end
-    assert cache.builds == 4
+        two.pyramid(*key)
+    # (10, 20) was dropped for (20, 30) ((0, 10) was used since): built again at the end
+    assert two.builds == 4
+    assert two.held == sizes[(0, 10)] + sizes[(10, 20)]
+    everything = cache(100.0)
+    for key in [(0, 10), (10, 20), (0, 10), (20, 30), (0, 10), (10, 20)]:
+        everything.pyramid(*key)
+    assert everything.builds == 3 and everything.held == sum(sizes.values())
+    tiny = cache(1e-6)  # the newest is always kept, however small the budget
+    tiny.pyramid(0, 10)
+    assert tiny.pyramid(0, 10) is tiny.pyramid(0, 10) and tiny.builds == 1
 
 
 def test_compact_view_keeps_the_field_and_drops_unused_tiles():

@@ -71,7 +71,6 @@ from slam.geometry import (
     wrap_angle,
 )
 from slam.graph import (
-    PASS_MAPS_KEPT,
     LoopResult,
     _edge_information,
     chain_looseness,
@@ -91,13 +90,6 @@ from slam.mapping import likelihood_tables
 from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
-
-
-SUBMAPS_KEPT = 16
-"""Submaps of each kind (pyramid, field view) the global search keeps at a time, shared by its
-threads: on mit-killian a pyramid is ~1 MB (2 MB at most) and a field view ~0.3 MB. With 32
-intel builds 147 submaps instead of 222 in its two rounds, but 32 full field maps (2.1 MB each,
-before :func:`~slam.backend.submaps.compact_view`) raised mit-killian's peak to 764-810 MB."""
 
 
 def keyframes(path: F64, spacing: float) -> NDArray[np.int64]:
@@ -222,10 +214,10 @@ def detect_global(
     frames = keyframes(path, bc.keyframe_path)
     turns = np.arange(frames.size)
     st = _Stretches.of(x, path, bc.submap_length, list(local))
-    cache = SubmapCache(seq, steps, x, config, keep=SUBMAPS_KEPT, table=table)
+    cache = SubmapCache(seq, steps, x, config, table=table)
     passes = None
     if config.loops.pass_path > 0.0:
-        passes = SubmapCache(seq, steps, x, config, keep=PASS_MAPS_KEPT, table=table)
+        passes = SubmapCache(seq, steps, x, config, table=table)
     search = partial(_search_keyframes, _Search(seq, steps, x, path, config, cache, st, passes))
     edges, searched = _in_ranges(search, frames, turns, False)
     if far and bc.far_drift_xy > 0 and bc.far_candidates > 0:

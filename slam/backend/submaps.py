@@ -7,7 +7,8 @@ global search, and as a one-particle distance-field map (:class:`slam.mapping.Pa
 kept as the field alone: :func:`compact_view`) for the Levenberg-Marquardt refinement and the
 fit check of :mod:`slam.graph`. Both are kept in a cache that the search's threads share
 (:class:`SubmapCache`): a submap is built once per round however many keyframes, on whichever
-thread, ask for it, as long as it stays among the ``keep`` most recently used.
+thread, ask for it, as long as it stays within the cache's budget of megabytes (the least
+recently used dropped first).
 """
 
 from __future__ import annotations
@@ -28,6 +29,14 @@ from slam.scans import ScanHits
 
 F64 = NDArray[np.float64]
 V = TypeVar("V")
+
+SUBMAP_CACHE_MB = 96.0
+"""Megabytes of submaps a :class:`SubmapCache` keeps (pyramids and field views together), the
+least recently used dropped first. A round's submaps took at most 47 MB per cache on intel and
+about 100 MB on mit-killian (seed 0; a pyramid ~1 MB, a compact field view ~0.3 MB). Kept by
+count instead (16 of each kind), intel's loop closing built 902 submaps where 597 now do (one
+thread), and took 7.4-7.8 s where it now takes 6.6-7.5 s (mit-killian 12.6-13.0 s, now
+9.8-10.2 s; the same closures and poses, bit for bit)."""
 
 
 @dataclass
@@ -56,8 +65,9 @@ def world_hits(seq, step: int, pose: F64, max_range: float, beams: int = 0) -> t
 
 
 class SubmapCache:
-    """The submaps of one round (poses fixed), built when first asked for, the ``keep`` most
-    recently used of each kind kept.
+    """The submaps of one round (poses fixed), built when first asked for and kept while they
+    fit in ``budget_mb`` megabytes (the least recently used dropped first; the newest is always
+    kept).
 
     Thread-safe: the global search's threads share one cache. A submap asked for while another
     thread builds it is waited for, not built again; building is deterministic, so what a
@@ -70,45 +80,47 @@ class SubmapCache:
         steps: NDArray[np.int64],
         poses: F64,
         config: Config,
-        keep: int = 8,
+        budget_mb: float = SUBMAP_CACHE_MB,
         table: ScanHits | None = None,
     ):
         self.seq, self.steps, self.poses, self.config = seq, steps, poses, config
         self.table = table  # the nodes' hits for the field maps (slam.graph.node_hits)
-        self.keep = keep
-        self._pyramids: OrderedDict[tuple[int, int], Pyramid | None] = OrderedDict()
-        self._maps: OrderedDict[tuple[int, int], FieldView] = OrderedDict()
+        self.budget = budget_mb * 1e6
+        self._store: OrderedDict[tuple[str, int, int], tuple[object, int]] = OrderedDict()
+        self.held = 0
+        """Bytes of the submaps kept now."""
         self._lock = threading.Lock()
         self._building: dict[tuple[str, int, int], threading.Event] = {}
         self.builds = 0
         """Submaps built so far (pyramids and field maps)."""
 
-    def _cached(
-        self, kind: str, store: OrderedDict, key: tuple[int, int], build: Callable[[], V]
-    ) -> V:
-        """``store[key]``, built by ``build`` (outside the lock, by one thread at a time)."""
+    def _cached(self, key: tuple[str, int, int], build: Callable[[], V]) -> V:
+        """The submap ``key`` (kind, first node, end node), built by ``build`` when it is not
+        kept (outside the lock, by one thread at a time)."""
         while True:
             with self._lock:
-                if key in store:
-                    store.move_to_end(key)
-                    return store[key]
-                pending = self._building.get((kind, *key))
+                if key in self._store:
+                    self._store.move_to_end(key)
+                    return self._store[key][0]
+                pending = self._building.get(key)
                 if pending is None:
-                    done = self._building[(kind, *key)] = threading.Event()
+                    done = self._building[key] = threading.Event()
             if pending is not None:  # another thread builds it: wait, then look again
                 pending.wait()
                 continue
             try:
                 value = build()
+                size = _nbytes(value)
                 with self._lock:
                     self.builds += 1
-                    store[key] = value
-                    if len(store) > self.keep:
-                        store.popitem(last=False)
+                    self._store[key] = (value, size)
+                    self.held += size
+                    while self.held > self.budget and len(self._store) > 1:
+                        self.held -= self._store.popitem(last=False)[1][1]
                 return value
             finally:
                 with self._lock:
-                    del self._building[(kind, *key)]
+                    del self._building[key]
                 done.set()
 
     def _node_hits(self, lo: int, hi: int) -> tuple[F64, F64]:
@@ -127,7 +139,7 @@ class SubmapCache:
 
     def pyramid(self, lo: int, hi: int) -> Pyramid | None:
         """The branch-and-bound grid of nodes ``[lo, hi)`` (None without hits)."""
-        return self._cached("pyramid", self._pyramids, (lo, hi), lambda: self._pyramid(lo, hi))
+        return self._cached(("pyramid", lo, hi), lambda: self._pyramid(lo, hi))
 
     def _pyramid(self, lo: int, hi: int) -> Pyramid | None:
         bc = self.config.backend
@@ -146,7 +158,7 @@ class SubmapCache:
     def field_view(self, lo: int, hi: int) -> FieldView:
         """The distance field of nodes ``[lo, hi)`` as the matching kernels read it (the map
         :mod:`slam.graph` builds, :func:`compact_view`)."""
-        return self._cached("map", self._maps, (lo, hi), lambda: self._field_view(lo, hi))
+        return self._cached(("map", lo, hi), lambda: self._field_view(lo, hi))
 
     def _field_view(self, lo: int, hi: int) -> FieldView:
         from slam.graph import empty_submap, insert_nodes
@@ -165,6 +177,15 @@ class SubmapCache:
             if self.table is None:
                 self.table = node_hits(self.seq, self.steps, self.config)
             return self.table
+
+
+def _nbytes(value: object) -> int:
+    """The bytes of a cached submap's arrays (a :class:`Pyramid`, a field view, or None)."""
+    if isinstance(value, Pyramid):
+        return int(value.levels.nbytes)
+    if isinstance(value, tuple):
+        return sum(int(a.nbytes) for a in value if isinstance(a, np.ndarray))
+    return 0
 
 
 def compact_view(view: FieldView) -> FieldView:
