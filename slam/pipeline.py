@@ -230,9 +230,11 @@ def execute(request: RunRequest) -> Result:
             source = sources.load(ref, config, _needs(config), request.progress, request.bag)
             config = source.configured(config)  # a measured beam step: config.toml records it
             doubts = check_plausibility(source.log, config)  # time base, odometry jumps
-            from slam.viz.recorder import start_recording
+            recorder = None
+            if config.viz.record or request.viewer:  # rerun's import costs 0.5-1.3 s
+                from slam.viz.recorder import start_recording
 
-            recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
+                recorder = start_recording(tmp, config, source.ground_truth, request.viewer)
             if recorder is not None:  # a failed run closes its recording before it goes
                 on_failure.push(lambda kind, *_: recorder.abort() if kind is not None else None)
             observers = [recorder] if recorder is not None else []

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -351,3 +352,26 @@ def test_maze_run_cli_writes_the_recording(tmp_path, capsys):
     assert main(["maze", "run", str(path), "--record", str(rrd)]) == 0
     assert "score" in capsys.readouterr().out
     assert summarize(rrd)["/maze/robot"].rows >= 2
+
+
+def test_a_run_without_recording_does_not_import_rerun(carmen_dir, tmp_path):
+    # rerun's import costs 0.5-1.3 s of every run's wall time: a run that records nothing
+    # (--no-record, no --viewer) must not pay it; the same run recording does import it
+    from cli_process import cli_env
+
+    def imports_rerun(*flags: str) -> bool:
+        out = tmp_path / f"run{len(flags)}"
+        code = (
+            "import sys; from slam.cli import main; "
+            f"args = ['run', {str(carmen_dir / 'intel.clf.gz')!r}, '--max-scans', '60', "
+            f"'--no-texture', '--quiet', '--out', {str(out)!r}, *{list(flags)!r}]; "
+            "assert main(args) == 0; print('rerun' in sys.modules)"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", code], env=cli_env(), capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip().splitlines()[-1] == "True"
+
+    assert not imports_rerun("--no-record")
+    assert imports_rerun()
