@@ -54,3 +54,33 @@ def test_a_missing_sub_command_is_a_usage_error(
         build_parser().parse_args(argv)
     assert exc.value.code == 2
     assert "required" in capsys.readouterr().err
+
+
+def test_the_parser_does_not_import_numba_or_rerun() -> None:
+    # `slam --help`, `slam data list`: building every command's arguments must stay light
+    # (numba's import alone took 0.7-1.1 s of a 1.1-1.9 s `slam --help` here)
+    import subprocess
+    import sys
+
+    from cli_process import cli_env
+
+    code = (
+        "import sys; from slam.cli import build_parser; build_parser(); "
+        "print(sorted(m for m in ('numba', 'rerun', 'llvmlite') if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=cli_env(), capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+
+
+def test_the_maze_robots_named_for_the_parser_are_the_robots() -> None:
+    from slam.maze import DEFAULT_ROBOT, ROBOT_NAMES
+    from slam.maze.robots import ROBOTS
+
+    assert tuple(ROBOTS) == ROBOT_NAMES and DEFAULT_ROBOT in ROBOTS
+    maze = _commands()["maze"]
+    run = next(a for a in maze._actions if isinstance(a, argparse._SubParsersAction)).choices["run"]
+    robot = next(a for a in run._actions if a.dest == "robot")
+    assert list(robot.choices) == list(ROBOTS) and robot.default == DEFAULT_ROBOT

@@ -35,7 +35,7 @@ from slam.errors import ConfigError, UsageError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the sub-commands ``run``, ``bench``, ``show`` and ``convert`` of ``slam maze``."""
-    from slam.maze.robots import DEFAULT_ROBOT, ROBOTS
+    from slam.maze import DEFAULT_ROBOT, ROBOT_NAMES
 
     sub = add_actions(parser, "maze_command", "ACTION")
 
@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         p.add_argument(
             "--robot",
             default=DEFAULT_ROBOT,
-            choices=list(ROBOTS),
+            choices=list(ROBOT_NAMES),
             help=f"robot (default {DEFAULT_ROBOT})",
         )
         p.add_argument(

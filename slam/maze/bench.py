@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from slam.errors import SlamError
+from slam.maze import DEFAULT_ROBOT
 from slam.maze.formats import Maze, read_maze
 from slam.maze.planner import lower_bound, optimal_plan
 from slam.maze.referee import EXPLORATION_WEIGHT, MazeInfo, TrialResult, run_trial
-from slam.maze.robots import DEFAULT_ROBOT, make_robot
+from slam.maze.robots import make_robot
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import UsageError
+from slam.maze import ROBOT_NAMES
 from slam.maze.formats import DX, DY
 from slam.maze.kernels import bfs_cells_unknown, edge_gain, observation_gain, reveal_count
 from slam.maze.planner import (
@@ -448,12 +449,17 @@ class BoundedRobot(ExplorerRobot):
         return best_action
 
 
-ROBOTS: dict[str, Callable[[MazeInfo], ExplorerRobot]] = {
-    "bounded": BoundedRobot,
-    "explore-all": lambda info: FloodFillRobot(info, explore_all=True),
-    "block-out": lambda info: FloodFillRobot(info, explore_all=False),
-}
-DEFAULT_ROBOT = "bounded"
+ROBOTS: dict[str, Callable[[MazeInfo], ExplorerRobot]] = dict(
+    zip(
+        ROBOT_NAMES,  # "bounded", "explore-all", "block-out"
+        (
+            BoundedRobot,
+            lambda info: FloodFillRobot(info, explore_all=True),
+            lambda info: FloodFillRobot(info, explore_all=False),
+        ),
+        strict=True,
+    )
+)
 
 
 def make_robot(name: str, info: MazeInfo, **options: float) -> ExplorerRobot:

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.sim.kernels import follow_path
-
 F64 = NDArray[np.float64]
 
 
@@ -278,6 +276,8 @@ def drive(
 
 
 def _follow(path: F64, arc: F64, speed: F64, steps: int, limits: DriveLimits) -> tuple:
+    from slam.sim.kernels import follow_path  # numba: not imported by `slam --help`
+
     return follow_path(
         np.ascontiguousarray(path),
         arc,
