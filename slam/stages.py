@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 from slam.budget import release_free_memory
 from slam.config import Config, MapConfig
 from slam.geometry import compose, relative, spread_corrections, spread_picks
+from slam.graph import FirstRound
 from slam.kernels.scan import thin_returns
 from slam.mapping import (
     OccupancyGrid,
@@ -76,16 +77,22 @@ class LoopClosing:
     ``start``: a dict that the instances of one run share with :class:`Repair`, which keeps the
     output this stage was handed (the filter's) under ``"output"`` to start from again.
     ``loose``: time spans ``(t0, t1)`` (the log's clock) across which the chain's sigmas are
-    ``loops.flex_factor`` times larger (:func:`slam.graph.chain_looseness`).
+    ``loops.flex_factor`` times larger (:func:`slam.graph.chain_looseness`). ``first``: a
+    :class:`slam.graph.FirstRound` shared with the :class:`Repair` of the run, whose rerun from
+    the same output takes the first round's closures from it instead of searching again.
     """
 
     name = "loop closing"
 
     def __init__(
-        self, start: dict | None = None, loose: list[tuple[float, float]] | None = None
+        self,
+        start: dict | None = None,
+        loose: list[tuple[float, float]] | None = None,
+        first: FirstRound | None = None,
     ) -> None:
         self.start = start
         self.loose = loose or []
+        self.first = first
 
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """Optimise the node poses; the stats get the candidates, closures and correction."""
@@ -104,7 +111,12 @@ class LoopClosing:
                 loose_nodes |= (times >= t0) & (times <= t1)
         close = close_loops_global if config.backend.global_search else close_loops
         closed = close(
-            output.scans, output.steps, output.node_poses, config, loose_nodes=loose_nodes
+            output.scans,
+            output.steps,
+            output.node_poses,
+            config,
+            loose_nodes=loose_nodes,
+            first=self.first,
         )
         stats = {
             **output.stats,
@@ -340,15 +352,24 @@ class Repair:
     broke (``repair_broke``, their times) and which was kept (``repaired``). Scored on every
     ``rbpf.smooth_choice_every``-th scan, as the smoothing's choice and :class:`Recovery` score;
     ``scored``, a dict shared with the run's :class:`Recovery`, hands it the score of the result
-    returned, so that it is not computed twice.
+    returned, so that it is not computed twice. ``first``, shared with the run's
+    :class:`LoopClosing`, gives the rerun the first round's closures (the same nodes, the same
+    closures: only the optimisation sees the looser chain).
     """
 
     name = "repair"
 
-    def __init__(self, start: dict, measured: dict, scored: dict | None = None) -> None:
+    def __init__(
+        self,
+        start: dict,
+        measured: dict,
+        scored: dict | None = None,
+        first: FirstRound | None = None,
+    ) -> None:
         self.start = start
         self.measured = measured
         self.scored = scored
+        self.first = first
 
     def run(self, output: FilterOutput, config: Config) -> FilterOutput:
         """``output``, or the stages' result with the looser chain when it scores better."""
@@ -373,7 +394,8 @@ class Repair:
         if not loose:
             _remember(self.scored, output.poses, picks, rays, score, checked)
             return output
-        again = _stages_one_to_five(LoopClosing(loose=loose), self.measured, config)
+        closing = LoopClosing(loose=loose, first=self.first)
+        again = _stages_one_to_five(closing, self.measured, config)
         other = run_stages(first, again, config)
         after = _quality(other.poses, seq, picks, rays, config)
         other_score, other_judged = _score_of(after)
@@ -577,9 +599,10 @@ def default_stages(config: Config) -> list[Stage]:
         measured: dict = {}  # the odometry's disagreement, measured once for every round
         start: dict = {}  # the filter's output, for the repair to start from again
         scored: dict = {}  # the repair's score of its result, for the recovery to take
+        first = FirstRound()  # the loop closing's first round, for the repair's rerun
         return [
-            *_stages_one_to_five(LoopClosing(start), measured, config),
-            Repair(start, measured, scored), Recovery(scored), FinalMap(),
+            *_stages_one_to_five(LoopClosing(start, first=first), measured, config),
+            Repair(start, measured, scored, first), Recovery(scored), FinalMap(),
         ]  # fmt: skip
     return []
 

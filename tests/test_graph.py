@@ -394,6 +394,54 @@ def test_search_beyond_the_window_only_in_the_first_round(small_log, monkeypatch
     assert asked == [True] + [False] * (len(asked) - 1)
 
 
+def test_a_second_loop_closing_over_the_same_nodes_takes_the_first_rounds_closures(
+    small_log, monkeypatch
+):
+    """With a shared :class:`slam.graph.FirstRound` a second loop closing over the same nodes
+    (the repair's rerun, with a looser chain) does not search its first round again, and ends
+    exactly where it would have ended searching it; other nodes are searched anew."""
+    import slam.backend.global_loops as gl
+    import slam.graph as graph
+
+    seq, truth, config = small_log
+    steps = np.arange(0, len(seq), 8)
+    opened = opened_loop(truth[steps])
+    calls = {"local": 0, "global": 0}
+    real_local, real_global = graph._detect, gl.detect_global
+
+    def local(*args, **kwargs):
+        calls["local"] += 1
+        return real_local(*args, **kwargs)
+
+    def global_(*args, **kwargs):
+        calls["global"] += 1
+        return real_global(*args, **kwargs)
+
+    monkeypatch.setattr(graph, "_detect", local)
+    monkeypatch.setattr(gl, "detect_global", global_)
+
+    def searches(nodes, first=None, loose_nodes=None):
+        before = dict(calls)
+        result = gl.close_loops_global(
+            seq, steps, nodes, config, loose_nodes=loose_nodes, first=first
+        )
+        return result, {k: calls[k] - before[k] for k in calls}
+
+    first = graph.FirstRound()
+    plain, rounds = searches(opened, first)
+    assert plain.accepted > 0 and rounds["local"] == rounds["global"] >= 2
+    loose = np.zeros(len(steps), dtype=bool)
+    loose[10:15] = True
+    again, fewer = searches(opened, first, loose)
+    alone, full = searches(opened, None, loose)
+    assert np.array_equal(again.poses, alone.poses)
+    assert (again.accepted, again.candidates) == (alone.accepted, alone.candidates)
+    assert fewer == {k: v - 1 for k, v in full.items()}
+    moved = opened + np.array([0.01, 0.0, 0.0])
+    assert searches(moved, first)[1] == rounds  # other nodes: every round searched
+    assert searches(moved, first)[1] == {k: v - 1 for k, v in rounds.items()}
+
+
 def test_chain_looseness_marks_the_keyframe_edges_around_the_loose_nodes():
     """An edge between two keyframes is loose when any node from one to the other (both
     included) is; no loose node: no multiple at all."""

@@ -12,7 +12,7 @@ from synthetic_logs import carmen_lines, write_carmen
 
 import slam.rowwise as rowwise
 import slam.stages as stages
-from slam.config import MapConfig, load_config
+from slam.config import Config, MapConfig, load_config
 from slam.io import sources
 from slam.io.exports import clean_image
 from slam.io.mapserver import trinary
@@ -607,6 +607,53 @@ def test_the_loop_closing_keeps_its_input_for_the_repair(long_room, monkeypatch)
     stages.LoopClosing(loose=[(times[10], times[14])]).run(handed, config)
     stages.LoopClosing().run(handed, config)
     assert np.flatnonzero(seen[0]).tolist() == [10, 11, 12, 13, 14] and seen[1] is None
+
+
+def test_the_repair_reruns_the_loop_closing_with_the_runs_first_round(long_room, monkeypatch):
+    """The default stages share one :class:`slam.graph.FirstRound` between the loop closing and
+    the repair, which hands it to the loop closing of its rerun (the same nodes: the same first
+    round of closures)."""
+    from slam.graph import FirstRound
+
+    seq, config = long_room
+    made = stages.default_stages(config)
+    closing, repair = made[0], next(s for s in made if isinstance(s, stages.Repair))
+    assert isinstance(closing.first, FirstRound) and repair.first is closing.first
+    truth = seq.odometry.copy()
+    handed = []
+
+    def rerun(output, again, *args, **kwargs):
+        handed.extend(again)
+        return _output(seq, truth)
+
+    monkeypatch.setattr(stages, "run_stages", rerun)
+    start = {"output": dataclasses.replace(_output(seq, truth), poses=None)}
+    bad = _output(seq, _shifted(truth, 50, 69, 0.4))
+    assert stages.Repair(start, {}, None, closing.first).run(bad, config).stats["repaired"]
+    assert isinstance(handed[0], stages.LoopClosing) and handed[0].first is closing.first
+    assert handed[0].loose  # the rerun's chain is looser across the contradicting stretch
+
+
+def test_first_round_keeps_one_result_per_kind_for_the_same_inputs():
+    from slam.graph import FirstRound
+
+    seq, config = object(), Config()
+    steps, poses, path = np.arange(3), np.zeros((3, 3)), np.arange(3.0)
+    first, made = FirstRound(), []
+
+    def make():
+        made.append(1)
+        return len(made)
+
+    inputs = (seq, steps, poses, path, config)
+    assert first.found("local", inputs, make) == 1
+    assert first.found("local", (seq, steps.copy(), poses.copy(), path.copy(), Config()), make) == 1
+    assert first.found("global", inputs, make) == 2  # another kind: computed once too
+    poses[0, 0] = 1.0  # the caller's array changed: not what was kept
+    assert first.found("local", inputs, make) == 3
+    assert first.found("local", (object(), steps, poses, path, config), make) == 4
+    other = load_config("", None, ["loops.rounds=3"], base=config)
+    assert first.found("local", (seq, steps, poses, path, other), make) == 5
 
 
 def test_the_recovery_keeps_every_counter_the_filter_hands_over(long_room):

@@ -71,6 +71,7 @@ from slam.geometry import (
     wrap_angle,
 )
 from slam.graph import (
+    FirstRound,
     LoopResult,
     _edge_information,
     chain_looseness,
@@ -467,6 +468,7 @@ def close_loops_global(
     config: Config,
     path: F64 | None = None,
     loose_nodes: NDArray[np.bool_] | None = None,
+    first: FirstRound | None = None,
 ) -> LoopResult:
     """:func:`slam.graph.close_loops` with the global closures added (module docstring).
 
@@ -474,7 +476,8 @@ def close_loops_global(
     a caller that passes a piece of a trajectory gives the whole one's). ``candidates`` counts
     the local candidates and the global searches; ``accepted`` the loop edges of the last
     round's graph, local and global. ``loose_nodes``: the chain is looser around them
-    (:func:`slam.graph.chain_looseness`).
+    (:func:`slam.graph.chain_looseness`). ``first`` keeps (or gives) the first round's local
+    and global closures (:class:`slam.graph.FirstRound`).
     """
     lc, bc = config.loops, config.backend
     if path is None:
@@ -488,7 +491,11 @@ def close_loops_global(
         # beyond the drift window in the first round only: once it has pulled a long loop in,
         # the next round finds that loop's closures within the window
         rounds[0] += 1
-        glob, searched = detect_global(seq, steps, x, path, config, local, table, rounds[0] == 1)
+        detect = partial(detect_global, seq, steps, x, path, config, local, table, rounds[0] == 1)
+        if rounds[0] == 1 and first is not None:
+            glob, searched = first.found("global", (seq, steps, poses, path, config), detect)
+        else:
+            glob, searched = detect()
         glob = consistent(glob, x, path, config)
         if not local and not glob:
             return [], None, searched
@@ -510,4 +517,4 @@ def close_loops_global(
         new_keys = optimize(poses[keys], edges, lc, start=start, loose=loose)
         return edges, new_keys, searched
 
-    return loop_rounds(seq, steps, poses, path, table, config, one_round)
+    return loop_rounds(seq, steps, poses, path, table, config, one_round, first)
