@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from slam.budget import check_memory
 from slam.config import MapConfig
 from slam.grid_geometry import GridGeometry
-from slam.io.atomic import atomic_path
+from slam.io.atomic import write_npz
 from slam.kernels.field import (
     FieldView,
     MatchOutput,
@@ -237,13 +237,12 @@ class OccupancyGrid:
 
     def save_npz(self, path: Path) -> None:
         """Write ``log_odds``, ``resolution`` and ``origin`` to ``path`` atomically."""
-        with atomic_path(Path(path)) as tmp:
-            np.savez_compressed(
-                tmp,
-                log_odds=self.log_odds,
-                resolution=np.float64(self.resolution),
-                origin=self.origin.astype(np.float64),
-            )
+        arrays = {
+            "log_odds": self.log_odds,
+            "resolution": np.float64(self.resolution),
+            "origin": self.origin.astype(np.float64),
+        }
+        write_npz(Path(path), arrays)
 
 
 @dataclass

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import DataError, UsageError
-from slam.io.atomic import atomic_path, write_text
+from slam.io.atomic import atomic_path, write_npz, write_text
 from slam.io.log import count_non_monotonic
 from slam.io.tum import format_tum, read_tum
 from slam.trajectory import Trajectory
@@ -194,14 +194,12 @@ def _write_occupancy_npz(path: Path, log_odds: Any, resolution: float, origin: F
     ``probability``, ``log_odds``, ``resolution``, ``origin`` ``[x, y, yaw]``."""
     from slam.io.mapserver import trinary
 
-    with atomic_path(path) as tmp:
-        np.savez_compressed(
-            tmp,
-            occupancy=trinary(log_odds),
-            probability=(1.0 - 1.0 / (1.0 + np.exp(log_odds.astype(np.float64)))).astype(
-                np.float32
-            ),
-            log_odds=log_odds,
-            resolution=np.float64(resolution),
-            origin=np.array([origin[0], origin[1], 0.0]),
-        )
+    probability = 1.0 - 1.0 / (1.0 + np.exp(log_odds.astype(np.float64)))
+    arrays = {
+        "occupancy": trinary(log_odds),
+        "probability": probability.astype(np.float32),
+        "log_odds": log_odds,
+        "resolution": np.float64(resolution),
+        "origin": np.array([origin[0], origin[1], 0.0]),
+    }
+    write_npz(path, arrays)

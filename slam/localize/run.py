@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from slam.config import Config, dumps
 from slam.errors import UsageError
-from slam.io.atomic import atomic_dir, atomic_path, write_text
+from slam.io.atomic import atomic_dir, write_npz, write_text
 from slam.io.tum import format_tum
 from slam.localize.localizer import PHASES, Localizer
 from slam.localize.maps import LikelihoodMap, load_map
@@ -271,13 +271,10 @@ def localize(request: LocalizeRequest) -> Path:
         metrics["warnings"] = messages
         write_text(tmp / "config.toml", dumps(config))
         write_text(tmp / "trajectory.tum", format_tum(Trajectory(trace.times, trace.poses)))
-        with atomic_path(tmp / "localization.npz") as target:
-            np.savez_compressed(
-                target,
-                times=trace.times, poses=trace.poses, covariances=trace.covariances,
-                localized=trace.localized, phase=trace.phase, particles=trace.particles,
-                quality=trace.quality,
-            )  # fmt: skip
+        arrays = {"times": trace.times, "poses": trace.poses, "covariances": trace.covariances,
+                  "localized": trace.localized, "phase": trace.phase,
+                  "particles": trace.particles, "quality": trace.quality}  # fmt: skip
+        write_npz(tmp / "localization.npz", arrays)
         write_png(tmp / "map.png", render_map(lmap.grid, trace.poses))
         if recorder is not None:
             metrics["recording"] = recorder.finish(trace.poses)

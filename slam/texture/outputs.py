@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.io.atomic import atomic_path, write_png
+from slam.io.atomic import write_npz, write_png
 from slam.mapping import OccupancyGrid
 from slam.texture.accumulate import TextureMap
 
@@ -48,13 +48,12 @@ def render_overlay(texture: TextureMap, grid: OccupancyGrid) -> NDArray[np.uint8
 def write_outputs(out_dir: Path, texture: TextureMap, grid: OccupancyGrid) -> None:
     """Write ``texture.npz``, ``texture.png`` and ``texture_overlay.png`` (each atomically)."""
     out_dir = Path(out_dir)
-    with atomic_path(out_dir / "texture.npz") as tmp:
-        np.savez_compressed(
-            tmp,
-            rgb=texture.rgb,
-            count=texture.count,
-            resolution=np.float64(texture.resolution),
-            origin=texture.origin.astype(np.float64),
-        )
+    arrays = {
+        "rgb": texture.rgb,
+        "count": texture.count,
+        "resolution": np.float64(texture.resolution),
+        "origin": texture.origin.astype(np.float64),
+    }
+    write_npz(out_dir / "texture.npz", arrays)
     write_png(out_dir / "texture.png", render_texture(texture))
     write_png(out_dir / "texture_overlay.png", render_overlay(texture, grid))
