@@ -166,16 +166,22 @@ to write at 6 and takes 0.74 s at 1, 17.4 MB instead of 13.8 MB (the ``map.pgm``
 
 
 def write_npz(path: Path, arrays: dict[str, Any], level: int = NPZ_LEVEL) -> None:
-    """Write ``arrays`` to ``path`` as a compressed ``.npz`` (what ``np.savez_compressed``
-    writes, at zlib ``level``), atomically. Object arrays are refused (no pickles)."""
+    """Write ``arrays`` to ``path`` as an ``.npz`` (what ``np.savez_compressed`` writes, at zlib
+    ``level``; 0: stored uncompressed, as ``np.savez``), atomically. The members carry a fixed
+    date (1980-01-01) instead of the time of writing, so that equal arrays give the same bytes.
+    Object arrays are refused (no pickles)."""
     import zipfile
 
     import numpy as np
 
-    deflate = {"compression": zipfile.ZIP_DEFLATED, "compresslevel": level}
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", **deflate) as zf:
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", allowZip64=True) as zf:
         for name, value in arrays.items():
-            with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.external_attr = 0o644 << 16
+            info.compress_type = zipfile.ZIP_DEFLATED if level > 0 else zipfile.ZIP_STORED
+            # what ZipFile.open(name, "w") sets from the archive's compresslevel (3.11-3.13)
+            info._compresslevel = level if level > 0 else None
+            with zf.open(info, "w", force_zip64=True) as member:
                 np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
 

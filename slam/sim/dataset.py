@@ -26,7 +26,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-import zipfile
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -39,7 +38,7 @@ from numpy.typing import NDArray
 
 from slam.budget import check_memory
 from slam.errors import UsageError
-from slam.io.atomic import atomic_dir, write_png
+from slam.io.atomic import atomic_dir, write_npz, write_png
 from slam.io.ece276a import rgbd_dirs, rgbd_patterns, stream_file
 from slam.io.tum import format_tum
 from slam.kinect import KinectModel
@@ -238,15 +237,9 @@ def _plan_kinect(log: SimulatedLog, rng: np.random.Generator) -> None:
 
 
 def save_npz(path: Path, arrays: dict[str, NDArray[Any]]) -> None:
-    """Write an uncompressed ``.npz`` like :func:`numpy.savez`, byte-identical for equal arrays
-    (zip entries carry a fixed date instead of the current time)."""
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-        for key, value in arrays.items():
-            info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_STORED
-            info.external_attr = 0o644 << 16
-            with zf.open(info, "w", force_zip64=True) as fh:
-                np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
+    """Write an uncompressed ``.npz`` like :func:`numpy.savez` (the course's files are stored,
+    not deflated), byte-identical for equal arrays (:func:`slam.io.atomic.write_npz`, level 0)."""
+    write_npz(path, arrays, level=0)
 
 
 def _scalar(value: float) -> NDArray[np.float64]:
