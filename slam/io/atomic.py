@@ -179,8 +179,11 @@ def write_npz(path: Path, arrays: dict[str, Any], level: int = NPZ_LEVEL) -> Non
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.external_attr = 0o644 << 16
             info.compress_type = zipfile.ZIP_DEFLATED if level > 0 else zipfile.ZIP_STORED
-            # what ZipFile.open(name, "w") sets from the archive's compresslevel (3.11-3.13)
-            info._compresslevel = level if level > 0 else None
+            # what ZipFile.open(name, "w") sets from the archive's compresslevel: the public
+            # ZipInfo.compress_level from Python 3.13, the private _compresslevel before it (a
+            # level that were ignored would deflate at 6: tests/test_atomic.py compares sizes)
+            field = "compress_level" if hasattr(info, "compress_level") else "_compresslevel"
+            setattr(info, field, level if level > 0 else None)
             with zf.open(info, "w", force_zip64=True) as member:
                 np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
