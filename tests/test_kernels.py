@@ -8,7 +8,7 @@ from slam.kernels.grid import bresenham, integrate_rays
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation, correlation_search
-from slam.mapping import ParticleMaps, likelihood_tables
+from slam.mapping import ParticleMaps, _spans, likelihood_tables
 
 
 def reference_line(x0, y0, x1, y1):
@@ -261,12 +261,51 @@ def test_resampled_tables_count_their_tiles_as_a_recount_does(parents):
     want = np.ascontiguousarray(tables[parents])
     want_count, want_stack = np.zeros(48, np.int32), np.zeros(48, np.int32)
     want_top = recount_tiles(want, want_count, want_stack)
-    out = np.empty_like(want)
+    out = np.full_like(want, -1)  # what the kernel asks of it: -1 outside the spans
     count, stack = np.full(48, 99, np.int32), np.full(48, -5, np.int32)
-    top = resample_tables(tables, parents, children, out, count, stack)
+    top = resample_tables(tables, _spans(tables), parents, children, out, count, stack)
     assert np.array_equal(out, want) and np.array_equal(count, want_count)
     assert top == want_top and np.array_equal(stack[:top], want_stack[:top])
     assert count.sum() == (want >= 0).sum() and top == 48 - len(np.unique(want[want >= 0]))
+
+
+def test_spans_cover_every_tile_through_inserts_growth_and_resamplings():
+    """Each row's span holds every tile of every particle's table, through inserts, growth of
+    the tables and resamplings that write into the tables an earlier resampling left (stale
+    entries within the spans, -1 outside): each resampling gives exactly ``tables[parents]``
+    and the counts a recount gives."""
+    rng = np.random.default_rng(3)
+    maps = ParticleMaps(4, 0.05, 0.3, tile=16, size_m=8.0, grow_margin_m=2.0)
+    grew = 0
+    for step in range(12):
+        poses = np.column_stack(
+            [rng.uniform(-3, 3, 4) + step, rng.uniform(-3, 3, 4), rng.uniform(-np.pi, np.pi, 4)]
+        )
+        angles = np.linspace(-1.5, 1.5, 40)
+        reach = rng.uniform(0.5, 6.0, 40)
+        hx, hy = reach * np.cos(angles), reach * np.sin(angles)
+        shape = maps.tables.shape
+        maps.ensure_contains(
+            poses[:, 0].min() - 6,
+            poses[:, 1].min() - 6,
+            poses[:, 0].max() + 6,
+            poses[:, 1].max() + 6,
+        )
+        grew += maps.tables.shape != shape
+        maps.insert(poses, hx, hy, hx, hy, 0.01)
+        cols = np.arange(maps.tables.shape[2])
+        outside = (cols < maps.spans[:, :1]) | (cols > maps.spans[:, 1:])
+        assert np.all(maps.tables[:, outside] == -1)
+        tight = _spans(maps.tables)  # the spans of today's tiles: within the kept ones
+        assert np.all(maps.spans[:, 0] <= tight[:, 0]) and np.all(maps.spans[:, 1] >= tight[:, 1])
+        parents = np.sort(rng.integers(0, 4, 4))
+        want = maps.tables[parents].copy()
+        maps.resample(parents)
+        assert np.array_equal(maps.tables, want)
+        count, stack = np.zeros_like(maps.refcount), np.zeros_like(maps.free_stack)
+        top = recount_tiles(want, count, stack)
+        assert np.array_equal(maps.refcount, count) and maps.free_top[0] == top
+    assert grew >= 2  # the tables grew in between: the spans were shifted with them
 
 
 def _room_maps(signed):

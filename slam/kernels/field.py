@@ -86,6 +86,9 @@ class TilePool(NamedTuple):
     """``(1,)`` int64 number of free tiles."""
     tables: np.ndarray
     """``(P, n_tiles_y, n_tiles_x)`` int32 tile of each particle at each tile position (-1)."""
+    spans: np.ndarray
+    """``(n_tiles_y, 2)`` int64: in each row of ``tables``, the first and the last column where
+    any particle's table may hold a tile (first > last: none); outside them every entry is -1."""
     shift: int
     """``log2(T)``."""
     ox: float
@@ -694,6 +697,7 @@ def _claim_particle(
     dist, surface, refcount = pool.dist, pool.surface, pool.refcount
     free_stack, free_top, shift = pool.free_stack, pool.free_top, pool.shift
     ox, oy, res, dmax = pool.ox, pool.oy, pool.res, pool.dmax
+    spans = pool.spans
     radius = int(np.ceil(dmax / res))
     ntile_y = pool.tables.shape[1]
     ntile_x = pool.tables.shape[2]
@@ -721,6 +725,8 @@ def _claim_particle(
                     new = free_stack[free_top[0]]
                     if t < 0:
                         _fill_tile(dist, surface, new, dmax, pool.one_layer)
+                        spans[ty, 0] = min(spans[ty, 0], tx)
+                        spans[ty, 1] = max(spans[ty, 1], tx)
                     else:
                         _copy_tile(dist, surface, t, new, pool.one_layer)
                         refcount[t] -= 1
@@ -924,6 +930,7 @@ def _rebuild_free_stack(refcount: np.ndarray, free_stack: np.ndarray) -> int:
 @njit(cache=True, parallel=True)
 def resample_tables(
     tables: np.ndarray,
+    spans: np.ndarray,
     parents: np.ndarray,
     children: np.ndarray,
     out: np.ndarray,
@@ -936,14 +943,18 @@ def resample_tables(
     counted from each surviving parent's table once, times its ``children[q]`` (the same
     integers, so the same stack). Returns the number of free tiles (the new stack top).
 
-    A big building's tables are mostly unknown (fr-clinic: 30 × 439 × 713 entries, 8 % of them
-    tiles): the copy and the count are the resampling's whole cost.
+    Only the entries within each row's ``spans`` (:class:`TilePool`) are copied and counted:
+    ``out`` must hold -1 outside them already (a fresh array filled so, or tables an earlier
+    resampling left, whose tiles all lay within spans that have only grown since). A big
+    building's tables are mostly unknown (fr-clinic: 30 × 439 × 713 entries, 8 % of them tiles,
+    the spans about a third): the copy and the count are the resampling's whole cost. The column
+    indices are unsigned (see :func:`_interpolate`): the copy compiles to a vector loop.
     """
     n, rows, cols = tables.shape
     for p in prange(out.shape[0]):
         src = parents[p]
         for r in range(rows):
-            for c in range(cols):
+            for c in range(np.uint64(spans[r, 0]), np.uint64(spans[r, 1] + 1)):
                 out[p, r, c] = tables[src, r, c]
     for t in range(refcount.shape[0]):
         refcount[t] = 0
@@ -952,7 +963,7 @@ def resample_tables(
         if m == 0:
             continue
         for r in range(rows):
-            for c in range(cols):
+            for c in range(np.uint64(spans[r, 0]), np.uint64(spans[r, 1] + 1)):
                 t = tables[q, r, c]
                 if t >= 0:
                     refcount[t] += m
