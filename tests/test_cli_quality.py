@@ -92,6 +92,7 @@ def test_low_score_warning_needs_a_score_below_the_threshold():
     text = low_score_warning({"score": 0.1523, "worst": worst}, 0.65)
     assert text is not None and text.startswith("map quality 0.152 is below quality.warn_below")
     assert "the worst stretches at 12-41 s, 100-132 s (marked on map.png" in text
+    assert text.endswith("docs/troubleshooting.md says what to check")
     assert low_score_warning({"score": 0.65, "worst": worst}, 0.65) is None
     assert low_score_warning({"score": float("nan"), "worst": []}, 0.65) is None
     assert low_score_warning({"score": None, "worst": []}, 0.65) is None

@@ -206,7 +206,8 @@ def low_score_warning(report: dict[str, Any], warn_below: float) -> str | None:
     return (
         f"map quality {score:.3f} is below quality.warn_below = {warn_below:g}: stretches of the "
         "map contradict each other (a loop left open or closed wrongly, or the filter lost track)"
-        f"{where}; `slam eval RUN` lists every stretch (docs/evaluation.md)"
+        f"{where}; `slam eval RUN` ranks the stretches (docs/evaluation.md), and "
+        "docs/troubleshooting.md says what to check"
     )
 
 
