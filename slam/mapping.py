@@ -280,9 +280,10 @@ def likelihood_tables(
     return out, (size - 1) / dmax
 
 
-def _spans(tables: NDArray[np.int32]) -> NDArray[np.int64]:
+def tile_spans(tables: NDArray[np.int32]) -> NDArray[np.int64]:
     """Per row of ``(P, rows, cols)`` tile tables, the first and the last column where any
-    table holds a tile (``(cols, -1)`` in a row without any): :attr:`~slam.kernels.field.TilePool.spans`."""
+    table holds a tile (``(cols, -1)`` in a row without any): the tightest
+    :attr:`~slam.kernels.field.TilePool.spans` of those tables."""
     rows, cols = tables.shape[1:]
     spans = np.tile(np.array([cols, -1], dtype=np.int64), (rows, 1))
     used = (tables >= 0).any(axis=0)
@@ -328,8 +329,9 @@ class ParticleMaps:
         )
         self.origin = np.array([center[0] - n * tile_m / 2, center[1] - n * tile_m / 2])
         self.tables = np.full((particles, n, n), -1, dtype=np.int32)
-        self.spans = _spans(self.tables)
-        """Per row of the tables, the columns that may hold a tile (:class:`~slam.kernels.field.TilePool`)."""
+        self.spans = tile_spans(self.tables)
+        """Per row of the tables, the columns that may hold a tile (kept, not recomputed: a
+        superset of :func:`tile_spans`; :class:`~slam.kernels.field.TilePool`)."""
         self._spare: NDArray[np.int32] | None = None
         """The tables before the last resampling: the next one writes into it (no fresh pages)."""
         self.surface = np.empty((capacity, self.tile, self.tile), dtype=np.float32)
@@ -424,7 +426,7 @@ class ParticleMaps:
         self.tables = np.pad(
             self.tables, ((0, 0), (bottom, top), (left, right)), constant_values=-1
         )
-        self.spans = _spans(self.tables)
+        self.spans = tile_spans(self.tables)
         self._spare = None
         self.origin = self.origin - np.array([left * tile_m, bottom * tile_m])
 

@@ -8,7 +8,7 @@ from slam.kernels.grid import bresenham, integrate_rays
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation, correlation_search
-from slam.mapping import ParticleMaps, _spans, likelihood_tables
+from slam.mapping import ParticleMaps, likelihood_tables, tile_spans
 
 
 def reference_line(x0, y0, x1, y1):
@@ -263,7 +263,7 @@ def test_resampled_tables_count_their_tiles_as_a_recount_does(parents):
     want_top = recount_tiles(want, want_count, want_stack)
     out = np.full_like(want, -1)  # what the kernel asks of it: -1 outside the spans
     count, stack = np.full(48, 99, np.int32), np.full(48, -5, np.int32)
-    top = resample_tables(tables, _spans(tables), parents, children, out, count, stack)
+    top = resample_tables(tables, tile_spans(tables), parents, children, out, count, stack)
     assert np.array_equal(out, want) and np.array_equal(count, want_count)
     assert top == want_top and np.array_equal(stack[:top], want_stack[:top])
     assert count.sum() == (want >= 0).sum() and top == 48 - len(np.unique(want[want >= 0]))
@@ -296,7 +296,7 @@ def test_spans_cover_every_tile_through_inserts_growth_and_resamplings():
         cols = np.arange(maps.tables.shape[2])
         outside = (cols < maps.spans[:, :1]) | (cols > maps.spans[:, 1:])
         assert np.all(maps.tables[:, outside] == -1)
-        tight = _spans(maps.tables)  # the spans of today's tiles: within the kept ones
+        tight = tile_spans(maps.tables)  # the spans of today's tiles: within the kept ones
         assert np.all(maps.spans[:, 0] <= tight[:, 0]) and np.all(maps.spans[:, 1] >= tight[:, 1])
         parents = np.sort(rng.integers(0, 4, 4))
         want = maps.tables[parents].copy()
