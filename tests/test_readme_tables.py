@@ -143,6 +143,31 @@ def test_prose_claims_hold_for_the_json():
     assert clinic_mean > 0.10
 
 
+def test_the_online_table_shows_the_json_and_the_slowest_update_keeps_up():
+    """The Performance section's ``Slam.update`` timings are docs/bench/online.json's, one row per
+    log; its claim — the slowest update of every log took a fraction of the scan period — holds
+    for the JSON; a skipped bench gets no row, and without any bench the share waits."""
+    benches = json.loads((BENCH / "online.json").read_text())["benches"]
+    performance = section("Performance")
+    assert set(benches) >= {"online.demo", "online.intel", "online.fr-clinic"}
+    for name, b in benches.items():
+        row = (
+            f"| {name.removeprefix('online.')} | {tables.thousands(b['scans'])} | "
+            f"{tables.thousands(b['updates'])} | {tables.fixed(b['scan_period_ms'], 0)} | "
+            f"{tables.fixed(b['update_median_ms'], 1)} | {tables.fixed(b['update_p99_ms'], 1)} | "
+            f"{tables.fixed(b['update_max_ms'], 1)} |"
+        )
+        assert row in performance, row
+        assert b["update_max_ms"] < b["scan_period_ms"], name  # the prose: it keeps up
+        assert b["update_median_ms"] <= b["update_p99_ms"] <= b["update_max_ms"], name
+    share = max(100 * b["update_max_ms"] / b["scan_period_ms"] for b in benches.values())
+    assert f"<!-- fig:online.worst_share -->{tables.fixed(share, 0)}<!-- /fig -->" in performance
+    skipped = dict(benches, **{"online.intel": {"skipped": "absent"}})
+    assert "| intel |" not in tables.online_table(skipped)
+    assert "| demo |" in tables.online_table(skipped)
+    assert tables.online_worst_share({"online.intel": {"skipped": "absent"}}) is None
+
+
 def test_a_hand_edited_figure_is_named(tmp_path, capsys):
     readme = tmp_path / "README.md"
     text = README.read_text()

@@ -40,6 +40,10 @@ What the generators read from ``docs/bench/slam.json`` (``benches`` of ``tools/b
   (a sweep over seeds writes them; see ``OPTIONAL_COLUMNS``): ``per_seed`` (a list of blocks
   with ``seed`` and ``trans_mean``), ``trans_median``, ``share_over_0.2m`` (fraction of
   relations). Unknown keys are ignored; a log the sweep adds gets rows in both tables.
+
+``docs/bench/online.json`` (``tools/bench.py online``) gives the README's ``online`` table, one
+row per ``online.<log>`` bench (``Slam.update`` timed call by call), and the share of the scan
+period the slowest update took.
 """
 
 from __future__ import annotations
@@ -250,6 +254,40 @@ def parts_table(benches: Benches) -> str:
              fixed(sum(seconds.values()), 1)]
         )  # fmt: skip
     return table(["run", *parts, "sum (s)"], rows)
+
+
+def online_table(benches: Benches) -> str:
+    """``Slam.update`` per scan (``tools/benches/online.py``): per log the scans and updates, the
+    scan period, the updates' median, 99th percentile and slowest call, the other scans' median,
+    and ``finish()``."""
+    rows = []
+    logs = [n.removeprefix("online.") for n in benches if n.startswith("online.")]
+    logs.sort(key=lambda log: (log != "demo", LOG_ORDER.index(log) if log in LOG_ORDER else 99))
+    for log in logs:
+        b = get(benches, f"online.{log}")
+        if "skipped" in b:
+            continue
+        other = b["other_median_ms"]
+        rows.append(
+            [log, thousands(b["scans"]), thousands(b["updates"]), fixed(b["scan_period_ms"], 0),
+             fixed(b["update_median_ms"], 1), fixed(b["update_p99_ms"], 1),
+             fixed(b["update_max_ms"], 1), "—" if other is None else fixed(other, 2),
+             fixed(b["finish_s"], 1)]
+        )  # fmt: skip
+    header = [
+        "log", "scans", "updates", "scan period (ms)", "update median (ms)", "update p99 (ms)",
+        "slowest update (ms)", "other scans median (ms)", "`finish()` (s)",
+    ]  # fmt: skip
+    return table(header, rows)
+
+
+def online_worst_share(benches: Benches) -> str | None:
+    """The slowest ``Slam.update`` call as a share of the scan period (%), the largest of the
+    logs timed (None before ``tools/bench.py online`` has run)."""
+    runs = [b for n, b in benches.items() if n.startswith("online.") and "skipped" not in b]
+    if not runs:
+        return None
+    return fixed(max(100.0 * b["update_max_ms"] / b["scan_period_ms"] for b in runs), 0)
 
 
 def _speed(b: dict, where: str) -> list[str]:
@@ -476,14 +514,18 @@ TABLES: dict[str, tuple[str, Callable[[Benches], str]]] = {
     "slam": ("slam", slam_table),
     "performance": ("slam", performance_table),
     "performance.parts": ("slam", parts_table),
+    "online": ("online", online_table),
     "slam.quality": ("slam", slam_quality_table),
     "localize.tracking": ("localize", tracking_table),
     "localize.global": ("localize", global_table),
     "quality": ("quality", quality_table),
     "quality.synthetic": ("quality", quality_synthetic_table),
 }
+
+
 # marker name -> generator; the JSON file is the name's first part (``localize.x``: localize.json)
 _FIGURES: dict[str, Callable[[Benches], str | None]] = {
+    "online.worst_share": online_worst_share,
     "slam.particles": _figure("slam.intel", "rbpf", "particles"),
     "slam.gmapping_speedup": gmapping_speedup,
     "slam.aces_gmapping": lambda b: gmapping(get(b, "slam.aces"))[0].split(" ")[0],
