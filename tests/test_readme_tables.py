@@ -257,13 +257,32 @@ def test_texture_figures_wait_for_texture_json_then_fill_in(tmp_path):
     }
     write_bench(tmp_path, "texture", {tables.TEXTURE: figures})
     rendered, waiting = tables.render(text, tmp_path)
-    assert not any(w.startswith("fig texture.") for w in waiting)
+    assert not any(w.startswith("fig texture.") and "slam_" not in w for w in waiting)
     floor = section_of(rendered, "Floor texture")
     assert "by <!-- fig:texture.colour_mae -->4.21<!-- /fig -->/255" in floor
     assert "floor to <!-- fig:texture.coverage -->100<!-- /fig --> %" in floor
     assert "ran at <!-- fig:texture.frames_per_s -->96<!-- /fig --> frames/s" in floor
     assert "with <!-- fig:texture.cpu_ms_per_frame -->9.2<!-- /fig --> ms" in floor
     assert "load average of <!-- fig:texture.load -->4<!-- /fig --> on" in floor
+    assert "fig texture.slam_ate (its keys are not in docs/bench/texture.json yet)" in waiting
+    run = {
+        "ate_rmse": 0.0512,
+        "colour_mae": 13.26,
+        "coverage": 0.98749,
+        "colour_mae_aligned": 8.04,
+        "coverage_aligned": 0.9976,
+        "map_offset_m": 0.0649,
+        "map_offset_deg": 0.642,
+    }
+    write_bench(tmp_path, "texture", {tables.TEXTURE: figures, tables.TEXTURE_SLAM: run})
+    rendered, waiting = tables.render(text, tmp_path)
+    assert not any(w.startswith("fig texture.") for w in waiting)
+    floor = section_of(rendered, "Floor texture")
+    assert "ATE <!-- fig:texture.slam_ate -->0.051<!-- /fig --> m" in floor
+    assert "about <!-- fig:texture.slam_offset_cm -->6<!-- /fig --> cm" in floor
+    assert "<!-- fig:texture.slam_offset_deg -->0.6<!-- /fig -->° off" in floor
+    assert "error of <!-- fig:texture.slam_colour_mae -->13.3<!-- /fig -->/255" in floor
+    assert "<!-- fig:texture.slam_coverage -->98.7<!-- /fig --> %" in floor
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,5 @@
-"""The bench tables and figures of README.md, docs/localize.md and docs/evaluation.md (``PAGES``),
+"""The bench tables and figures of README.md, docs/localize.md, docs/evaluation.md and docs/texture.md
+(``PAGES``),
 generated from ``docs/bench/*.json``.
 
 Each generated part is marked with comments; everything between them is rewritten::
@@ -57,7 +58,7 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PAGES = ("README.md", "docs/localize.md", "docs/evaluation.md")
+PAGES = ("README.md", "docs/localize.md", "docs/evaluation.md", "docs/texture.md")
 """The pages with generated parts, relative to the repository."""
 BENCH_DIR = ROOT / "docs" / "bench"
 LOG_ORDER = ("intel", "aces", "fr079", "fr-clinic", "mit-csail", "mit-killian")
@@ -335,6 +336,20 @@ def _figure(*keys: str, digits: int | None = None) -> Callable[[Benches], str]:
 
 TEXTURE = "texture.demo_ground_truth_path"
 """The texture bench of the README: the demo along its true path (tools/benches/texture.py)."""
+TEXTURE_SLAM = "texture.demo_slam_run"
+"""``slam run demo``'s texture along its SLAM trajectory (tools/benches/texture.py)."""
+
+
+def _slam_texture(key: str, digits: int, scale: float = 1.0) -> Callable[[Benches], str | None]:
+    """A figure of :data:`TEXTURE_SLAM` times ``scale`` (None, waiting, in a texture.json
+    written before that bench existed)."""
+
+    def figure(benches: Benches) -> str | None:
+        if TEXTURE_SLAM not in benches:
+            return None
+        return fixed(scale * get(benches, TEXTURE_SLAM, key), digits)
+
+    return figure
 
 
 COLD = "coldstart.demo_cold_then_warm"
@@ -583,6 +598,13 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "texture.frames_per_s": _figure(TEXTURE, "frames_per_s", digits=0),
     "texture.cpu_ms_per_frame": _figure(TEXTURE, "cpu_ms_per_frame", digits=1),
     "texture.load": _figure(TEXTURE, "load_average_at_start", digits=0),
+    "texture.slam_ate": _slam_texture("ate_rmse", 3),
+    "texture.slam_colour_mae": _slam_texture("colour_mae", 1),
+    "texture.slam_coverage": _slam_texture("coverage", 1, scale=100),
+    "texture.slam_colour_mae_aligned": _slam_texture("colour_mae_aligned", 1),
+    "texture.slam_coverage_aligned": _slam_texture("coverage_aligned", 1, scale=100),
+    "texture.slam_offset_cm": _slam_texture("map_offset_m", 0, scale=100),
+    "texture.slam_offset_deg": _slam_texture("map_offset_deg", 1),
     "sim.demo_wall_s": _figure("sim.demo_full", "wall_s", digits=0),
     "sim.demo_20hz_wall_s": _figure("sim.demo_rgbd_20hz", "wall_s", digits=0),
     "sim.load": _figure("sim.demo_full", "load_average_at_start", digits=0),
