@@ -253,8 +253,9 @@ def execute(request: RunRequest) -> Result:
         messages = doubts + sorted({str(w.message) for w in caught})
         clock = clock_warning(result.trajectory.times)
         messages += [clock] if clock else []
+        messages += source.notes
         metrics = result.metrics
-        metrics["warnings"] = messages + source.notes
+        metrics["warnings"] = messages
         _evaluate(result, source)
         write_text(tmp / "config.toml", dumps(config))
         write_trajectories(tmp, result.trajectory)  # sorted by time; file order if it differs

@@ -323,6 +323,32 @@ def test_slam_runs_on_a_log_of_raw_scans(tmp_path):
     assert np.abs(got.poses[:, :2] - poses[:, :2]).max() < 0.05
 
 
+def test_a_run_prints_the_warnings_found_when_the_log_loaded(tmp_path, capsys):
+    """The note of a log mixing 180- and 181-reading scans is a warning like the others: ``slam
+    run`` prints it on stderr and keeps it in ``metrics.json``'s ``warnings``."""
+    import json
+
+    from synthetic_logs import path as room_path
+    from synthetic_logs import ray_cast
+
+    from slam.cli import main
+
+    lines = []
+    for k, pose in enumerate(room_path(30)):
+        n = 180 + k % 2
+        r = [f"{v:.3f}" for v in ray_cast(pose, np.linspace(-np.pi / 2, np.pi / 2, n))]
+        lines.append(flaser(r, pose=tuple(pose), t=100.0 + 0.1 * k))
+    log = write(tmp_path, lines, "mixed.clf")
+    out = tmp_path / "run"
+    argv = ["run", str(log), "--out", str(out), "--no-texture", "--no-record", "--quiet"]
+    assert main([*argv, "--set", "lidar.measure_beam_step=false"]) == 0
+    note = f"{log}: scans of 180 and 181 readings, the 180-reading ones spread over the field"
+    stderr = capsys.readouterr().err
+    assert f"slam: warning: {note}" in stderr
+    warnings = json.loads((out / "metrics.json").read_text())["warnings"]
+    assert [w for w in warnings if w.startswith(note)] and len(warnings) == stderr.count("warning:")
+
+
 # --- malformed input: each error names the file and line ------------------------------------------
 
 GOOD = flaser([1.0, 2.0, 3.0], t=1.0)

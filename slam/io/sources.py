@@ -111,7 +111,8 @@ class Source:
     ground_truth: Trajectory | None = None
     """The true trajectory when the dataset has one (simulated logs)."""
     notes: list[str] = field(default_factory=list)
-    """Lines for the run's ``warnings`` (where the demo is)."""
+    """Warnings about the log found when it loaded (a run prints them and keeps them in
+    ``metrics.json``'s ``warnings``)."""
     beam_geometry: dict | None = None
     """What :func:`slam.calibration.measure_beam_step` measured when the log loaded (its
     ``as_dict()`` and ``applied``: whether the log was read with the measured step)."""
@@ -340,5 +341,4 @@ def load(
     )
     reference = ref.reference
     truth = read_tum(reference) if reference is not None and reference.is_file() else None
-    notes = [f"demo dataset: {folder}"] if ref.kind is Kind.DEMO else []
-    return Source(log, truth, notes)
+    return Source(log, truth)  # the demo's folder: metrics.json's log_source
