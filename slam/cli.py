@@ -69,7 +69,11 @@ COMMANDS: dict[str, Command] = {
     "localize": Command(
         "localize a log on a saved map (Monte Carlo localization, global localization)"
     ),
-    "data": Command("list and verify the datasets under the data directory", layout=True),
+    "data": Command(
+        "list and verify the datasets under the data directory, inspect a log, calibrate its "
+        "odometry and laser mount",
+        layout=True,
+    ),
     "sim": Command("simulate a robot log with ground truth (ECE276A format)", layout=True),
     "eval": Command("evaluate a run: map quality without ground truth, relations metric, ATE, RPE"),
     "export": Command(

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
-from slam.errors import ConfigError
+from slam.errors import ConfigError, UsageError
 from slam.resources import config_dir
 from slam.validate import FieldError, Rule, Validated, bounded, coerce, field_types, parse_literal
 from slam.validate import read_toml as _read_toml
@@ -952,6 +952,41 @@ def section_types() -> dict[str, type]:
     return {name: tp for name, tp in field_types(Config).items() if dataclasses.is_dataclass(tp)}
 
 
+class Override(str):
+    """A ``section.key=value`` override (the string itself) that an option set rather than
+    ``--set`` (``--every 0`` sets ``filter.every=0``): a message about its value names
+    :attr:`option`, what the user typed. Anything that takes override strings takes it."""
+
+    option: str
+    """What set it, as the user typed it: ``--every 0``, ``slam.run(every=0)``."""
+
+    def __new__(cls, text: str, option: str) -> Override:
+        """The override ``text`` set by ``option``."""
+        self = super().__new__(cls, text)
+        self.option = option
+        return self
+
+    def __getnewargs__(self) -> tuple[str, str]:  # type: ignore[override]
+        """What pickling needs to rebuild it (a plain ``str`` pickles its text only)."""
+        return (str(self), self.option)
+
+
+def override_list(overrides: Iterable[str]) -> list[str]:
+    """``overrides`` as a list, refused with one :class:`UsageError` when it is not a list of
+    ``section.key=value`` strings (a single string would be read character by character)."""
+    expected = "overrides: expected a list of 'section.key=value' strings"
+    if isinstance(overrides, str):
+        raise UsageError(f"{expected}, found the string {overrides!r}")
+    try:
+        items = list(overrides)
+    except TypeError:
+        raise UsageError(f"{expected}, found {type(overrides).__name__}") from None
+    wrong = next((x for x in items if not isinstance(x, str)), None)
+    if wrong is not None:
+        raise UsageError(f"{expected}, found an item {wrong!r} ({type(wrong).__name__})")
+    return items
+
+
 def parse_override(text: str) -> tuple[str, str, Any]:
     """Parse ``section.key=value`` (value a TOML literal, else a bare string)."""
     if "=" not in text or "." not in text.split("=", 1)[0]:
@@ -973,6 +1008,8 @@ class _Layers:
     values: dict[str, dict[str, Any]]
     origin: dict[tuple[str, str], tuple[int, str]] = field(default_factory=dict)
     dataset: str = ""
+    options: set[str] = field(default_factory=set)
+    """The sources that are options (:class:`Override`), not files or ``--set``."""
 
     def apply(self, table: Mapping[str, Any], source: str) -> None:
         sections = section_types()
@@ -981,6 +1018,8 @@ class _Layers:
             if key == "dataset":
                 self.dataset = coerce(value, str, source, "dataset")
                 continue
+            if key not in sections and not isinstance(value, Mapping):
+                raise ConfigError(outside_sections(source, key))
             if key not in sections:
                 raise ConfigError(
                     f"{source}: unknown section [{key}]; expected one of "
@@ -1007,9 +1046,48 @@ class _Layers:
             except FieldError as exc:
                 keys = [re.split(r"[\[.]", f, maxsplit=1)[0] for f in exc.fields]
                 set_by = [self.origin[(name, k)] for k in keys if (name, k) in self.origin]
-                source = max(set_by)[1] + ": " if set_by else ""
-                raise ConfigError(f"{source}{exc}") from None
+                source = max(set_by)[1] if set_by else ""
+                if source in self.options and len(exc.fields) == 1:  # `--every 0: expected ...`
+                    raise ConfigError(f"{source}: {exc.detail}") from None
+                raise ConfigError(f"{source}: {exc}" if source else str(exc)) from None
         return dataclasses.replace(base, dataset=self.dataset or base.dataset, **built)
+
+
+def outside_sections(source: str, key: str) -> str:
+    """The message of a key ``key`` of ``source`` (a TOML file) outside any section: the section
+    it belongs to when exactly one has such a key, else the sections there are."""
+    sections = section_types()
+    owners = [name for name, cls in sections.items() if key in field_types(cls)]
+    if len(owners) == 1:
+        return (
+            f"{source}: {key!r} is a key outside any section; expected [section] tables such as "
+            f"[{owners[0]}] (did you mean {owners[0]}.{key}?)"
+        )
+    owned = f" ({key!r} is a key of {', '.join(f'[{o}]' for o in owners)})" if owners else ""
+    return (
+        f"{source}: {key!r} is a key outside any section; expected [section] tables, one of "
+        f"{', '.join(f'[{name}]' for name in sorted(sections))}{owned}"
+    )
+
+
+def case_variant(dataset: str) -> str | None:
+    """The shipped configuration (``configs/<name>.toml``) whose name differs from ``dataset``
+    only by letter case (``intel`` for ``Intel``), else ``None`` (also when one is ``dataset``)."""
+    shipped = [path.stem for path in sorted(config_dir().glob("*.toml"))]
+    if not dataset or dataset in shipped:
+        return None
+    return next((name for name in shipped if name.casefold() == dataset.casefold()), None)
+
+
+def shipped_config(dataset: str) -> Path | None:
+    """``configs/<dataset>.toml`` when the project ships it, else ``None`` (a log of one's own
+    runs on the defaults). A name that differs from a shipped configuration's only by letter case
+    (``Intel``) is a :class:`ConfigError` naming both, not the defaults."""
+    near = case_variant(dataset)
+    if near is not None:
+        raise ConfigError(f"no configuration {dataset!r}; did you mean {near!r}?")
+    path = config_dir() / f"{dataset}.toml"
+    return path if dataset and path.is_file() else None
 
 
 def load_config(
@@ -1021,8 +1099,12 @@ def load_config(
     """Resolve the configuration of a run (defaults, dataset config, file, overrides).
 
     Each layer's keys and types are checked as it is read; bounds and cross-field rules once, on
-    the merged result (see the module docstring).
+    the merged result (see the module docstring). ``dataset`` names its shipped configuration
+    (:func:`shipped_config`: none is the defaults, a wrong letter case an error); ``overrides``
+    is a list of ``section.key=value`` strings (a message names ``--set <it>``, or the option
+    of an :class:`Override`).
     """
+    overrides = override_list(overrides)
     base = base or Config()
     layers = _Layers({name: dataclasses.asdict(getattr(base, name)) for name in section_types()})
     for name in section_types():  # asdict turns tuples into lists; keep the declared types
@@ -1030,16 +1112,19 @@ def load_config(
             f.name: getattr(getattr(base, name), f.name)
             for f in dataclasses.fields(getattr(base, name))
         }
-    if dataset:
-        shipped = config_dir() / f"{dataset}.toml"
-        if shipped.is_file():
-            layers.apply(read_toml(shipped), str(shipped))
+    shipped = shipped_config(dataset)
+    if shipped is not None:
+        layers.apply(read_toml(shipped), str(shipped))
     if config_file is not None:
         layers.apply(read_toml(Path(config_file)), str(config_file))
     for text in overrides:
         section, key, value = parse_override(text)
-        label = text if text.isprintable() else repr(text)
-        layers.apply({section: {key: value}}, f"--set {label}")
+        if isinstance(text, Override):
+            source = text.option
+            layers.options.add(source)
+        else:
+            source = f"--set {text if text.isprintable() else repr(text)}"
+        layers.apply({section: {key: value}}, source)
     config = layers.build(base)
     if dataset:
         config = dataclasses.replace(config, dataset=dataset)

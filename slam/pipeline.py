@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 import slam.jit_background as jit_background
 from slam.budget import release_free_memory
-from slam.config import Config, dumps, load_config
+from slam.config import Config, Override, dumps, load_config, override_list
 from slam.errors import UsageError
 from slam.io import sources
 from slam.io.atomic import atomic_dir, check_output_dir, write_png, write_text
@@ -336,15 +336,21 @@ def run_dataset(
         raise UsageError(
             f"slam.run: unknown option(s) {', '.join(unknown)}; expected {', '.join(RUN_OPTIONS)}"
         )
+    overrides = override_list(overrides)  # a str would be read character by character
     settings = [
-        f'{RUN_OPTIONS[key]}="{value}"' if isinstance(value, str) else f"{RUN_OPTIONS[key]}={value}"
+        Override(
+            f'{RUN_OPTIONS[key]}="{value}"'
+            if isinstance(value, str)
+            else f"{RUN_OPTIONS[key]}={value}",
+            f"slam.run({key}={value!r})",
+        )
         for key, value in options.items()
     ]
     if seed is not None:
-        settings.append(f"filter.seed={int(seed)}")
+        settings.append(Override(f"filter.seed={int(seed)}", f"slam.run(seed={seed!r})"))
     folder = resolve_data_dir(None if data_dir is None else Path(data_dir))
     ref = sources.resolve(name, folder, where="slam.run")
-    base = config if config is not None else load_config(ref.config_name)
+    base = config if config is not None else dataset_config(ref)
     # "": the dataset's file is in base already (re-reading it would undo the caller's config)
     config = load_config("", None, [*settings, *overrides], base=base)
     if out is not None:
@@ -357,6 +363,17 @@ def run_dataset(
     result.metrics["warnings"] = doubts + list(source.notes)
     _evaluate(result, source)
     return result
+
+
+def dataset_config(ref: sources.DatasetRef) -> Config:
+    """The configuration of the dataset ``ref`` as ``slam run`` resolves it: its shipped
+    ``configs/<name>.toml`` when one applies (never for a bag), the defaults otherwise; either
+    way named after it."""
+    import dataclasses
+
+    if ref.shipped_config:
+        return load_config(ref.config_name)
+    return dataclasses.replace(load_config(""), dataset=ref.config_name)
 
 
 def _estimate(source: Source, config: Config, progress: bool, observers: list[Observer]) -> Result:

@@ -84,3 +84,32 @@ def test_the_maze_robots_named_for_the_parser_are_the_robots() -> None:
     run = next(a for a in maze._actions if isinstance(a, argparse._SubParsersAction)).choices["run"]
     robot = next(a for a in run._actions if a.dest == "robot")
     assert list(robot.choices) == list(ROBOTS) and robot.default == DEFAULT_ROBOT
+
+
+def test_the_run_help_names_every_file_a_run_writes(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``slam run --help`` lists what a run writes (on main it left out quality.png,
+    recording.rrd, texture.npz's siblings and trajectory_file_order.tum), and when."""
+    monkeypatch.setenv("COLUMNS", "1000")  # no line break inside an option name
+    text = " ".join(_commands()["run"].format_help().split())
+    for name in (
+        "config.toml", "metrics.json", "trajectory.tum", "trajectory_file_order.tum", "map.npz",
+        "map.png", "map_clean.png", "map.pgm/map.yaml", "quality.png", "recording.rrd",
+        "texture.npz", "texture.png", "texture_overlay.png",
+    ):  # fmt: skip
+        assert name in text, name
+    assert "quality.png (the map-quality picture, unless quality.enabled = false)" in text
+    assert "recording.rrd (the rerun recording, unless --no-record)" in text
+
+
+def test_the_data_summary_names_its_sub_commands() -> None:
+    from slam.cli import COMMANDS
+
+    action = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    line = next(c.help for c in action._choices_actions if c.dest == "data")
+    assert line == COMMANDS["data"].help
+    for action_name in ("list", "verify", "inspect", "calibrate"):
+        assert action_name in line, action_name
+    data = _commands()["data"]
+    assert "inspect what a log holds; calibrate a log's odometry" in " ".join(
+        (data.description or "").split()
+    )

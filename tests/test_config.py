@@ -60,3 +60,93 @@ def test_bad_toml_file_names_the_file(tmp_path):
     path.write_text("[filter\nparticles = 3")
     with pytest.raises(ConfigError, match="bad.toml: invalid TOML"):
         load_config(config_file=path)
+
+
+def test_an_option_is_named_as_typed_and_a_set_as_set(tmp_path, capsys):
+    """``--every 0`` and ``--particles -3`` are reported as the user typed them (on main:
+    "--set filter.every=0: ...", an option never typed); a real ``--set`` keeps its wording."""
+    from slam.cli import main
+
+    out = tmp_path / "o"
+    for args, message in (
+        (["--every", "0"], "--every 0: expected an integer in [1, 1000000], found 0"),
+        (["--particles", "-3"], "--particles -3: expected an integer in [1, 100000], found -3"),
+        (["--max-scans", "-1"], "--max-scans -1: expected an integer ≥ 0, found -1"),
+        (
+            ["--set", "filter.every=0"],
+            "--set filter.every=0: filter.every: expected an integer in [1, 1000000], found 0",
+        ),
+    ):
+        assert main(["run", "demo", "--out", str(out), "--quiet", *args]) == 2
+        assert capsys.readouterr().err == f"slam: error: {message}\n"
+        assert not out.exists()
+
+
+def test_slam_run_names_its_keyword_options():
+    import slam
+
+    with pytest.raises(ConfigError) as info:
+        slam.run("demo", every=0)
+    assert str(info.value) == "slam.run(every=0): expected an integer in [1, 1000000], found 0"
+    with pytest.raises(ConfigError, match=re.escape("slam.run(seed=-2): expected an integer ≥ 0")):
+        slam.run("demo", seed=-2)
+
+
+def test_overrides_given_as_one_string_are_refused():
+    """A str is not read character by character (on main: "--set 'r': expected section.key=...")."""
+    import slam
+    from slam.errors import UsageError
+
+    expected = (
+        "overrides: expected a list of 'section.key=value' strings, found the string "
+        "'rbpf.temperature=20'"
+    )
+    with pytest.raises(UsageError) as info:
+        slam.run("demo", overrides="rbpf.temperature=20")
+    assert str(info.value) == expected
+    with pytest.raises(UsageError) as info:
+        slam.load_config("intel", None, "rbpf.temperature=20")
+    assert str(info.value) == expected
+    with pytest.raises(UsageError, match=r"strings, found an item 3 \(int\)"):
+        load_config(overrides=["filter.every=2", 3])
+    assert load_config(overrides=("filter.every=2",)).filter.every == 2  # any iterable of str
+
+
+def test_a_key_outside_any_section_of_a_config_file(tmp_path):
+    """On main: "unknown section [particles]"."""
+    path = tmp_path / "mine.toml"
+    path.write_text("particles = 40\n\n[filter]\nevery = 2\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(config_file=path)
+    assert str(info.value) == (
+        f"{path}: 'particles' is a key outside any section; expected [section] tables such as "
+        "[filter] (did you mean filter.particles?)"
+    )
+    path.write_text("enabled = true\n")  # a key of several sections: no guess
+    with pytest.raises(ConfigError) as info:
+        load_config(config_file=path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: 'enabled' is a key outside any section; expected ")
+    assert "[filter], [lidar]" in message and "did you mean" not in message
+    assert "('enabled' is a key of " in message and "[texture]" in message
+    path.write_text("nosuch = 1\n")
+    with pytest.raises(ConfigError, match="'nosuch' is a key outside any section") as info:
+        load_config(config_file=path)
+    assert "is a key of" not in str(info.value)
+    path.write_text("[nosuch]\nkey = 1\n")  # a table of an unknown name is still that
+    with pytest.raises(ConfigError, match=re.escape("unknown section [nosuch]")):
+        load_config(config_file=path)
+    path.write_text("filter.particles = 40\n")  # a dotted key is the table [filter]
+    assert load_config(config_file=path).filter.particles == 40
+
+
+def test_a_dataset_name_in_the_wrong_letter_case_is_an_error():
+    """On main ``load_config("Intel")`` returned the defaults; an unknown name still does."""
+    with pytest.raises(ConfigError) as info:
+        load_config("Intel")
+    assert str(info.value) == "no configuration 'Intel'; did you mean 'intel'?"
+    with pytest.raises(ConfigError, match="no configuration 'DATASET20'; did you mean 'dataset20'"):
+        load_config("DATASET20")
+    assert load_config("intel").lidar.no_return == 80.0
+    own = load_config("my-building")  # no configs/my-building.toml: the defaults, named
+    assert own.dataset == "my-building" and own.lidar == Config().lidar

@@ -236,3 +236,63 @@ def test_texture_and_run_refuse_an_unknown_name_in_one_line(tmp_path, capsys, mo
     err = capsys.readouterr().err
     assert err.startswith("slam: error: slam run NAME: 'nosuch' is not 'demo'")
     assert err.count("\n") == 1 and not (tmp_path / "o").exists()
+
+
+def test_a_missing_path_says_no_such_file(tmp_path, monkeypatch, capsys):
+    """A NAME with a path separator or a log's suffix is a path: when it is missing, the message
+    says so (on main: "'…/intel.clf' is not 'demo', a registry dataset (…), the path of …")."""
+    monkeypatch.chdir(tmp_path)
+    tail = "no such file or folder; a registry dataset is given by its name (see `slam data list`)"
+    for name in (str(tmp_path / "carmen" / "intel.clf"), "intel.bag", "./corridor", "x.MCAP"):
+        with pytest.raises(UsageError) as info:
+            sources.resolve(name, tmp_path, where="slam run NAME")
+        assert str(info.value) == f"slam run NAME: {name}: {tail}"
+    with pytest.raises(UsageError) as info:
+        sources.resolve("run.db3", tmp_path, where="--dataset", hint="give --dataset PATH")
+    assert str(info.value) == f"--dataset: run.db3: {tail}; give --dataset PATH"
+    # The compressed log beside the missing one is suggested.
+    carmen_log(tmp_path / "intel.clf.gz")
+    with pytest.raises(UsageError) as info:
+        sources.resolve(str(tmp_path / "intel.clf"), tmp_path, where="slam run NAME")
+    assert str(info.value).startswith(
+        f"slam run NAME: {tmp_path / 'intel.clf'}: no such file or folder (did you mean "
+        f"{tmp_path / 'intel.clf.gz'}?); a registry dataset is given by its name"
+    )
+    # On the command line: one line, exit 2, no run folder.
+    assert main(["run", "logs/intel.clf", "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"slam: error: slam run NAME: logs/intel.clf: {tail}\n"
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_path_named_like_a_config_but_for_the_letter_case_runs_on_the_defaults(tmp_path, capsys):
+    """``Intel.clf`` is not ``configs/intel.toml``'s log where names are case-sensitive: it runs
+    on the defaults (as on main), and never meets the error `slam.load_config("Intel")` gives."""
+    from slam.io.formats import run_config_name
+
+    log = carmen_log(tmp_path / "Intel.clf")
+    ref = sources.resolve(str(log), tmp_path)
+    assert (ref.config_name, ref.shipped_config) == ("Intel", False)
+    assert run_config_name(str(log)) == ("Intel", False)
+    assert sources.resolve(str(carmen_log(tmp_path / "intel.clf")), tmp_path).shipped_config
+    out = tmp_path / "run"
+    args = ["run", str(log), "--method", "odometry", "--out", str(out), "--quiet", "--no-record"]
+    assert main([*args, "--data-dir", str(tmp_path)]) == 0, capsys.readouterr().err
+    config = load_config("", out / "config.toml")
+    assert config.dataset == "Intel" and config.lidar.no_return is None  # intel.toml: 80.0
+
+
+def test_eval_rereads_a_path_run_named_like_a_registry_dataset_from_its_path(tmp_path, capsys):
+    """``slam run elsewhere/intel.clf`` records ``dataset = "intel"`` (a registry name): its map
+    score re-reads the file it ran on (its log_source), not the registry's intel, which this data
+    directory does not hold."""
+    (tmp_path / "elsewhere").mkdir()
+    log = carmen_log(tmp_path / "elsewhere" / "intel.clf")
+    out = tmp_path / "run"
+    args = ["run", str(log), "--method", "odometry", "--out", str(out), "--quiet", "--no-record"]
+    assert main([*args, "--data-dir", str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(out), "--quality", "--json", "--data-dir", str(tmp_path / "d")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert report["quality"]["returns"] == metrics["quality"]["returns"] == len(POSES) * 5

@@ -1,7 +1,8 @@
 """``slam data``: which datasets are under the data directory, and are they sound.
 
-List and verify the datasets of the registry (data/datasets.toml) under the data directory:
---data-dir, else $SLAM_DATA_DIR, else ./data.
+List and verify the datasets of the registry (data/datasets.toml) under the data directory
+(--data-dir, else $SLAM_DATA_DIR, else ./data); inspect what a log holds; calibrate a log's
+odometry and laser mount from its data.
 
 * ``slam data list [--data-dir D] [--json]``: every registry dataset as present, partial (with
   the missing files) or absent.

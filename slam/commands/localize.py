@@ -10,6 +10,7 @@ recording.rrd to the run folder.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from slam.commands._common import (
@@ -65,7 +66,11 @@ def localize_command(args: argparse.Namespace) -> int:
     initial = parse_initial(args.initial) if args.initial is not None else None
     data_dir = data_dir_from(args)
     ref = resolve(args.name, data_dir, where="slam localize LOG")
-    config = load_config(ref.config_name, args.config, overrides_from(args))
+    config = load_config(
+        ref.config_name if ref.shipped_config else "", args.config, overrides_from(args)
+    )
+    if not ref.shipped_config:  # as slam run: a bag's geometry is its messages'
+        config = dataclasses.replace(config, dataset=ref.config_name)
     out = localize(
         LocalizeRequest(
             name=args.name,

@@ -2,9 +2,12 @@
 
 Run SLAM on NAME: a dataset of the registry (slam data list), 'demo' (a simulated dataset20-scale
 log generated on first use, with ground truth), or a path to a CARMEN log, an ECE276A dataset
-folder, a ROS 1 bag, a ROS 2 bag folder or an MCAP file (format detected by content). Writes
-config.toml, trajectory.tum, map.pgm/map.yaml, map.npz, map.png, map_clean.png, metrics.json and,
-with RGB-D frames, texture.png/npz to the run folder.
+folder, a ROS 1 bag, a ROS 2 bag folder or an MCAP file (format detected by content). Writes to
+the run folder: config.toml, metrics.json and trajectory.tum (sorted by time, plus
+trajectory_file_order.tum when the log's clock runs backwards, as intel's does); from a log with
+laser scans, map.npz, map.png, map_clean.png, map.pgm/map.yaml and quality.png (the map-quality
+picture, unless quality.enabled = false); recording.rrd (the rerun recording, unless --no-record);
+and, with RGB-D frames, texture.npz, texture.png and texture_overlay.png (unless --no-texture).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from slam.commands._common import (
     data_dir_from,
     output_request_fields,
 )
-from slam.config import METHODS
+from slam.config import METHODS, Override
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -49,8 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def overrides_from(args: argparse.Namespace) -> list[str]:
     """``--set`` values (untouched: a TOML literal string ``'a "b"'`` stays one) plus the
-    shortcut flags, as ``section.key=value`` strings (string values as TOML basic strings)."""
-    out = list(args.set)
+    shortcut flags, as ``section.key=value`` strings (string values as TOML basic strings); a
+    flag's is an :class:`~slam.config.Override` naming the flag, so that a message about its value
+    names what the user typed (``--every 0``), not a ``--set`` they did not."""
+    out: list[str] = list(args.set)
     for flag, key in (
         ("method", "filter.method"),
         ("particles", "filter.particles"),
@@ -60,11 +65,12 @@ def overrides_from(args: argparse.Namespace) -> list[str]:
     ):
         value = getattr(args, flag, None)
         if value is not None:
-            out.append(f"{key}={json.dumps(value)}" if isinstance(value, str) else f"{key}={value}")
+            text = f"{key}={json.dumps(value)}" if isinstance(value, str) else f"{key}={value}"
+            out.append(Override(text, f"--{flag.replace('_', '-')} {value}"))
     if getattr(args, "no_texture", False):
-        out.append("texture.enabled=false")
+        out.append(Override("texture.enabled=false", "--no-texture"))
     if getattr(args, "no_record", False):
-        out.append("viz.record=false")
+        out.append(Override("viz.record=false", "--no-record"))
     return out
 
 

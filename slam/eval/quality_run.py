@@ -28,6 +28,7 @@ from slam.io.atomic import write_png
 from slam.io.log import Log, ScanStream
 
 if TYPE_CHECKING:
+    from slam.io.registry import Dataset
     from slam.io.sources import DatasetRef
     from slam.trajectory import Trajectory
 
@@ -84,11 +85,17 @@ def poses_at_scans(
 def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -> DatasetRef:
     """The log ``run_dir`` was made from, resolved by :func:`slam.io.sources.resolve`.
 
-    ``dataset`` (a registry name, ``demo`` or a path) wins; else the ``log_source`` path the run
-    recorded in ``metrics.json`` (exactly what it read; a run made from a path records only the
-    file's stem as its ``dataset``); else the ``dataset`` of its ``config.toml``. A recorded log
-    that is no longer there is a :class:`DataError`, unless that ``dataset`` is ``demo`` or a
-    registry name (the data directory moved).
+    ``dataset`` (a registry name, ``demo`` or a path) wins. Else, for a run of a registry
+    dataset (its ``config.toml``'s ``dataset`` is a registry name, and the ``log_source`` it
+    recorded in ``metrics.json``, if it still exists, is where the registry keeps that dataset),
+    that dataset: an ECE276A dataset's ``log_source`` is the folder it shares with the course's
+    other datasets, which names none of them. Else the ``log_source``, exactly what the run read
+    (a run made from a path records only the file's stem as its ``dataset``, which may be a
+    registry name: ``slam run elsewhere/intel.clf`` is re-read from there). Else the
+    ``dataset`` (``demo``). A registry dataset is read from ``data_dir``, or from the data
+    directory the run read it from when its scans are only there
+    (:func:`registry_run_data_dir`). A recorded log that is no longer there is a
+    :class:`DataError`, unless that ``dataset`` is ``demo`` or a registry name.
     """
     from slam.io import registry, sources
 
@@ -98,11 +105,21 @@ def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -
         return sources.resolve(dataset, data_dir, where="--dataset")
     name = config.dataset
     where = f"{run_dir / 'config.toml'}: dataset"
-    known = name == "demo" or name in registry.load_registry()
     recorded = recorded_source(run_dir)
-    if recorded is not None and recorded.exists():
-        return sources.resolve(str(recorded), data_dir, where=f"{run_dir / 'metrics.json'}")
-    if recorded is not None and not known:
+    found = recorded is not None and recorded.exists()
+    datasets = registry.load_registry()
+    if name in datasets:
+        entry = datasets[name]
+        read_from = None if recorded is None else registry_run_data_dir(entry, recorded)
+        if not found or read_from is not None:  # a run of the registry's dataset
+            return sources.resolve(name, _holding_scans(entry, data_dir, read_from), where=where)
+    elif name == "demo" and not found:  # found: the demo's folder, or a path named demo
+        return sources.resolve(name, data_dir, where=where)
+    if found:
+        return sources.resolve(
+            str(recorded), data_dir, where=f"{run_dir / 'metrics.json'}: log_source"
+        )
+    if recorded is not None:
         raise DataError(
             f"{run_dir / 'metrics.json'}: log_source {recorded} no longer exists (the log this "
             "run was made from); give the log with --dataset PATH"
@@ -110,6 +127,29 @@ def resolve_run_log(run_dir: Path, data_dir: Path, dataset: str | None = None) -
     return sources.resolve(
         name, data_dir, where=where, hint="the run recorded no log_source; give --dataset PATH"
     )
+
+
+def registry_run_data_dir(entry: Dataset, recorded: Path) -> Path | None:
+    """The data directory a run of the registry dataset ``entry`` read it from, known by the
+    ``log_source`` it recorded (``recorded``: ``<data dir>/ece276a`` for dataset20,
+    ``<data dir>/carmen/intel.clf.gz`` for intel); ``None`` when ``recorded`` is not where the
+    registry keeps the dataset (a run made from a path whose stem is the dataset's name)."""
+    scans = entry.file_for("scans")
+    if scans is None:
+        return None
+    relative = Path(entry.folder if entry.loader == "ece276a" else scans.path).parts
+    if len(recorded.parts) <= len(relative) or recorded.parts[-len(relative) :] != relative:
+        return None
+    return Path(*recorded.parts[: -len(relative)])
+
+
+def _holding_scans(entry: Dataset, data_dir: Path, other: Path | None) -> Path:
+    """``data_dir``, unless the scans of the registry dataset ``entry`` are missing there and
+    present under ``other`` (a run made with another ``--data-dir``)."""
+    scans = entry.file_for("scans")
+    if other is None or scans is None or scans.location(data_dir).exists():
+        return data_dir
+    return other if scans.location(other).exists() else data_dir
 
 
 def _run_config(run_dir: Path) -> Config:

@@ -150,8 +150,11 @@ def run_config_name(name: str) -> tuple[str, bool]:
     ``configs/intel.toml`` as ``slam run intel`` does. A bag or MCAP file carries its geometry
     (LaserScan fields, tf_static): it is named by :func:`slam.io.rosbag.bag_stem` (``intel.orig``
     for ``intel.orig.bag``) and never picks up a shipped configuration, whatever it is called;
-    ``--config`` and ``--set`` still apply.
+    ``--config`` and ``--set`` still apply. A file name that differs from a shipped configuration's
+    only by letter case (``Intel.clf.gz``) picks up none (:func:`slam.config.case_variant`).
     """
+    from slam.config import case_variant
+
     path = Path(name)
     if not path.exists():
         return name, True
@@ -160,4 +163,5 @@ def run_config_name(name: str) -> tuple[str, bool]:
         from slam.io.rosbag import bag_stem
 
         return bag_stem(path), False
-    return path.name.split(".")[0], True
+    stem = path.name.split(".")[0]
+    return stem, case_variant(stem) is None

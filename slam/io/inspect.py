@@ -36,8 +36,8 @@ def inspect_path(path: Path, options: BagOptions | None = None) -> dict[str, Any
         return inspect_bag(path, options)
     from slam.config import load_config
 
-    dataset, _ = run_config_name(str(path))
-    config = load_config(dataset)
+    dataset, shipped = run_config_name(str(path))
+    config = load_config(dataset if shipped else "")
     if fmt == "carmen":
         from slam.io.carmen import load_carmen
 

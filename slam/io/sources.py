@@ -22,6 +22,7 @@ suffix or folder content) and a branch of :func:`load`.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -92,7 +93,8 @@ class DatasetRef:
     re-timed onto its scans (:func:`slam.eval.retime.relations_file`)."""
     shipped_config: bool = True
     """Whether ``configs/<config_name>.toml`` applies. A bag carries its geometry (LaserScan
-    fields, tf_static): it never picks up a shipped configuration by its file name."""
+    fields, tf_static): it never picks up a shipped configuration by its file name; nor does a
+    path whose name differs from a shipped configuration's only by letter case."""
 
     @property
     def reference(self) -> Path | None:
@@ -202,7 +204,9 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
     """What ``name`` means (see the module docstring for the order of the rules).
 
     An unknown name raises one :class:`UsageError` line, ``"<where>: '<name>' is not ...: <what a
-    NAME may be>"``, followed by ``hint`` (e.g. the option that gives the dataset instead).
+    NAME may be>"``, followed by ``hint`` (e.g. the option that gives the dataset instead); a
+    missing path (a NAME that :func:`looks_like_path`) says ``"<where>: <name>: no such file or
+    folder"`` instead.
     """
     from slam.io import registry
 
@@ -234,18 +238,46 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
     path = Path(name)
     if name and path.exists():
         return detect_path(name, path, data_dir)
-    raise UsageError(f"{where}: {name!r} is not {names_hint()}" + (f"; {hint}" if hint else ""))
+    tail = f"; {hint}" if hint else ""
+    if looks_like_path(name):
+        raise UsageError(f"{where}: {name}: no such file or folder{missing_path_hint(path)}{tail}")
+    raise UsageError(f"{where}: {name!r} is not {names_hint()}{tail}")
+
+
+LOG_SUFFIXES = (".clf", ".log", ".gz", ".bag", ".mcap", ".db3", ".npz")
+"""File name endings of logs (``.clf.gz`` ends with ``.gz``): a NAME ending so is a path."""
+
+
+def looks_like_path(name: str) -> bool:
+    """Whether the dataset NAME ``name`` is meant as a path: it holds a path separator or ends
+    with a log's suffix (:data:`LOG_SUFFIXES`); no registry name does either."""
+    separators = {"/", os.sep} | ({os.altsep} if os.altsep else set())
+    return any(s in name for s in separators) or name.lower().endswith(LOG_SUFFIXES)
+
+
+def missing_path_hint(path: Path) -> str:
+    """What to say after ``<path>: no such file or folder``: the compressed log beside it when
+    there is one (``intel.clf`` → ``intel.clf.gz``), and where the registry's datasets are
+    listed."""
+    gz = path.parent / f"{path.name}.gz"
+    beside = f" (did you mean {gz}?)" if path.name and gz.is_file() else ""
+    return f"{beside}; a registry dataset is given by its name (see `slam data list`)"
 
 
 def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
     """The :class:`DatasetRef` of an existing ``path``: a bag (by content), a folder holding the
     files of exactly one ECE276A dataset, or a CARMEN log (text or gzip; other content is an
     error). The configuration name is the file or folder name up to its first dot
-    (``intel.clf.gz`` → ``intel``); a bag is named by :func:`slam.io.rosbag.bag_stem`
+    (``intel.clf.gz`` → ``intel``), whose shipped configuration applies, but never one whose name
+    differs from it only by letter case (``Intel.clf.gz`` runs on the defaults, as it always did
+    where file names are case-sensitive, rather than failing in
+    :func:`slam.config.shipped_config`); a bag is named by :func:`slam.io.rosbag.bag_stem`
     (``intel.orig.bag`` → ``intel.orig``) and uses no shipped configuration."""
+    from slam.config import case_variant
     from slam.io.formats import BAG_FORMATS, ROSBAG2_METADATA, detect_format
 
     stem = path.name.split(".")[0]
+    shipped = case_variant(stem) is None
     if not path.is_dir() or (path / ROSBAG2_METADATA).is_file():
         fmt = detect_format(path)
         if fmt in BAG_FORMATS:
@@ -264,9 +296,12 @@ def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
                 f"ImuNN.npz, HokuyoNN.npz, KinectNN.npz), found {found}"
             )
         return DatasetRef(
-            name, Kind.ECE276A, path, stem, path.name, "ece276a", data_dir, numbers[0]
-        )
-    return DatasetRef(name, Kind.CARMEN, path, stem, stem, "carmen", data_dir)
+            name, Kind.ECE276A, path, stem, path.name, "ece276a", data_dir, numbers[0],
+            shipped_config=shipped,
+        )  # fmt: skip
+    return DatasetRef(
+        name, Kind.CARMEN, path, stem, stem, "carmen", data_dir, shipped_config=shipped
+    )
 
 
 def ensure(ref: DatasetRef, progress: bool = False) -> Path:
