@@ -12,14 +12,18 @@ The folder protocol (:func:`atomic_dir`):
 * before any work, :func:`check_output_dir` refuses a destination that is a symbolic link, a
   file, under a file, a mount point, ends in ``..``, holds one of the command's inputs, or exists
   and is not empty — unless ``force`` is given and it is a finished output folder of the same
-  kind (:func:`slam.io.runfolder.is_own_output`);
+  kind (:func:`slam.io.runfolder.is_own_output`) that holds nothing slam did not write
+  (:func:`slam.io.runfolder.foreign_entries`: a note or plots the user saved into it make
+  ``--force`` refuse, naming them);
 * stale partial folders of dead processes in the destination's parent are removed, and a live
   process writing the same destination makes this one stop (exit 2) before it starts;
 * the final rename never replaces a folder that appeared meanwhile: ``renameat2`` with
   ``RENAME_NOREPLACE`` (Linux), else an exclusive ``mkdir`` of the destination followed by a
   rename onto that still-empty folder (a rename onto a non-empty folder fails). With ``force``
   the old folder is swapped out with ``RENAME_EXCHANGE`` (else moved aside first) and deleted
-  only after checking it is the very folder (same device and inode) found to be ours.
+  only after checking it is the very folder (same device and inode) found to be ours, still
+  holding nothing slam did not write (a file saved into it meanwhile makes the command fail and
+  keeps the folder as it is).
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from slam.io.runfolder import (
     OWNER_FILE,
     OutputKind,
     clean_stale_partials,
+    foreign_entries,
     get_kind,
     is_own_output,
     live_writers,
@@ -275,6 +280,8 @@ class OutputPlan:
     """``"none"``, ``"empty"`` (an empty folder, replaced) or ``"own"`` (replaced with force)."""
     identity: tuple[int, int] | None = None
     """``(st_dev, st_ino)`` of the folder to replace (``"own"``)."""
+    option: str = "--out"
+    """The option that named the folder, for messages."""
 
 
 def _contains(folder: Path, path: Path) -> bool:
@@ -341,8 +348,43 @@ def check_output_dir(
             f"holding {spec.marker}, {' and '.join(spec.required)}); this folder is not one, so it "
             "was left alone"
         )
+    check_only_ours(path, spec, option)
     st = os.lstat(path)
-    return OutputPlan(path, spec, "own", (st.st_dev, st.st_ino))
+    return OutputPlan(path, spec, "own", (st.st_dev, st.st_ino), option)
+
+
+FOREIGN_NAMED = 5
+"""How many entries slam did not write a refusal names (then how many more there are)."""
+
+
+def check_only_ours(
+    path: Path, kind: str | OutputKind, option: str = "--out", late: bool = False
+) -> None:
+    """Raise :class:`~slam.errors.UsageError` when the finished output folder ``path`` of
+    ``kind`` holds anything slam did not write (:func:`slam.io.runfolder.foreign_entries`) or
+    its marker cannot be read: ``--force`` would delete it. ``late``: found once the new folder
+    was complete (the message says that result was discarded)."""
+    spec = get_kind(kind)
+    if late:
+        outcome = "this command's result was discarded and nothing was replaced"
+    else:
+        outcome = "it was left alone"
+    try:
+        foreign = foreign_entries(path, spec)
+    except OSError as exc:
+        raise UsageError(
+            f"{path}: --force cannot tell what slam wrote into this {spec.label}: its marker "
+            f"{spec.marker} cannot be read ({exc.strerror or exc}); {outcome}"
+        ) from None
+    if not foreign:
+        return
+    names = ", ".join(foreign[:FOREIGN_NAMED])
+    if len(foreign) > FOREIGN_NAMED:
+        names += f" and {len(foreign) - FOREIGN_NAMED} more"
+    raise UsageError(
+        f"{path}: --force replaces only what slam wrote, but this {spec.label} also holds files "
+        f"slam did not write ({names}); {outcome} (move them out or choose another {option})"
+    )
 
 
 @contextlib.contextmanager
@@ -385,13 +427,24 @@ def _changed(path: Path) -> UsageError:
     )
 
 
-def _is_planned_folder(folder: Path, plan: OutputPlan) -> bool:
+def _same_folder(folder: Path, plan: OutputPlan) -> bool:
+    """Whether ``folder`` is the very output folder ``plan`` found (device and inode, kind)."""
     try:
         st = os.lstat(folder)
     except OSError:
         return False
     same = stat.S_ISDIR(st.st_mode) and (st.st_dev, st.st_ino) == plan.identity
     return same and is_own_output(folder, plan.kind)
+
+
+def _is_planned_folder(folder: Path, plan: OutputPlan) -> bool:
+    """:func:`_same_folder`, still holding nothing slam did not write: safe to delete."""
+    if not _same_folder(folder, plan):
+        return False
+    try:
+        return not foreign_entries(folder, plan.kind)
+    except OSError:
+        return False
 
 
 class _Staging:
@@ -425,6 +478,8 @@ def _commit_replacing(staging: _Staging, plan: OutputPlan) -> None:
     if not os.path.lexists(path):  # removed meanwhile: nothing to replace
         _commit_new(staging, OutputPlan(path, plan.kind, "none"))
         return
+    if _same_folder(path, plan):  # else the checks after the swap say what changed
+        check_only_ours(path, plan.kind, plan.option, late=True)
     if _exchange(staging.path, path):
         if not _is_planned_folder(staging.path, plan):
             if not _exchange(staging.path, path):  # pragma: no cover - exchange just worked
