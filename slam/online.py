@@ -68,8 +68,9 @@ class Estimate:
     time: float
     """Scan time (s)."""
     pose: F64
-    """``(3,)`` current pose: the highest-weight particle (between ``rbpf`` updates moved on by
-    odometry)."""
+    """``(3,)`` current pose: the particle with the highest weight at the last update (after a
+    resampling, its first copy: the weights are then equal); between ``rbpf`` updates moved on by
+    odometry."""
     n_eff: float
     """Effective sample size ``1/Σw²`` after weighting."""
     max_weight: float

@@ -294,6 +294,10 @@ class RbpfFilter:
         self.lineage = Lineage(self.particles)
         self.parents = np.arange(p)
         """Parent of each current particle among those of the last lineage record."""
+        self.best = 0
+        """The particle the estimate follows: the highest weight at the last update, or after a
+        resampling the first copy of it (the weights are then uniform, and any index would do
+        for ``argmax``)."""
         self.last_odometry = start
         self.last_update = 0
         self.n_eff_log = [float(p)]
@@ -383,8 +387,7 @@ class RbpfFilter:
         if not self.rule.due(moved, elapsed):
             self.n_eff_log.append(self.n_eff_log[-1])
             self.max_weight_log.append(self.max_weight_log[-1])
-            best = int(np.argmax(self.weights))
-            pose = compose(self.particles[best], moved)
+            pose = compose(self.particles[self.best], moved)
             return StepOutcome(
                 k, pose, self.particles, self.weights, self.n_eff_log[-1],
                 self.max_weight_log[-1], False, False, motion=moved,
@@ -397,9 +400,8 @@ class RbpfFilter:
         resampled = self.resample(n_eff)
         self.last_odometry = self.scans.odometry[k]
         self.last_update = k
-        best = int(np.argmax(self.weights))
         return StepOutcome(
-            k, self.particles[best], self.particles, self.weights, n_eff, max_weight, True,
+            k, self.particles[self.best], self.particles, self.weights, n_eff, max_weight, True,
             resampled, hits=hits,
         )  # fmt: skip
 
@@ -629,8 +631,11 @@ class RbpfFilter:
         """Systematic resampling when ``N_eff`` is below ``resample_threshold`` of the count."""
         p = self.particles.shape[0]
         resampled = n_eff < self.config.filter.resample_threshold * p
+        self.best = int(np.argmax(self.weights))
         if resampled:
             idx = systematic_resample(self.weights, self.rng.random())
+            copies = np.flatnonzero(idx == self.best)  # a weight of at least 1/p: one at least
+            self.best = int(copies[0]) if copies.size else 0
             self.particles = self.particles[idx]
             self.maps.resample(idx)
             self.logw = np.zeros(p)
@@ -644,13 +649,14 @@ class RbpfFilter:
         return resampled
 
     def finish(self) -> FilterOutput:
-        """The nodes: the updates' poses along the ancestry of the best particle."""
-        best = int(np.argmax(self.weights))
+        """The nodes: the updates' poses along the ancestry of the best particle (:attr:`best`,
+        found in the last lineage record through :attr:`parents`: a resampling after it
+        reorders the particles)."""
         steps = self.lineage.steps
         return FilterOutput(
             scans=self.scans,
             steps=steps,
-            node_poses=self.lineage.ancestry(best),
+            node_poses=self.lineage.ancestry(int(self.parents[self.best])),
             n_eff=np.asarray(self.n_eff_log, dtype=np.float64),
             max_weight=np.asarray(self.max_weight_log, dtype=np.float64),
             stats={

@@ -119,3 +119,39 @@ def test_the_fused_proposal_mean_keeps_the_match_where_the_scan_constrains_and_o
     half = fuse_with_prediction(matched[:1], predicted[:1], np.linalg.inv(motion[:1]) * 10.0,
                                 10.0, motion[:1])  # fmt: skip
     np.testing.assert_allclose(half[0], [1.25, 2.1, 0.15], atol=1e-9)
+
+
+def test_the_estimate_follows_the_best_particle_through_a_resampling(monkeypatch):
+    """After a resampling the weights are equal, so ``argmax`` would name particle 0, a copy of
+    whichever particle the resampling drew first. The estimate keeps following the particle that
+    had the highest weight (its first copy), and the final ancestry is that particle's, also when
+    the last update resampled (every update does here: ``filter.resample_threshold = 1``)."""
+    from synthetic_logs import path as room_path
+    from synthetic_logs import ray_cast
+
+    import slam
+    from slam.particle_filter import RbpfFilter
+
+    best_before: list[np.ndarray] = []
+    resample = RbpfFilter.resample
+
+    def watched(self: RbpfFilter, n_eff: float) -> bool:
+        best_before.append(self.particles[int(np.argmax(self.weights))].copy())
+        return resample(self, n_eff)
+
+    monkeypatch.setattr(RbpfFilter, "resample", watched)
+    config = slam.load_config("", None, ["filter.resample_threshold=1.0", "filter.particles=20"])
+    s = slam.Slam(config, seed=3, stages=[])
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    poses = room_path(60)
+    moved_on = 0
+    for k, pose in enumerate(poses):
+        est = s.update(slam.Scan(100.0 + 0.1 * k, ray_cast(pose, angles), angles), odometry=pose)
+        if est.updated and k > 0:
+            assert est.resampled
+            np.testing.assert_array_equal(est.pose, best_before[-1])
+            cloud = np.asarray(est.particles)
+            moved_on += int(not np.array_equal(cloud[0], best_before[-1]))
+    assert len(best_before) >= 10 and moved_on >= 3  # particle 0 was not the best, often
+    nodes = s._filter.finish().node_poses
+    np.testing.assert_array_equal(nodes[-1], best_before[-1])

@@ -550,9 +550,6 @@ _FIGURES: dict[str, Callable[[Benches], str | None]] = {
     "slam.seeds_fr079": seed_range("fr079"),
     "slam.seeds_fr-clinic": seed_range("fr-clinic"),
     "slam.seeds_mit-killian": seed_range("mit-killian"),
-    "slam.seed_mean_intel": _figure(
-        "slam.intel", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
-    ),
     "slam.seed_mean_fr-clinic": _figure(
         "slam.fr-clinic", "rbpf", "over_seeds", "trans_mean", "mean", digits=4
     ),
