@@ -48,7 +48,7 @@ from slam.particle_filter import (
     make_filter,
 )
 from slam.scans import Scan, ScanSequence
-from slam.stages import Stage, default_stages, run_stages
+from slam.stages import Stage, build_map, default_stages, run_stages
 from slam.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
@@ -362,6 +362,30 @@ class Slam:
     def steps(self) -> int:
         """Scans processed so far."""
         return len(self.scans)
+
+    def map(self) -> OccupancyGrid:
+        """The occupancy grid of the run so far, for a robot that needs a map while it drives.
+
+        ``rbpf``: every update's scan at the pose the best particle's ancestry gives it — the map
+        GMapping publishes while it runs; the stages of :meth:`finish` make the final map better.
+        It is built anew at each call, from every update's scan (as long as
+        :class:`~slam.stages.FinalMap` takes on them: 0.1–2 s at the end of a benchmark log), so
+        call it every few seconds, not at every scan. ``classic``: a copy of its own grid. The
+        call changes nothing in the run.
+        """
+        if self._finished:
+            raise UsageError("Slam.map: the run is finished (its map is the result's grid)")
+        if self._filter is None:
+            raise UsageError("Slam.map: no scan was processed (call update() first)")
+        if isinstance(self._filter, ClassicFilter):
+            grid = self._filter.grid
+            return OccupancyGrid.from_arrays(
+                grid.log_odds.copy(), grid.resolution, grid.origin, grid.config
+            )
+        steps, nodes = self._filter.best_ancestry()
+        poses = np.zeros((len(self.scans), 3))
+        poses[steps] = nodes
+        return build_map(self.scans, poses, steps, self.config)
 
     def finish(self) -> Result:
         """End the run: the filter's output through the post-filter stages."""

@@ -648,15 +648,19 @@ class RbpfFilter:
         self.peak_map_bytes = max(self.peak_map_bytes, self.maps.memory_bytes())
         return resampled
 
+    def best_ancestry(self) -> tuple[NDArray[np.int64], F64]:
+        """The updates' scan numbers and the poses of the best particle's ancestry at them
+        (:attr:`best`, found in the last lineage record through :attr:`parents`: a resampling
+        after it reorders the particles)."""
+        return self.lineage.steps, self.lineage.ancestry(int(self.parents[self.best]))
+
     def finish(self) -> FilterOutput:
-        """The nodes: the updates' poses along the ancestry of the best particle (:attr:`best`,
-        found in the last lineage record through :attr:`parents`: a resampling after it
-        reorders the particles)."""
-        steps = self.lineage.steps
+        """The nodes: the updates' poses along the ancestry of the best particle."""
+        steps, nodes = self.best_ancestry()
         return FilterOutput(
             scans=self.scans,
             steps=steps,
-            node_poses=self.lineage.ancestry(int(self.parents[self.best])),
+            node_poses=nodes,
             n_eff=np.asarray(self.n_eff_log, dtype=np.float64),
             max_weight=np.asarray(self.max_weight_log, dtype=np.float64),
             stats={

@@ -48,8 +48,11 @@ def _log(name: str, config: slam.Config, data_dir: Path = Path(".")) -> Log:
     return load_source(name, data_dir, config).log
 
 
-def replay(log: Log, config: slam.Config, count: int, seed: int = 0, **kwargs) -> slam.Result:
-    """What a user does with raw arrays: one Scan per reading, the log's odometry, update()."""
+def replay(
+    log: Log, config: slam.Config, count: int, seed: int = 0, during=None, **kwargs
+) -> slam.Result:
+    """What a user does with raw arrays: one Scan per reading, the log's odometry, update();
+    ``during(s, k)``, when given, after each update ``k``."""
     scans = log.scans
     odometry = scan_odometry(log, config.robot)
     n = min(count, len(scans))
@@ -67,6 +70,8 @@ def replay(log: Log, config: slam.Config, count: int, seed: int = 0, **kwargs) -
         )
         estimate = s.update(scan, odometry=odometry[k])
         assert estimate.step == k and estimate.scan_index == k
+        if during is not None:
+            during(s, k)
     return s.finish()
 
 
@@ -221,6 +226,47 @@ def test_custom_stages_replace_the_default_ones(small):
     assert list(custom.seconds) == ["filter"] + list(dict.fromkeys(s.name for s in stages))
     assert list(raw.seconds) == ["filter", "between-update placement", "final map"]
     assert all(v >= 0.0 for v in custom.seconds.values()) and custom.seconds["filter"] > 0.0
+
+
+def test_the_map_so_far_is_the_best_particles_and_changes_nothing(small):
+    """``Slam.map()`` while the run goes on: the update scans at the best particle's ancestry —
+    just before ``finish()``, the very grid :class:`FinalMap` builds from the filter's nodes —
+    growing as the robot explores; calling it changes nothing in the run; before the first scan
+    and after the end it is one clear error; ``classic``'s is a copy of its own grid."""
+    config = slam.load_config("", None, ["filter.particles=8"])
+    log = _log(str(small), config)
+    stages = [BetweenUpdates(), FinalMap()]
+    occupied: list[int] = []
+    grids: list = []
+
+    def look(s: slam.Slam, k: int) -> None:
+        if k % 100 == 99:
+            grids.append(s.map())
+            occupied.append(int((grids[-1].log_odds > 0).sum()))
+
+    watched = replay(log, config, 400, during=look, stages=stages)
+    assert_identical(watched, replay(log, config, 400, stages=stages))
+    np.testing.assert_array_equal(grids[-1].log_odds, watched.grid.log_odds)
+    np.testing.assert_array_equal(grids[-1].origin, watched.grid.origin)
+    assert 0 < occupied[0] < occupied[-1] and len(occupied) == 4
+    s = slam.Slam(config)
+    with pytest.raises(UsageError, match=r"Slam\.map: no scan was processed"):
+        s.map()
+    classic = slam.load_config("", None, ["filter.method=classic", "filter.particles=8"])
+
+    def spoil(s: slam.Slam, k: int) -> None:
+        if k == 59:
+            grid = s.map()
+            grid.log_odds[:] = 0.0
+            assert np.abs(s.map().log_odds).max() > 0  # a copy: the filter's own is untouched
+
+    replay(log, classic, 60, during=spoil)
+    ended = slam.Slam(config)
+    scan = log.scans
+    ended.update(slam.Scan(scan.time[0], scan.ranges[0], scan.scan_angles(0)), odometry=[0, 0, 0])
+    ended.finish()
+    with pytest.raises(UsageError, match=r"Slam\.map: the run is finished"):
+        ended.map()
 
 
 def test_the_run_times_its_parts(small, tmp_path):

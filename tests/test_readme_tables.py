@@ -155,7 +155,9 @@ def test_the_online_table_shows_the_json_and_the_slowest_update_keeps_up():
             f"| {name.removeprefix('online.')} | {tables.thousands(b['scans'])} | "
             f"{tables.thousands(b['updates'])} | {tables.fixed(b['scan_period_ms'], 0)} | "
             f"{tables.fixed(b['update_median_ms'], 1)} | {tables.fixed(b['update_p99_ms'], 1)} | "
-            f"{tables.fixed(b['update_max_ms'], 1)} |"
+            f"{tables.fixed(b['update_max_ms'], 1)} | "
+            f"{'—' if b['other_median_ms'] is None else tables.fixed(b['other_median_ms'], 2)} | "
+            f"{tables.fixed(b['map_s'], 2)} | {tables.fixed(b['finish_s'], 1)} |"
         )
         assert row in performance, row
         assert b["update_max_ms"] < b["scan_period_ms"], name  # the prose: it keeps up

@@ -260,7 +260,7 @@ def parts_table(benches: Benches) -> str:
 def online_table(benches: Benches) -> str:
     """``Slam.update`` per scan (``tools/benches/online.py``): per log the scans and updates, the
     scan period, the updates' median, 99th percentile and slowest call, the other scans' median,
-    and ``finish()``."""
+    ``map()`` after the last scan (blank in a file from before it was timed) and ``finish()``."""
     rows = []
     logs = [n.removeprefix("online.") for n in benches if n.startswith("online.")]
     logs.sort(key=lambda log: (log != "demo", LOG_ORDER.index(log) if log in LOG_ORDER else 99))
@@ -273,11 +273,12 @@ def online_table(benches: Benches) -> str:
             [log, thousands(b["scans"]), thousands(b["updates"]), fixed(b["scan_period_ms"], 0),
              fixed(b["update_median_ms"], 1), fixed(b["update_p99_ms"], 1),
              fixed(b["update_max_ms"], 1), "—" if other is None else fixed(other, 2),
-             fixed(b["finish_s"], 1)]
+             fixed(b["map_s"], 2) if "map_s" in b else "", fixed(b["finish_s"], 1)]
         )  # fmt: skip
     header = [
         "log", "scans", "updates", "scan period (ms)", "update median (ms)", "update p99 (ms)",
-        "slowest update (ms)", "other scans median (ms)", "`finish()` (s)",
+        "slowest update (ms)", "other scans median (ms)", "`map()` at the end (s)",
+        "`finish()` (s)",
     ]  # fmt: skip
     return table(header, rows)
 

@@ -3,16 +3,18 @@
 A robot that runs the filter live needs each scan processed before the next one arrives. Each
 bench feeds a log into a :class:`slam.Slam` (default configuration, seed 0, the log's nominal scan
 period) as ``slam run`` does — every selected scan with its synchronised odometry pose
-(:class:`slam.scans.LogScans`), read before the clock starts — and times every ``update()`` call
-and the final ``finish()`` (the post-filter stages). A first pass over the log's first
-:data:`WARMUP_SCANS` scans, finished too, compiles the kernels first (a warm numba cache is what a
-robot runs on: ``slam warmup``), so no compilation is in the figures.
+(:class:`slam.scans.LogScans`), read before the clock starts — and times every ``update()``
+call, ``map()`` after the last scan (the map so far) and the final ``finish()`` (the post-filter
+stages). A first pass over the log's first :data:`WARMUP_SCANS` scans, finished too, compiles
+the kernels first (a warm numba cache is what a robot runs on: ``slam warmup``), so no
+compilation is in the figures.
 
 Reported per log (milliseconds unless named): the scans and the updates among them (``rbpf``
 weighs a scan only after enough motion or time: :attr:`slam.Estimate.updated`), the log's median
 time between scans (``scan_period_ms``), the updates' median, 99th percentile and maximum, the
 other scans' median and maximum, the mean over every scan, the filter's total (``filter_s``),
-``finish_s``, and the step of the slowest update. ``demo`` is the simulated dataset20-scale robot
+``map_s`` (``Slam.map()``, the map so far, after the last scan), ``finish_s``, and the step of the
+slowest update. ``demo`` is the simulated dataset20-scale robot
 (1081 beams at 40 Hz, ``slam run demo``'s log), the others the benchmark logs.
 """
 
@@ -47,8 +49,9 @@ def _scans(name: str) -> tuple[list, float] | str:
     return list(selected), selected.scan_period()
 
 
-def _replay(name: str, fed: list, period: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per ``update()`` call its seconds and whether it updated, and the seconds of ``finish()``."""
+def _replay(name: str, fed: list, period: float) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Per ``update()`` call its seconds and whether it updated, and the seconds of ``map()`` after
+    the last scan and of ``finish()``."""
     import slam
 
     s = slam.Slam(slam.load_config(name), seed=0, scan_period=period)
@@ -60,8 +63,11 @@ def _replay(name: str, fed: list, period: float) -> tuple[np.ndarray, np.ndarray
         seconds[k] = time.perf_counter() - start
         updated[k] = estimate.updated
     start = time.perf_counter()
+    s.map()
+    map_s = time.perf_counter() - start
+    start = time.perf_counter()
     s.finish()
-    return seconds, updated, time.perf_counter() - start
+    return seconds, updated, map_s, time.perf_counter() - start
 
 
 def _ms(values: np.ndarray, q: float | None = None) -> float | None:
@@ -78,7 +84,7 @@ def _bench(name: str) -> Callable[[], dict]:
             return skip(loaded)
         fed, period = loaded
         _replay(name, fed[:WARMUP_SCANS], period)
-        seconds, updated, finish_s = _replay(name, fed, period)
+        seconds, updated, map_s, finish_s = _replay(name, fed, period)
         times = np.array([scan.time for scan, _ in fed])
         ups, others = seconds[updated], seconds[~updated]
         return {
@@ -92,6 +98,7 @@ def _bench(name: str) -> Callable[[], dict]:
             "other_max_ms": _ms(others, 100.0),
             "mean_ms_per_scan": round(float(seconds.mean()) * 1e3, 3),
             "filter_s": round(float(seconds.sum()), 2),
+            "map_s": round(map_s, 3),
             "finish_s": round(finish_s, 2),
             "slowest_update_step": int(np.flatnonzero(updated)[np.argmax(ups)]),
             "duration_s": round(float(times[-1] - times[0]), 1),
