@@ -383,9 +383,10 @@ class Slam:
                 grid.log_odds.copy(), grid.resolution, grid.origin, grid.config
             )
         steps, nodes = self._filter.best_ancestry()
-        poses = np.zeros((len(self.scans), 3))
-        poses[steps] = nodes
-        return build_map(self.scans, poses, steps, self.config)
+        # every scan at its last update's pose: only the nodes are drawn, and the grid's extent,
+        # taken over every pose, then spans the nodes (not the origin of the odometry's frame)
+        last = np.searchsorted(steps, np.arange(len(self.scans)), side="right") - 1
+        return build_map(self.scans, nodes[last], steps, self.config)
 
     def finish(self) -> Result:
         """End the run: the filter's output through the post-filter stages."""

@@ -159,7 +159,8 @@ class StepOutcome:
     step: int
     """Number of the processed scan (0-based)."""
     pose: F64
-    """``(3,)`` current estimate: the pose of the highest-weight particle."""
+    """``(3,)`` current estimate: the pose of :attr:`RbpfFilter.best` (the highest weight at the
+    last update; after a resampling, its first copy)."""
     particles: F64
     """``(P, 3)`` particle poses after the step (between ``rbpf`` updates: at the last update)."""
     weights: F64

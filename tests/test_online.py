@@ -269,6 +269,23 @@ def test_the_map_so_far_is_the_best_particles_and_changes_nothing(small):
         ended.map()
 
 
+def test_the_map_so_far_spans_the_robots_path_wherever_its_odometry_starts():
+    """Odometry 5 km from its frame's origin (a robot's odometry need not start at 0): the map
+    so far covers the room it drove through, not the 5 km back to the origin."""
+    from synthetic_logs import path as room_path
+    from synthetic_logs import ray_cast
+
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    s = slam.Slam(slam.load_config("", None, ["filter.particles=8"]), seed=0)
+    for k, pose in enumerate(room_path(40)):
+        scan = slam.Scan(100.0 + 0.1 * k, ray_cast(pose, angles), angles)
+        s.update(scan, odometry=pose + np.array([5000.0, -3000.0, 0.0]))
+    grid = s.map()
+    rows, cols = grid.shape
+    assert rows * grid.resolution < 20.0 and cols * grid.resolution < 20.0  # the 10 m × 6 m room
+    assert (grid.log_odds > 0).sum() > 100
+
+
 def test_the_run_times_its_parts(small, tmp_path):
     """``metrics.json``'s ``estimate_parts_s``: the filter and each default stage; their sum is
     the estimate's time (compilation included, as each part counts what it compiled)."""
