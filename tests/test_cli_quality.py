@@ -5,6 +5,7 @@ scored."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -269,16 +270,23 @@ def test_the_score_can_be_switched_off(small_log, tmp_path):
     assert "enabled = false" in (out / "config.toml").read_text().split("[quality]")[1]
 
 
+@pytest.mark.parametrize("linked", [False, True])
 def test_eval_of_a_registry_ece276a_run_reads_its_dataset_not_the_shared_folder(
-    small_log, tmp_path, capsys, monkeypatch
+    small_log, tmp_path, capsys, monkeypatch, linked
 ):
     """``slam run dataset20`` on a data directory whose ece276a/ holds datasets 20 and 21 side by
     side (docs/data.md): metrics.json's log_source is that folder, which names neither; `slam
     eval RUN` reads the config's dataset20 (on main: "expected the files of one ECE276A dataset
     in the folder ..., found those of 20, 21"), from --data-dir, or without it from the data
-    directory the run read (the default one, here empty, lacks the dataset's scans)."""
+    directory the run read (the default one, here empty, lacks the dataset's scans); also when
+    the data directory's ece276a/ is a link to a folder of another name."""
     data = tmp_path / "data"
-    (data / "ece276a").mkdir(parents=True)
+    if linked:
+        (tmp_path / "store" / "pr2data").mkdir(parents=True)
+        data.mkdir()
+        (data / "ece276a").symlink_to(tmp_path / "store" / "pr2data")
+    else:
+        (data / "ece276a").mkdir(parents=True)
     for number in ("20", "21"):
         for stream in ("Encoders", "Imu", "Hokuyo"):
             shutil.copy(small_log / f"{stream}20.npz", data / "ece276a" / f"{stream}{number}.npz")
@@ -287,7 +295,7 @@ def test_eval_of_a_registry_ece276a_run_reads_its_dataset_not_the_shared_folder(
                  "--quiet", "--no-record"]) == 0  # fmt: skip
     capsys.readouterr()
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["log_source"] == str((data / "ece276a").resolve())
+    assert metrics["log_source"] == os.path.abspath(data / "ece276a")
     (tmp_path / "empty").mkdir()
     monkeypatch.setenv("SLAM_DATA_DIR", str(tmp_path / "empty"))
     for extra in (["--data-dir", str(data)], []):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -214,8 +215,8 @@ def quality_stage(log: Log, trajectory: Trajectory, config: Config, out_dir: Pat
     import warnings
 
     metrics: dict[str, Any] = {}
-    if log.source is not None:
-        metrics["log_source"] = str(Path(log.source).resolve())
+    if log.source is not None:  # absolute, links kept: a data directory reached through a link
+        metrics["log_source"] = os.path.abspath(log.source)  # still names the dataset's place
     if not config.quality.enabled or log.scans is None or len(trajectory) == 0:
         return metrics
     try:
