@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -977,6 +978,8 @@ def override_list(overrides: Iterable[str]) -> list[str]:
     expected = "overrides: expected a list of 'section.key=value' strings"
     if isinstance(overrides, str):
         raise UsageError(f"{expected}, found the string {overrides!r}")
+    if isinstance(overrides, (bytes, bytearray, Mapping)):
+        raise UsageError(f"{expected}, found {type(overrides).__name__}")
     try:
         items = list(overrides)
     except TypeError:
@@ -1072,17 +1075,24 @@ def outside_sections(source: str, key: str) -> str:
 
 def case_variant(dataset: str) -> str | None:
     """The shipped configuration (``configs/<name>.toml``) whose name differs from ``dataset``
-    only by letter case (``intel`` for ``Intel``), else ``None`` (also when one is ``dataset``)."""
+    only by letter case or surrounding spaces (``intel`` for ``Intel`` or ``intel ``), else
+    ``None`` (also when one is ``dataset``)."""
     shipped = [path.stem for path in sorted(config_dir().glob("*.toml"))]
     if not dataset or dataset in shipped:
         return None
-    return next((name for name in shipped if name.casefold() == dataset.casefold()), None)
+    wanted = dataset.strip().casefold()
+    return next((name for name in shipped if name.casefold() == wanted), None)
 
 
 def shipped_config(dataset: str) -> Path | None:
     """``configs/<dataset>.toml`` when the project ships it, else ``None`` (a log of one's own
     runs on the defaults). A name that differs from a shipped configuration's only by letter case
     (``Intel``) is a :class:`ConfigError` naming both, not the defaults."""
+    if dataset.endswith(".toml") or "/" in dataset or "\\" in dataset:
+        raise ConfigError(
+            f"dataset {dataset!r}: expected a dataset's name such as 'intel'; a configuration "
+            "file is given as config_file (--config FILE)"
+        )
     near = case_variant(dataset)
     if near is not None:
         raise ConfigError(f"no configuration {dataset!r}; did you mean {near!r}?")
@@ -1144,10 +1154,21 @@ def config_for(owner: str, config: Config | None, seed: int | None = None) -> Co
             f"{type(config).__name__}"
         )
     if seed is not None:
-        config = dataclasses.replace(
-            config, filter=dataclasses.replace(config.filter, seed=int(seed))
-        )
+        value = seed_value(owner, seed)
+        if value < 0:
+            raise UsageError(f"{owner}(seed): expected an integer ≥ 0, found {seed!r}")
+        config = dataclasses.replace(config, filter=dataclasses.replace(config.filter, seed=value))
     return config
+
+
+def seed_value(owner: str, seed: object) -> int:
+    """``seed`` as the integer it is, or one :class:`UsageError` naming ``owner`` (``1.9`` is not
+    silently 1, ``"x"`` not a bare ``ValueError``; the range is the configuration's to check)."""
+    from slam.errors import UsageError
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise UsageError(f"{owner}(seed): expected an integer ≥ 0, found {seed!r}")
+    return int(seed)
 
 
 def to_dict(config: Any) -> dict[str, Any]:

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 import slam.jit_background as jit_background
 from slam.budget import release_free_memory
-from slam.config import Config, Override, dumps, load_config, override_list
+from slam.config import Config, Override, dumps, load_config, override_list, seed_value
 from slam.errors import UsageError
 from slam.io import sources
 from slam.io.atomic import atomic_dir, check_output_dir, write_png, write_text
@@ -347,7 +347,8 @@ def run_dataset(
         for key, value in options.items()
     ]
     if seed is not None:
-        settings.append(Override(f"filter.seed={int(seed)}", f"slam.run(seed={seed!r})"))
+        value = seed_value("slam.run", seed)
+        settings.append(Override(f"filter.seed={value}", f"slam.run(seed={seed!r})"))
     folder = resolve_data_dir(None if data_dir is None else Path(data_dir))
     ref = sources.resolve(name, folder, where="slam.run")
     base = config if config is not None else dataset_config(ref)

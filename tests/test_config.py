@@ -2,6 +2,7 @@
 
 import re
 
+import numpy as np
 import pytest
 
 from slam.config import Config, dumps, load_config, parse_override
@@ -110,6 +111,26 @@ def test_overrides_given_as_one_string_are_refused():
     with pytest.raises(UsageError, match=r"strings, found an item 3 \(int\)"):
         load_config(overrides=["filter.every=2", 3])
     assert load_config(overrides=("filter.every=2",)).filter.every == 2  # any iterable of str
+    for wrong, kind in ((b"filter.every=2", "bytes"), ({"filter.every=2": 1}, "dict")):
+        with pytest.raises(UsageError, match=rf"strings, found {kind}$"):
+            load_config(overrides=wrong)
+
+
+@pytest.mark.parametrize("seed", [1.9, "x", True])
+def test_a_seed_that_is_not_a_whole_number_is_refused(seed):
+    """``Slam(seed=1.9)`` is not silently seed 1, ``slam.run(seed="x")`` not a bare ValueError."""
+    import slam
+    from slam.errors import UsageError
+
+    with pytest.raises(
+        UsageError, match=rf"^Slam\(seed\): expected an integer ≥ 0, found {seed!r}$"
+    ):
+        slam.Slam(seed=seed)
+    with pytest.raises(UsageError, match=r"^slam\.run\(seed\): expected an integer ≥ 0"):
+        slam.run("demo", seed=seed)
+    assert slam.Slam(seed=np.int64(3)).config.filter.seed == 3
+    with pytest.raises(UsageError, match=r"^Slam\(seed\): expected an integer ≥ 0, found -1$"):
+        slam.Slam(seed=-1)
 
 
 def test_a_key_outside_any_section_of_a_config_file(tmp_path):
@@ -147,6 +168,19 @@ def test_a_dataset_name_in_the_wrong_letter_case_is_an_error():
     assert str(info.value) == "no configuration 'Intel'; did you mean 'intel'?"
     with pytest.raises(ConfigError, match="no configuration 'DATASET20'; did you mean 'dataset20'"):
         load_config("DATASET20")
+    with pytest.raises(ConfigError, match="no configuration 'intel '; did you mean 'intel'"):
+        load_config("intel ")
     assert load_config("intel").lidar.no_return == 80.0
     own = load_config("my-building")  # no configs/my-building.toml: the defaults, named
     assert own.dataset == "my-building" and own.lidar == Config().lidar
+
+
+@pytest.mark.parametrize("name", ["intel.toml", "configs/intel", "configs\\intel"])
+def test_a_file_name_given_as_the_dataset_is_an_error(name):
+    """``load_config("configs/intel.toml")`` is not silently the defaults: a file is config_file."""
+    with pytest.raises(ConfigError) as info:
+        load_config(name)
+    assert str(info.value) == (
+        f"dataset {name!r}: expected a dataset's name such as 'intel'; a configuration file is "
+        "given as config_file (--config FILE)"
+    )

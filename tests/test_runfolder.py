@@ -109,8 +109,8 @@ def test_force_refuses_a_folder_holding_the_users_files_and_replaces_it_once_the
     assert main(command(kind, outputs, out)) == 2
     label = KINDS[kind].label
     assert error_line(capsys) == (
-        f"{out}: --force replaces only what slam wrote, but this {label} also holds files slam "
-        "did not write (my_notes.txt, plots/); it was left alone (move them out or choose "
+        f"{out}: --force replaces only what slam wrote, but this {label} also holds entries "
+        "slam did not write (my_notes.txt, plots/); it was left alone (move them out or choose "
         "another --out)"
     )
     assert snapshot(out) == before and no_partials(tmp_path)
@@ -207,14 +207,15 @@ def test_the_message_names_five_entries_and_counts_the_rest(tmp_path):
     with atomic_dir(out, kind="localize") as tmp:
         (tmp / "metrics.json").write_text("{}")
         (tmp / "config.toml").write_text("")
-    for i in range(8):
+    for i in range(7):
         (out / f"note{i}.txt").write_text("mine")
+    (out / "a\nb").write_text("mine")  # shown as its repr: the message stays one line
     os.symlink("/", out / "link")  # a link is an entry of its own, never followed
     with pytest.raises(UsageError) as exc:
         check_output_dir(out, "localize", force=True)
     assert str(exc.value) == (
         f"{out}: --force replaces only what slam wrote, but this localization folder also holds "
-        "files slam did not write (link, note0.txt, note1.txt, note2.txt, note3.txt and 4 more); "
+        "entries slam did not write ('a\\nb', link, note0.txt, note1.txt, note2.txt and 4 more); "
         "it was left alone (move them out or choose another --out)"
     )
     assert len(list(out.iterdir())) == 12 and no_partials(tmp_path)
@@ -232,8 +233,8 @@ def test_a_file_saved_into_the_folder_while_the_command_runs_is_kept(tmp_path):
         (tmp / "config.toml").write_text("")
         (out / "my_notes.txt").write_text("hi")
     assert str(late.value) == (
-        f"{out}: --force replaces only what slam wrote, but this run folder also holds files slam "
-        "did not write (my_notes.txt); this command's result was discarded and nothing was "
+        f"{out}: --force replaces only what slam wrote, but this run folder also holds entries "
+        "slam did not write (my_notes.txt); this command's result was discarded and nothing was "
         "replaced (move them out or choose another --out)"
     )
     assert (out / "metrics.json").read_text() == '{"seed": 1}'

@@ -238,6 +238,20 @@ def test_texture_and_run_refuse_an_unknown_name_in_one_line(tmp_path, capsys, mo
     assert err.count("\n") == 1 and not (tmp_path / "o").exists()
 
 
+def test_a_dataset_name_in_another_case_or_with_spaces_is_named(tmp_path, monkeypatch):
+    """``Intel`` or ``intel `` is not a dataset, and the message names the one it resembles;
+    a name like no dataset gets the list of what a name may be."""
+    monkeypatch.chdir(tmp_path)
+    for name, near in (("Intel", "intel"), ("intel ", "intel"), ("DEMO", "demo")):
+        with pytest.raises(UsageError) as info:
+            sources.resolve(name, tmp_path, where="slam run NAME")
+        assert (
+            str(info.value) == f"slam run NAME: {name!r} is not a dataset; did you mean {near!r}?"
+        )
+    with pytest.raises(UsageError, match=r"'intell' is not 'demo', a registry dataset \("):
+        sources.resolve("intell", tmp_path, where="slam run NAME")
+
+
 def test_a_missing_path_says_no_such_file(tmp_path, monkeypatch, capsys):
     """A NAME with a path separator or a log's suffix is a path: when it is missing, the message
     says so (on main: "'…/intel.clf' is not 'demo', a registry dataset (…), the path of …")."""

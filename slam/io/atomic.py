@@ -378,12 +378,14 @@ def check_only_ours(
         ) from None
     if not foreign:
         return
-    names = ", ".join(foreign[:FOREIGN_NAMED])
+    shown = [name if name.isprintable() else repr(name) for name in foreign]  # one line
+    names = ", ".join(shown[:FOREIGN_NAMED])
     if len(foreign) > FOREIGN_NAMED:
         names += f" and {len(foreign) - FOREIGN_NAMED} more"
     raise UsageError(
-        f"{path}: --force replaces only what slam wrote, but this {spec.label} also holds files "
-        f"slam did not write ({names}); {outcome} (move them out or choose another {option})"
+        f"{path}: --force replaces only what slam wrote, but this {spec.label} also holds "
+        f"entries slam did not write ({names}); {outcome} (move them out or choose another "
+        f"{option})"
     )
 
 
@@ -423,7 +425,7 @@ def _appeared(path: Path) -> UsageError:
 def _changed(path: Path) -> UsageError:
     return UsageError(
         f"{path}: the folder changed while this command was running (another process replaced "
-        "it); this command's result was discarded and nothing was replaced"
+        "it, or wrote into it); this command's result was discarded and nothing was replaced"
     )
 
 

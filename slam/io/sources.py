@@ -241,6 +241,9 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
     tail = f"; {hint}" if hint else ""
     if looks_like_path(name):
         raise UsageError(f"{where}: {name}: no such file or folder{missing_path_hint(path)}{tail}")
+    near = [known for known in (*datasets, "demo") if known.casefold() == name.strip().casefold()]
+    if near:
+        raise UsageError(f"{where}: {name!r} is not a dataset; did you mean {near[0]!r}?{tail}")
     raise UsageError(f"{where}: {name!r} is not {names_hint()}{tail}")
 
 
