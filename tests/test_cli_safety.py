@@ -189,6 +189,13 @@ def test_final_rename_never_replaces_a_folder_that_appeared_meanwhile(
             for name in content:
                 (out / name).write_text("theirs")
         assert out.is_dir() and sorted(p.name for p in out.iterdir()) == list(content)
+        kept = tmp_path / f"{out.name}-2"  # the finished result, not lost: named in the error
+        assert str(kept) in str(appeared.excinfo.value)
+        assert sorted(p.name for p in kept.iterdir()) == [
+            ".slam-run",
+            "config.toml",
+            "metrics.json",
+        ]
     assert not partials(tmp_path)
 
 

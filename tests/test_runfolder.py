@@ -223,7 +223,8 @@ def test_the_message_names_five_entries_and_counts_the_rest(tmp_path):
 
 def test_a_file_saved_into_the_folder_while_the_command_runs_is_kept(tmp_path):
     """The check is made again when the new folder is complete: a note saved meanwhile keeps the
-    old folder (and the note), the new result is discarded, no partial folder is left."""
+    old folder (and the note), the new result is kept beside it (``out-2``), no partial folder
+    is left."""
     out = tmp_path / "out"
     with atomic_dir(out, kind="run") as tmp:
         (tmp / "metrics.json").write_text('{"seed": 1}')
@@ -234,11 +235,14 @@ def test_a_file_saved_into_the_folder_while_the_command_runs_is_kept(tmp_path):
         (out / "my_notes.txt").write_text("hi")
     assert str(late.value) == (
         f"{out}: --force replaces only what slam wrote, but this run folder also holds entries "
-        "slam did not write (my_notes.txt); this command's result was discarded and nothing was "
-        "replaced (move them out or choose another --out)"
+        "slam did not write (my_notes.txt); nothing was replaced (move them out or choose "
+        f"another --out); this command's result is in {tmp_path / 'out-2'} instead"
     )
     assert (out / "metrics.json").read_text() == '{"seed": 1}'
     assert (out / "my_notes.txt").read_text() == "hi" and no_partials(tmp_path)
+    kept = tmp_path / "out-2"
+    assert (kept / "metrics.json").read_text() == '{"seed": 2}'
+    assert sorted(p.name for p in kept.iterdir()) == [".slam-run", "config.toml", "metrics.json"]
 
 
 @pytest.mark.parametrize("exchange", [True, False], ids=["rename-exchange", "move-aside"])
@@ -252,7 +256,9 @@ def test_a_file_saved_just_before_the_swap_is_kept_too(tmp_path, monkeypatch, ex
     monkeypatch.setattr(atomic, "check_only_ours", lambda *args, **kwargs: None)
     if not exchange:
         monkeypatch.setattr(atomic, "_exchange", lambda a, b: False)
-    changed = pytest.raises(UsageError, match="this command's result was discarded")
+    (tmp_path / "out-2").mkdir()  # taken: the result goes to the next free name
+    kept = tmp_path / "out-3"
+    changed = pytest.raises(UsageError, match=f"this command's result is in {kept} instead$")
     with changed, atomic_dir(out, overwrite=True, kind="run") as tmp:
         (tmp / "metrics.json").write_text('{"seed": 2}')
         (tmp / "config.toml").write_text("")
@@ -261,6 +267,8 @@ def test_a_file_saved_just_before_the_swap_is_kept_too(tmp_path, monkeypatch, ex
         ".slam-run", "config.toml", "metrics.json", "my_notes.txt"
     ]  # fmt: skip
     assert (out / "metrics.json").read_text() == '{"seed": 1}' and no_partials(tmp_path)
+    assert (kept / "metrics.json").read_text() == '{"seed": 2}'
+    assert not any((tmp_path / "out-2").iterdir())
 
 
 def test_the_names_added_later_are_those_the_commands_write():

@@ -23,7 +23,10 @@ The folder protocol (:func:`atomic_dir`):
   the old folder is swapped out with ``RENAME_EXCHANGE`` (else moved aside first) and deleted
   only after checking it is the very folder (same device and inode) found to be ours, still
   holding nothing slam did not write (a file saved into it meanwhile makes the command fail and
-  keeps the folder as it is).
+  keeps the folder as it is);
+* a finished output that could not be put at its destination that way (a folder appeared there,
+  or the one to replace changed) is not lost: it is renamed to the first free ``<destination>-N``
+  (N = 2, 3, …) and the error (exit 2) says where it is.
 """
 
 from __future__ import annotations
@@ -363,16 +366,14 @@ def check_only_ours(
     """Raise :class:`~slam.errors.UsageError` when the finished output folder ``path`` of
     ``kind`` holds anything slam did not write (:func:`slam.io.runfolder.foreign_entries`) or
     its marker cannot be read: ``--force`` would delete it. ``late``: found once the new folder
-    was complete (the message says that result was discarded)."""
+    was complete (:func:`atomic_dir` then keeps that result beside ``path`` and says where)."""
     spec = get_kind(kind)
-    if late:
-        outcome = "this command's result was discarded and nothing was replaced"
-    else:
-        outcome = "it was left alone"
+    outcome = "nothing was replaced" if late else "it was left alone"
+    refusal = _NotCommitted if late else UsageError
     try:
         foreign = foreign_entries(path, spec)
     except OSError as exc:
-        raise UsageError(
+        raise refusal(
             f"{path}: --force cannot tell what slam wrote into this {spec.label}: its marker "
             f"{spec.marker} cannot be read ({exc.strerror or exc}); {outcome}"
         ) from None
@@ -382,7 +383,7 @@ def check_only_ours(
     names = ", ".join(shown[:FOREIGN_NAMED])
     if len(foreign) > FOREIGN_NAMED:
         names += f" and {len(foreign) - FOREIGN_NAMED} more"
-    raise UsageError(
+    raise refusal(
         f"{path}: --force replaces only what slam wrote, but this {spec.label} also holds "
         f"entries slam did not write ({names}); {outcome} (move them out or choose another "
         f"{option})"
@@ -415,18 +416,44 @@ def _signals_deferred() -> Iterator[None]:
             raise Terminated(signum)
 
 
+class _NotCommitted(UsageError):
+    """The finished output could not be put at its path, which changed while the command ran:
+    :func:`atomic_dir` keeps it beside that path (:func:`_keep_beside`) and says where."""
+
+
 def _appeared(path: Path) -> UsageError:
-    return UsageError(
-        f"{path}: another process created this folder while this command was running; this "
-        "command's result was discarded and nothing was replaced"
+    return _NotCommitted(
+        f"{path}: another process created this folder while this command was running; nothing "
+        "was replaced"
     )
 
 
 def _changed(path: Path) -> UsageError:
-    return UsageError(
+    return _NotCommitted(
         f"{path}: the folder changed while this command was running (another process replaced "
-        "it, or wrote into it); this command's result was discarded and nothing was replaced"
+        "it, or wrote into it); nothing was replaced"
     )
+
+
+KEEP_TRIES = 1000
+"""Sibling names ``<path>-2`` … tried for an output that could not be put at its path."""
+
+
+def _keep_beside(staging: Path, path: Path) -> Path | None:
+    """Rename the finished folder ``staging`` to the first free ``<path>-N`` (N = 2, 3, …), so
+    that a result the command could not put at ``path`` is not lost; None when none was free."""
+    for k in range(2, KEEP_TRIES + 2):
+        candidate = path.with_name(f"{path.name}-{k}")
+        try:
+            rename_noreplace(staging, candidate)
+        except FileExistsError:
+            continue
+        except OSError:
+            return None
+        with contextlib.suppress(OSError):
+            os.unlink(candidate / OWNER_FILE)
+        return candidate
+    return None
 
 
 def _same_folder(folder: Path, plan: OutputPlan) -> bool:
@@ -573,9 +600,16 @@ def atomic_dir(
         with contextlib.suppress(OSError):
             os.unlink(path / OWNER_FILE)
     except BaseException as exc:
+        kept = None
         with _signals_deferred():
+            if isinstance(exc, _NotCommitted) and staging is not None and staging.ours:
+                kept = _keep_beside(staging.path, path)  # complete: kept, not deleted
+                staging.ours = kept is None
             if staging is not None and staging.ours:
                 remove_owned_tree(staging.path)
+        if isinstance(exc, _NotCommitted):
+            where = f"is in {kept} instead" if kept is not None else "was discarded"
+            raise UsageError(f"{exc}; this command's result {where}") from None
         if staging is not None and _about_the_output(exc, staging.path):
             raise OSError(exc.errno, f"{exc.strerror}; nothing was written", str(path)) from None
         raise
