@@ -304,3 +304,31 @@ def test_eval_of_a_registry_ece276a_run_reads_its_dataset_not_the_shared_folder(
         assert report["dataset"] == "dataset20"
         assert report["quality"]["score"] == metrics["quality"]["score"] > 0.99
         assert report["quality"]["checked"] == metrics["quality"]["checked"]
+
+
+def test_a_registry_run_of_another_log_says_why_there_is_no_ground_truth(
+    carmen_dir, tmp_path, capsys
+):
+    """intel's run with its times moved away: its relations match nothing (a warning) and the map
+    score refuses it; the error says why there is no ground truth either (it ended in a literal
+    'None')."""
+    data = ["--data-dir", str(carmen_dir.parent)]
+    out = tmp_path / "intel"
+    run = ["run", "intel", *data, "--max-scans", "150", "--out", str(out), "--quiet", "--no-record"]
+    assert main(run) == 0
+    lines = (out / "trajectory.tum").read_text().splitlines()
+    moved = [
+        line if line.startswith("#") else " ".join([f"{float(line.split()[0]) + 1e5:.6f}",
+                                                    *line.split()[1:]])
+        for line in lines
+    ]  # fmt: skip
+    (out / "trajectory.tum").write_text("\n".join(moved) + "\n")
+    capsys.readouterr()
+    assert main(["eval", str(out), *data]) == 2
+    warning, error = capsys.readouterr().err.splitlines()
+    assert warning.startswith("slam: warning: ") and warning.endswith("; left out")
+    assert "is it the same log?" in error and "None" not in error
+    assert error.endswith(
+        "and no ground truth either: the dataset's relations match none of the run's times (left "
+        "out above)"
+    )

@@ -112,6 +112,7 @@ def run_eval(args: argparse.Namespace) -> int:
             # not re-timed) must not cost the map score.
             print(f"slam: warning: {exc}; left out", file=sys.stderr)
             relations = None
+            no_truth = "the dataset's relations match none of the run's times (left out above)"
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(trajectory, reference, args))
@@ -130,7 +131,8 @@ def run_eval(args: argparse.Namespace) -> int:
             if args.quality:
                 raise
             if "relations" not in result and reference is None:
-                raise type(exc)(f"{exc}; and no ground truth either: {no_truth}") from None
+                why = f": {no_truth}" if no_truth else ""
+                raise type(exc)(f"{exc}; and no ground truth either{why}") from None
             print(f"slam: warning: map quality not computed: {exc}", file=sys.stderr)
         else:
             picture = render_quality(scored)
