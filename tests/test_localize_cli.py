@@ -8,12 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_process import finished_run
-from synthetic_logs import carmen_lines, path, ray_cast, write_carmen
+from synthetic_logs import carmen_lines, flaser_line, path, ray_cast, write_carmen
 
 from slam.cli import main
 from slam.io.tum import read_tum
+from slam.localize.maps import LikelihoodMap, load_map
 
 SCANS = 160
+BACK_AT, BACK_S = 50, 0.35
+"""The clock of :func:`stepped_log` steps back ``BACK_S`` at scan ``BACK_AT`` (as intel's does)."""
 
 
 def one_line_error(capsys) -> str:
@@ -236,3 +239,145 @@ def test_map_yaml_with_a_rotated_origin_is_one_line(room, tmp_path, capsys):
     bad.write_text(text.replace(origin, origin.replace(", 0.0]", ", 0.5]")))
     assert main(["localize", str(log), "--map", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "origin yaw 0.5 rad" in one_line_error(capsys)
+
+
+def test_a_negative_initial_needs_no_equals_sign(room, tmp_path, capsys):
+    """The bug: ``--initial -3,-1,0.15,0.1`` was read as an option ("argument --initial:
+    expected one argument"); only ``--initial=-3,...`` worked. Both forms now give the same
+    run, and a negative list of the wrong length is the command's own one-line error."""
+    log, run = room
+    common = ["localize", str(log), "--map", str(run), "--max-scans", "20", "--no-record",
+              "--quiet"]  # fmt: skip
+    assert main([*common, "--initial", "-3,-1,0.15,0.1", "--out", str(tmp_path / "a")]) == 0
+    assert main([*common, "--initial=-3,-1,0.15,0.1", "--out", str(tmp_path / "b")]) == 0
+    a = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    b = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    assert a["initial"] == b["initial"] == [-3.0, -1.0, 0.15, 0.1]
+    assert (tmp_path / "a" / "trajectory.tum").read_bytes() == (
+        tmp_path / "b" / "trajectory.tum"
+    ).read_bytes()
+    assert main([*common, "--initial", "-.5,-1e0,-0.1", "--out", str(tmp_path / "c")]) == 0
+    assert json.loads((tmp_path / "c" / "metrics.json").read_text())["initial"] == [-0.5, -1, -0.1]
+    assert main([*common, "--initial", "-3,-1", "--out", str(tmp_path / "d")]) == 2
+    assert one_line_error(capsys) == (
+        "slam: error: --initial '-3,-1': expected x,y,theta or x,y,theta,sigma (metres, "
+        "radians), found 2 values"
+    )
+    assert not (tmp_path / "d").exists()
+
+
+def extent(lmap: LikelihoodMap) -> str:
+    """The map's extent as the refusals of ``--initial`` give it."""
+    (x0, y0), (rows, cols), res = lmap.origin, lmap.shape, lmap.resolution
+    return f"x {x0:.2f} to {x0 + cols * res:.2f} m, y {y0:.2f} to {y0 + rows * res:.2f} m"
+
+
+def test_an_initial_pose_off_the_map_is_refused_before_the_log_is_read(room, tmp_path, capsys):
+    """The bug: ``--initial 1000,1000,0`` ran to the end, exit 0, no warning, 0 % localized.
+    Now a pose outside the map's extent, or with no known-free cell within its sigma, is one
+    line naming --initial, the pose and the extent, exit 2, nothing written; it is checked
+    before the log is read (a log that cannot be read gives the same line)."""
+    log, run = room
+    unreadable = tmp_path / "bad.clf"
+    unreadable.write_text("FLASER 3 1 2\n")
+    span = extent(load_map(run))
+    x0, y0 = load_map(run).origin
+    corner = f"{x0 + 0.05:g},{y0 + 0.05:g}"
+    cases = [
+        ("1000,1000,0", f"the pose (1000, 1000) lies outside the map ({span}): expected a pose "
+         "in the map's frame, or --global"),
+        (f"{corner},0,0.1", f"the pose ({corner.replace(',', ', ')}) has no known-free cell of "
+         f"the map within 0.1 m (its sigma); the map spans {span}: expected a pose in its free "
+         "space, or --global"),
+    ]  # fmt: skip
+    for where in (log, unreadable):
+        for value, message in cases:
+            out = tmp_path / "o"
+            assert main(["localize", str(where), "--map", str(run), "--initial", value,
+                         "--out", str(out), "--quiet"]) == 2  # fmt: skip
+            assert one_line_error(capsys) == f"slam: error: --initial {value!r}: {message}"
+            assert not out.exists()
+    # 0.5 m beyond the room's wall at x = 5 m the default sigma (1 m) reaches free cells
+    assert main(["localize", str(log), "--map", str(run), "--initial", "5.5,-1,0", "--max-scans",
+                 "5", "--no-record", "--out", str(tmp_path / "ok"), "--quiet"]) == 0  # fmt: skip
+
+
+def test_check_initial_measures_sigma_to_the_nearest_free_cell():
+    """On a hand-made map of 0.1 m cells whose only free cell spans x 1.0-1.1, y 1.0-1.1: a
+    pose 0.19 m right of it is accepted with sigma 0.2, refused with 0.18; a pose outside the
+    2 m x 2 m map is refused whatever its sigma."""
+    from slam.errors import UsageError
+    from slam.localize.run import check_initial
+
+    occupied = np.zeros((20, 20), bool)
+    occupied[0, 0] = True
+    free = np.zeros((20, 20), bool)
+    free[10, 10] = True
+    lmap = LikelihoodMap.from_masks(occupied, free, 0.1, (0.0, 0.0))
+    check_initial(lmap, (1.29, 1.05, 0.0, 0.2), 1.0)
+    check_initial(lmap, (1.29, 1.05, 0.0), 0.2)  # the default sigma when none is given
+    check_initial(lmap, (1.05, 1.05, 0.0, 1e-6), 1.0)  # inside the free cell
+    with pytest.raises(UsageError) as exc:
+        check_initial(lmap, (1.29, 1.05, 0.0, 0.18), 1.0)
+    assert str(exc.value) == (
+        "--initial '1.29,1.05,0,0.18': the pose (1.29, 1.05) has no known-free cell of the map "
+        "within 0.18 m (its sigma); the map spans x 0.00 to 2.00 m, y 0.00 to 2.00 m: expected "
+        "a pose in its free space, or --global"
+    )
+    with pytest.raises(UsageError, match=r"the pose \(2.01, 1\) lies outside the map"):
+        check_initial(lmap, (2.01, 1.0, 0.0, 100.0), 1.0)
+    with pytest.raises(UsageError, match=r"the pose \(1, -0.5\) lies outside the map"):
+        check_initial(lmap, (1.0, -0.5, 0.0), 10.0)
+
+
+def stepped_log(folder: Path) -> Path:
+    """The room's log with a clock that steps back ``BACK_S`` at scan ``BACK_AT``."""
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    times = 100.0 + 0.1 * np.arange(SCANS)
+    times[BACK_AT:] -= BACK_S
+    poses = path(SCANS)
+    lines = [flaser_line(ray_cast(p, angles), p, t) for p, t in zip(poses, times, strict=True)]
+    return write_carmen(folder, lines, "stepped.clf")
+
+
+def test_a_clock_stepping_back_is_written_and_counted_as_slam_run_does(room, tmp_path, capsys):
+    """The bugs: on a log whose clock runs backwards ``slam localize`` wrote ``trajectory.tum``
+    in file order (backward timestamps, which evo and the TUM tools reject) and no
+    ``trajectory_file_order.tum``, and counted ``localized_time_s`` over the positive gaps in
+    file order: the time before the step back twice, more than the log lasts (15.8 s of a
+    15.55 s log here). Now the trajectory files are ``slam run``'s and the localized time is
+    summed in time order; ``slam eval`` reads the folder."""
+    _, run = room
+    log = stepped_log(tmp_path / "log")
+    out = tmp_path / "loc"
+    x, y, theta = read_tum(run / "trajectory.tum").poses[0]
+    assert main(["localize", str(log), "--map", str(run), f"--initial={x},{y},{theta},0.1",
+                 "--no-record", "--out", str(out), "--quiet"]) == 0  # fmt: skip
+    clock = ("the log's clock runs backwards at 1 of 160 poses: trajectory.tum is sorted by "
+             "time, trajectory_file_order.tum keeps the file order")  # fmt: skip
+    assert f"slam: warning: {clock}\n" in capsys.readouterr().err
+    m = json.loads((out / "metrics.json").read_text())
+    assert clock in m["warnings"]
+    assert m["localized_share"] == 1.0
+    assert m["duration_s"] == 15.55 and m["localized_time_s"] == 15.55
+    with np.load(out / "localization.npz") as d:
+        times, poses = d["times"], d["poses"]
+    assert np.count_nonzero(np.diff(times) < 0) == 1  # the npz keeps the file order
+    file_order = read_tum(out / "trajectory_file_order.tum")
+    np.testing.assert_allclose(file_order.times, times, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(file_order.poses[:, :2], poses[:, :2], rtol=0, atol=1e-6)
+    by_time = read_tum(out / "trajectory.tum")
+    order = np.argsort(times, kind="stable")
+    assert np.all(np.diff(by_time.times) >= 0)
+    np.testing.assert_allclose(by_time.times, times[order], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(by_time.poses[:, :2], poses[order, :2], rtol=0, atol=1e-6)
+    # the same writer as slam run: the same bytes for the same poses
+    from slam.io.exports import write_trajectories
+    from slam.trajectory import Trajectory
+
+    write_trajectories(tmp_path, Trajectory(times, poses))
+    for name in ("trajectory.tum", "trajectory_file_order.tum"):
+        assert (out / name).read_bytes() == (tmp_path / name).read_bytes(), name
+    assert main(["eval", str(out), "--dataset", str(log), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["poses"] == SCANS and report["trajectory"] == str(out / "trajectory.tum")

@@ -3,14 +3,16 @@
 Localize LOG (a dataset name, 'demo', or a path) on the map of a slam run folder (or a map.npz, or
 a ROS map_server map.yaml). With --initial the particles start around that pose; without it (or
 with --global) an exact histogram filter over the map's free cells and headings finds the pose
-first. Writes trajectory.tum, localization.npz, metrics.json, map.png, config.toml and
-recording.rrd to the run folder.
+first. Writes trajectory.tum (sorted by time, and trajectory_file_order.tum when the log's clock
+runs backwards, as slam run), localization.npz, metrics.json, map.png, config.toml and
+recording.rrd to the run folder. A negative coordinate needs no '=': --initial -19,-24,0 works.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from pathlib import Path
 
 from slam.commands._common import (
@@ -51,7 +53,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scan_arguments(parser)
     add_output_arguments(parser, "folder of slam localize")
     add_data_dir_argument(parser)
+    accept_negative_numbers(parser)
     parser.set_defaults(func=localize_command)
+
+
+NUMBER_LIST = re.compile(r"^-\.?\d[\d.eE+\-,\s]*$")
+"""What ``slam localize``'s parser reads as a value, not an option, though it starts with ``-``:
+a negative number or a list of numbers (``--initial -19,-24,0``)."""
+
+
+def accept_negative_numbers(parser: argparse.ArgumentParser) -> None:
+    """Let ``parser`` take an argument such as ``-19,-24,0`` as a value (argparse otherwise reads
+    it as an unknown option and says ``--initial: expected one argument``).
+
+    argparse decides what looks like a negative number with the parser's own
+    ``_negative_number_matcher`` (``-19`` or ``-1.5``, not a list); this parser's matcher
+    accepts :data:`NUMBER_LIST` too. No option of the command looks like a number, so nothing
+    else changes; ``--initial=-19,-24,0`` keeps working."""
+    default = parser._negative_number_matcher
+    parser._negative_number_matcher = re.compile(f"{NUMBER_LIST.pattern}|{default.pattern}")
 
 
 def localize_command(args: argparse.Namespace) -> int:

@@ -159,6 +159,7 @@ LOCALIZE_WRITES = (
     "config.toml",
     "metrics.json",
     "trajectory.tum",
+    "trajectory_file_order.tum",
     "localization.npz",
     "map.png",
     "recording.rrd",

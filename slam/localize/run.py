@@ -5,7 +5,9 @@ selected scan to a :class:`~slam.localize.localizer.Localizer` and writes, atomi
 appears complete or not at all):
 
 * ``trajectory.tum`` — one pose per scan (also while not localized: then the global filter's
-  best state, or the tracked pose during a recovery);
+  best state, or the tracked pose during a recovery), sorted by time as ``slam run`` writes it
+  (:func:`slam.io.exports.write_trajectories`), and ``trajectory_file_order.tum`` in the log's
+  order when its clock runs backwards (intel);
 * ``localization.npz`` — per scan: ``times``, ``poses``, ``covariances (N, 3, 3)``,
   ``localized``, ``phase`` (0 global, 1 tracking, 2 recovering), ``particles``, ``quality``;
 * ``map.png`` — the map with the path; ``recording.rrd`` — the map, the particles and the
@@ -14,6 +16,9 @@ appears complete or not at all):
   localized, mean match quality, particles used, lost / re-localization counts, speed (wall and
   CPU time, real-time factor), memory;
 * ``config.toml`` — the configuration used.
+
+An ``initial`` pose outside the map, or with no known-free cell within its sigma, is refused
+before anything is read (:func:`check_initial`).
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from numpy.typing import NDArray
 from slam.config import Config, dumps
 from slam.errors import UsageError
 from slam.io.atomic import atomic_dir, write_npz, write_text
-from slam.io.tum import format_tum
+from slam.io.exports import clock_warning, time_order, write_trajectories
 from slam.localize.localizer import PHASES, Localizer
 from slam.localize.maps import LikelihoodMap, load_map
 from slam.scans import LogScans, Scan
@@ -103,6 +108,50 @@ def parse_initial(text: str) -> tuple[float, ...]:
     return tuple(values)
 
 
+def format_initial(initial: Sequence[float]) -> str:
+    """``initial`` as ``--initial`` takes it (``x,y,theta[,sigma]``)."""
+    return ",".join(f"{v:g}" for v in initial)
+
+
+def check_initial(lmap: LikelihoodMap, initial: Sequence[float], sigma_xy: float) -> None:
+    """Refuse (``UsageError``, one line naming ``--initial``, the pose and the map's extent) an
+    initial pose ``(x, y, θ[, σ])`` outside ``lmap`` or with no known-free cell of the map within
+    ``σ`` (``sigma_xy`` when ``initial`` has none) of ``(x, y)``: the particles drawn around it
+    could never match a scan, and the run would end with nothing localized."""
+    x, y = float(initial[0]), float(initial[1])
+    sigma = float(initial[3]) if len(initial) > 3 else float(sigma_xy)
+    res = lmap.resolution
+    (x0, y0), (rows, cols) = lmap.origin, lmap.shape
+    x1, y1 = x0 + cols * res, y0 + rows * res
+    extent = f"x {x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m"
+    head = f"--initial {format_initial(initial)!r}: the pose ({x:g}, {y:g})"
+    if not (x0 <= x <= x1 and y0 <= y <= y1):
+        raise UsageError(
+            f"{head} lies outside the map ({extent}): expected a pose in the map's frame, "
+            "or --global"
+        )
+    ix, dx = _cells_within(x, x0, res, sigma, cols)
+    iy, dy = _cells_within(y, y0, res, sigma, rows)
+    near = dy[:, None] ** 2 + dx[None, :] ** 2 <= sigma**2
+    if not np.any(lmap.free[np.ix_(iy, ix)] & near):
+        raise UsageError(
+            f"{head} has no known-free cell of the map within {sigma:g} m (its sigma); the map "
+            f"spans {extent}: expected a pose in its free space, or --global"
+        )
+
+
+def _cells_within(
+    c: float, lo: float, res: float, sigma: float, count: int
+) -> tuple[NDArray[np.int64], F64]:
+    """Along one axis of a grid starting at ``lo`` (cells of ``res``, ``count`` of them): the
+    cells within ``sigma`` of ``c`` and the distance from ``c`` to each (0 in its own cell)."""
+    first = max(math.floor((c - sigma - lo) / res), 0)
+    last = min(math.floor((c + sigma - lo) / res), count - 1)
+    cells = np.arange(first, last + 1, dtype=np.int64)
+    gap = np.maximum(np.maximum(lo + cells * res - c, c - (lo + (cells + 1) * res)), 0.0)
+    return cells, gap
+
+
 def run_localizer(
     localizer: Localizer,
     scans: Sequence[tuple[Scan, F64]],
@@ -160,7 +209,10 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
     driven = np.concatenate([[0.0], np.cumsum(steps)])
     first = int(np.argmax(trace.localized)) if trace.localized.any() else -1
     duration = float(times.max() - times.min()) if n > 1 else 0.0
-    gaps = np.clip(np.diff(times), 0.0, None)
+    # in time order: where the clock runs backwards (intel), file order counts its steps twice
+    order = time_order(times)
+    gaps = np.diff(times[order])
+    localized_time = float(np.sum(gaps[trace.localized[order][:-1]])) if n > 1 else 0.0
     tracking = trace.particles > 0
     quality = trace.quality[trace.updated & np.isfinite(trace.quality)]
     out: dict[str, Any] = {
@@ -170,7 +222,7 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
         "time_to_convergence_s": round(float(times[first] - times[0]), 3) if first >= 0 else None,
         "distance_to_convergence_m": round(float(driven[first]), 3) if first >= 0 else None,
         "localized_share": round(float(trace.localized.mean()), 4) if n else 0.0,
-        "localized_time_s": round(float(np.sum(gaps[trace.localized[:-1]])), 3) if n > 1 else 0.0,
+        "localized_time_s": round(localized_time, 3),
         "mean_match_quality": round(float(quality.mean()), 4) if quality.size else None,
         "particles_mean": round(float(trace.particles[tracking].mean()), 1)
         if tracking.any()
@@ -180,6 +232,17 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
         "path_length_m": round(float(driven[-1]) if n else 0.0, 3),
     }
     return out
+
+
+def write_trace(folder: Path, trace: LocalizationTrace) -> None:
+    """``trajectory.tum`` sorted by time, ``trajectory_file_order.tum`` when the clock runs
+    backwards (both as ``slam run`` writes them) and ``localization.npz`` (file order) of
+    ``trace`` into ``folder``."""
+    write_trajectories(folder, Trajectory(trace.times, trace.poses))
+    arrays = {"times": trace.times, "poses": trace.poses, "covariances": trace.covariances,
+              "localized": trace.localized, "phase": trace.phase,
+              "particles": trace.particles, "quality": trace.quality}  # fmt: skip
+    write_npz(folder / "localization.npz", arrays)
 
 
 def splice(
@@ -221,6 +284,8 @@ def localize(request: LocalizeRequest) -> Path:
     check_output_dir(out, "localize", request.force, inputs)  # before loading anything
     lmap: LikelihoodMap = load_map(request.map_path)
     localizer = Localizer(lmap, config, initial=request.initial)
+    if request.initial is not None:  # before the log is read
+        check_initial(lmap, request.initial, config.localize.initial_sigma_xy)
     with atomic_dir(out, overwrite=request.force, kind="localize", inputs=inputs) as tmp:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -268,13 +333,11 @@ def localize(request: LocalizeRequest) -> Path:
                 "states": hist.state_count,
                 "memory_mb": round(hist.memory_bytes() / 2**20, 2),
             }
+        clock = clock_warning(trace.times)
+        messages += [clock] if clock else []
         metrics["warnings"] = messages
         write_text(tmp / "config.toml", dumps(config))
-        write_text(tmp / "trajectory.tum", format_tum(Trajectory(trace.times, trace.poses)))
-        arrays = {"times": trace.times, "poses": trace.poses, "covariances": trace.covariances,
-                  "localized": trace.localized, "phase": trace.phase,
-                  "particles": trace.particles, "quality": trace.quality}  # fmt: skip
-        write_npz(tmp / "localization.npz", arrays)
+        write_trace(tmp, trace)
         write_png(tmp / "map.png", render_map(lmap.grid, trace.poses))
         if recorder is not None:
             metrics["recording"] = recorder.finish(trace.poses)

@@ -159,7 +159,7 @@ def _tracking(name: str) -> dict:
         out["localize"] = _relation_summary(*loc, relations)
         ratio = out["localize"]["trans_mean"] / out["slam"]["trans_mean"]
         out["trans_ratio_to_slam"] = round(ratio, 3)
-        err, deg = _errors(loc.poses, slam_trajectory.poses)
+        err, deg = _errors(_file_order(run).poses, slam_trajectory.poses)  # pose k: scan k
         out["pose_vs_slam"] = {
             "median_m": round(float(np.median(err)), 4),
             "p95_m": round(float(np.percentile(err, 95)), 4),
