@@ -81,7 +81,7 @@ def test_seeds_values_and_the_grid_of_the_command_line():
     spec = build_spec(
         None,
         no_args(logs="intel,aces", seeds="0-1", set=["rbpf.temperature=10,20,40",
-                "filter.particles=15", "loop.enabled=true,false"], max_scans=50),
+                "filter.particles=15", "loops.enabled=true,false"], max_scans=50),
     )  # fmt: skip
     cells = spec.cells()
     assert len(cells) == 2 * 2 * 3 * 2
@@ -89,7 +89,7 @@ def test_seeds_values_and_the_grid_of_the_command_line():
     assert first.name == "intel-seed0-temperature=10,enabled=true"
     # an ordinary slam run argument list: options first, the seed, then the setting
     assert first.argv == ("intel", "--max-scans", "50", "--set", "filter.particles=15", "--seed",
-                          "0", "--set", "rbpf.temperature=10", "--set", "loop.enabled=true")  # fmt: skip
+                          "0", "--set", "rbpf.temperature=10", "--set", "loops.enabled=true")  # fmt: skip
     assert len({c.name for c in cells}) == len(cells)
 
 
@@ -113,8 +113,8 @@ def test_spec_file_explicit_settings_and_per_setting_seeds(tmp_path):
         ("[sweep]\nlogs = ['intel']\n[run]\nparticle = 3\n", "s.toml: [run] unknown key 'particle'"),
         ("[sweep]\nlogs = ['intel']\nseeds = 'x'\n", "s.toml: [sweep] seeds: expected seeds"),
         ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.temperature' = []\n", "[grid]: rbpf.temperature: expected a non-empty list"),
-        ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.nosuch' = [1, 2]\n", "nosuch"),
-        ("[sweep]\nlogs = ['nosuch-log']\n", "sweep log 'nosuch-log'"),
+        ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.nosuch' = [1, 2]\n", "s.toml: [grid] rbpf.nosuch: unknown key"),
+        ("[sweep]\nlogs = ['nosuch-log']\n", "s.toml: [sweep] logs: 'nosuch-log' is not"),
         ("[sweep\n", "s.toml: not valid TOML"),
     ],
 )  # fmt: skip
@@ -125,6 +125,90 @@ def test_bad_spec_is_one_line_exit_2_before_any_work(tmp_path, capsys, text, mes
     assert main(["sweep", str(spec_file), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+GRID = "[sweep]\nlogs = ['intel']\n[grid]\n"
+EVALUATION = "[sweep]\nlogs = ['intel', 'mit-killian', 'demo']\n[sweep.evaluation]\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (GRID + "'rbpf.temperatur' = [1, 2]\n", "[grid] rbpf.temperatur: unknown key; expected one of coarse_stride, "),
+        (GRID + "'rbpf.temperature' = ['x', 2]\n", "[grid] rbpf.temperature: expected a number, found 'x'\n"),
+        (GRID + "'rbpf.temperature' = [10, -1]\n", "[grid] rbpf.temperature: expected a finite number in [0.001, 1e+06], found -1.0\n"),
+        (GRID + "'loop.enabled' = [true, false]\n", "[grid] loop.enabled: unknown section [loop]; expected one of backend, "),
+        (GRID + "'rbpf.sigmas' = [['x'], [1.0]]\n", "[grid] rbpf.sigmas[0]: expected a number, found 'x'\n"),
+        ("[sweep]\nlogs = ['intel']\n[[setting]]\nname = 'a'\n[[setting]]\nname = 'b'\nset = { 'rbpf.temperatur' = 3 }\n",
+         "[[setting]] #2 set rbpf.temperatur: unknown key; expected one of "),
+        ("[sweep]\nlogs = ['intel']\n[run]\nset = ['map.resolution=-1']\n",
+         "[run] set map.resolution: expected a finite number in [0.001, 10], found -1.0\n"),
+        ("[sweep]\nlogs = ['intel']\n[run]\nset = ['resolution=1']\n",
+         "[run] set: expected 'section.key=value' strings (e.g. 'map.resolution=0.05'), found 'resolution=1'\n"),
+        ("[sweep]\nlogs = ['intl']\n", "[sweep] logs: 'intl' is not 'demo', a registry dataset ("),
+        (EVALUATION + "mit-kilian = 'quality'\n", "[sweep.evaluation] mit-kilian: not a log of the sweep; expected one of its logs (intel, mit-killian, demo), found 'mit-kilian'; did you mean 'mit-killian'?\n"),
+        (EVALUATION + "intel = 'ate'\n", "[sweep.evaluation] intel: 'ate' needs a ground-truth trajectory, which intel does not have; expected one of auto, quality\n"),
+        (EVALUATION + "intel = 'relations'\n", "[sweep.evaluation] intel: 'relations' needs a relations file, which intel does not have ({data}/carmen/relations/intel.relations is missing); expected one of auto, quality\n"),
+        (EVALUATION + "demo = 'relations'\n", "[sweep.evaluation] demo: 'relations' needs a relations file, which demo does not have; expected one of auto, ate, quality\n"),
+    ],
+)  # fmt: skip
+def test_a_bad_spec_value_names_the_spec_file_and_key_before_any_cell(
+    tmp_path, capsys, text, message
+):
+    """A typo in a [grid] key or value, a log, or an evaluation: one line naming the spec file
+    and the key (not a --set the user never typed), exit 2, no sweep folder, no cell run."""
+    spec_file, out, data = tmp_path / "s.toml", tmp_path / "out", tmp_path / "data"
+    spec_file.write_text(text)
+    argv = ["sweep", str(spec_file), "--out", str(out), "--data-dir", str(data), *RUN_OPTIONS]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"slam: error: {spec_file}: {message.format(data=data)}"), err
+    assert err.count("\n") == 1, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("spec", "options", "message"),
+    [
+        (None, ["--logs", "intl"], "--logs: 'intl' is not 'demo', a registry dataset ("),
+        (None, ["--logs", "intel", "--set", "rbpf.temperatur=1,2"], "--set rbpf.temperatur: unknown key; expected one of "),
+        (None, ["--logs", "intel", "--set", "rbpf.temperatur=1"], "--set rbpf.temperatur=1: rbpf.temperatur: unknown key; "),
+        # the file's axis keeps its name beside an axis of the command line
+        (GRID + "'rbpf.temperature' = [10, -1]\n", ["--set", "filter.particles=10,20"],
+         "{spec}: [grid] rbpf.temperature: expected a finite number in [0.001, 1e+06], found -1.0\n"),
+        (GRID + "'rbpf.temperature' = [10, 20]\n", ["--set", "rbpf.temperature=10,-1"],
+         "--set rbpf.temperature: expected a finite number in [0.001, 1e+06], found -1.0\n"),
+        # a spec without logs: its evaluation is checked against those of --logs
+        ("[sweep.evaluation]\nmit-kilian = 'quality'\n", ["--logs", "intel"],
+         "{spec}: [sweep.evaluation] mit-kilian: not a log of the sweep; expected one of its logs (intel), found 'mit-kilian'\n"),
+    ],
+)  # fmt: skip
+def test_a_bad_command_line_value_names_the_option(tmp_path, capsys, spec, options, message):
+    spec_file, out = tmp_path / "s.toml", tmp_path / "out"
+    argv = ["sweep", "--out", str(out), *RUN_OPTIONS, *options]
+    if spec is not None:
+        spec_file.write_text(spec)
+        argv.insert(1, str(spec_file))
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"slam: error: {message.format(spec=spec_file)}"), err
+    assert err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_a_bad_tune_range_names_the_spec_file_and_key(tmp_path, capsys):
+    spec_file, out = tmp_path / "t.toml", tmp_path / "out"
+    spec_file.write_text(
+        "[sweep]\nlogs = ['intel']\n[tune]\ntrials = 3\n[tune.ranges]\n"
+        "'loop.enabled' = { values = [true, false] }\n"
+    )
+    assert main(["tune", str(spec_file), "--out", str(out), *RUN_OPTIONS]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"slam: error: {spec_file}: [tune.ranges] loop.enabled: unknown section [loop]; expected "
+    ), err
+    assert err.count("\n") == 1, err
     assert not out.exists()
 
 

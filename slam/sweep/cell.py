@@ -67,6 +67,26 @@ def _relations(trajectory: Any, relations_file: Path) -> dict[str, Any]:
     return summary
 
 
+METRIC_NEEDS = {"relations": "a relations file", "ate": "a ground-truth trajectory"}
+"""What a log needs for each metric that not every log has (``quality`` needs the map only)."""
+
+
+def metrics_of(ref: Any) -> tuple[str, ...]:
+    """The metrics the cells of the dataset ``ref`` (a :class:`slam.io.sources.DatasetRef`) can be
+    evaluated by, as :func:`evaluate_run_folder` decides: ``relations`` when it has a relations
+    file (re-timed where its times were lost), ``ate`` when it has a ground-truth trajectory (the
+    demo's is made with it), and ``auto`` and ``quality`` always."""
+    from slam.io.sources import Kind
+
+    out = ["auto"]
+    if ref.relations is not None and ref.relations.is_file():
+        out.append("relations")
+    reference = ref.reference
+    if ref.kind == Kind.DEMO or (reference is not None and reference.is_file()):
+        out.append("ate")
+    return (*out, "quality")
+
+
 def evaluate_run_folder(
     run_dir: Path, log: str, data_dir: Path, metric: str = "auto"
 ) -> dict[str, Any]:

@@ -28,6 +28,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,22 +132,71 @@ def open_sweep_folder(folder: Path, spec: SweepSpec, option: str = "--out") -> N
 
 
 def expected_config_text(cell: Cell, data_dir: Path) -> str:
-    """The ``config.toml`` the cell's ``slam run`` writes (as ``slam run`` resolves it)."""
+    """The ``config.toml`` the cell's ``slam run`` writes (as ``slam run`` resolves it).
+
+    A bad value is one :class:`~slam.errors.SlamError` naming where the spec gave it (``FILE:
+    [grid] rbpf.temperature: ...``, ``FILE: [run] set map.resolution: ...``), not the ``--set``
+    the cell passes on."""
     import dataclasses
 
     from slam.cli import build_parser
     from slam.commands.run import overrides_from
-    from slam.config import dumps, load_config
+    from slam.config import Override, dumps, load_config
+    from slam.errors import SlamError
     from slam.io.sources import resolve
 
-    args = build_parser().parse_args(["run", *cell.argv])
+    args = build_parser().parse_args(["run", *(str(a) for a in cell.argv)])
     ref = resolve(cell.log, data_dir, where=f"sweep log {cell.log!r}")
-    config = load_config(
-        ref.config_name if ref.shipped_config else "", args.config, overrides_from(args)
-    )
+    labels = {str(a): a.option for a in cell.argv if isinstance(a, Override)}
+    overrides = [
+        Override(o, labels[o]) if not isinstance(o, Override) and o in labels else o
+        for o in overrides_from(args)
+    ]
+    try:
+        config = load_config(ref.config_name if ref.shipped_config else "", args.config, overrides)
+    except SlamError as exc:
+        raise type(exc)(_said_once(str(exc), labels.values())) from None
     if not ref.shipped_config:
         config = dataclasses.replace(config, dataset=ref.config_name)
     return dumps(config)
+
+
+def _said_once(message: str, labels: Iterable[str]) -> str:
+    """``LABEL: KEY...: detail`` as ``LABEL...: detail`` when ``LABEL`` ends with ``KEY`` (``FILE:
+    [grid] rbpf.x: rbpf.x: unknown key`` → ``FILE: [grid] rbpf.x: unknown key``)."""
+    for label in labels:
+        key = label.rsplit(" ", 1)[-1]
+        if message.startswith(f"{label}: {key}"):
+            return label + message[len(label) + 2 + len(key) :]
+    return message
+
+
+def check_sweep(spec: SweepSpec, data_dir: Path) -> dict[str, str]:
+    """Check, before any cell runs, what would fail a cell as bad input, and return each cell's
+    expected ``config.toml`` text by cell name.
+
+    Every log must resolve (a message names where the logs were given: ``FILE: [sweep] logs``
+    or ``--logs``), every ``[sweep.evaluation]`` be a metric its log has
+    (:func:`~slam.sweep.cell.metrics_of`), and every cell's configuration load
+    (:func:`expected_config_text`); else one :class:`~slam.errors.SlamError` line (exit 2)."""
+    from slam.io.sources import resolve
+    from slam.sweep.cell import METRIC_NEEDS, metrics_of
+
+    cells = spec.cells()
+    refs = {log: resolve(log, data_dir, where=spec.logs_where) for log in spec.logs}
+    for log, metric in spec.evaluation:
+        if log not in refs:  # not a log of this sweep (checked by the spec when it can be)
+            continue
+        ref, supported = refs[log], metrics_of(refs[log])
+        if metric not in supported:
+            absent = metric == "relations" and ref.relations is not None
+            missing = f" ({ref.relations} is missing)" if absent else ""
+            raise UsageError(
+                f"{spec.where('sweep.evaluation')} {log}: {metric!r} needs "
+                f"{METRIC_NEEDS[metric]}, which {log} does not have{missing}; expected one of "
+                f"{', '.join(supported)}"
+            )
+    return {c.name: expected_config_text(c, data_dir) for c in cells}
 
 
 def _state(cell: Cell, folder: Path, config_text: str) -> tuple[str, dict[str, Any] | None]:
@@ -426,7 +476,7 @@ def run_sweep(
     """
     folder = Path(folder or spec.out or default_sweep_dir(spec))
     cells = spec.cells()
-    configs = {c.name: expected_config_text(c, data_dir) for c in cells}  # bad input: exit 2 now
+    configs = check_sweep(spec, data_dir)  # bad input: exit 2 now, before any cell
     open_sweep_folder(folder, spec)
     results: dict[str, dict[str, Any] | None] = {}
     tasks: list[dict[str, Any]] = []
@@ -452,7 +502,7 @@ def run_sweep(
             {
                 "cell": cell.name,
                 "log": cell.log,
-                "argv": list(cell.argv),
+                "argv": [str(a) for a in cell.argv],
                 "out": str((folder / cell.name).resolve()),
                 "data_dir": str(Path(data_dir).resolve()),
                 "metric": cell.metric,

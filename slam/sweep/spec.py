@@ -3,8 +3,11 @@
 A specification comes from a TOML file (``slam sweep SPEC.toml``, layout in ``docs/sweep.md``)
 and/or the command line (``--logs``, ``--seeds``, ``--set KEY=V1,V2``, the ``slam run`` options);
 the command line wins. :func:`build_spec` checks every value and names the file and key of a bad
-one (:class:`~slam.errors.UsageError`, exit 2). :meth:`SweepSpec.cells` expands it into
-:class:`Cell` s, each one ordinary ``slam run`` argument list.
+one (:class:`~slam.errors.UsageError`, exit 2); what needs the data directory (the logs, each
+log's evaluation, each cell's configuration) :func:`slam.sweep.driver.check_sweep` checks before
+any cell runs, and a configuration key or value of the file is named as the file gives it (``FILE:
+[grid] rbpf.temperature``, not the ``--set`` a cell passes on). :meth:`SweepSpec.cells` expands
+it into :class:`Cell` s, each one ordinary ``slam run`` argument list.
 
 :meth:`SweepSpec.identity` is what makes two sweeps the same sweep (what a cell computes; not
 where or how fast): a sweep folder remembers it, and a sweep of another identity is refused there.
@@ -12,11 +15,13 @@ where or how fast): a sweep folder remembers it, and a sweep of another identity
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import itertools
 import json
 import re
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -55,7 +60,9 @@ class Setting:
 
     name: str
     overrides: tuple[str, ...] = ()
-    """``section.key=value`` strings (values as TOML literals)."""
+    """``section.key=value`` strings (values as TOML literals). Those of a spec file or of a
+    ``--set`` axis are :class:`~slam.config.Override` s naming where they were given (``FILE:
+    [grid] rbpf.temperature``), so that a message about one names that, not a ``--set``."""
     values: tuple[tuple[str, Any], ...] = ()
     """The setting's values by key, for tables and plots."""
     seeds: tuple[int, ...] | None = None
@@ -76,6 +83,8 @@ class RunOptions:
     no_texture: bool = False
     no_record: bool = False
     set: tuple[str, ...] = ()
+    """``section.key=value`` strings; those of the spec file's ``[run] set`` are
+    :class:`~slam.config.Override` s naming it (``FILE: [run] set map.resolution``)."""
 
     def argv(self) -> list[str]:
         """These options as ``slam run`` arguments."""
@@ -126,6 +135,8 @@ class SweepSpec:
     address: str | None = None
     source: Path | None = None
     """The spec file, when there is one."""
+    logs_where: str = "slam sweep logs"
+    """Where the logs were given, for messages: ``FILE: [sweep] logs`` or ``--logs``."""
 
     def metric_of(self, log: str) -> str:
         """How cells of ``log`` are evaluated."""
@@ -251,8 +262,10 @@ def split_values(text: str) -> list[str]:
     return [p.strip() for p in parts]
 
 
-def _override(key: str, value: Any, where: str) -> str:
-    from slam.config import _toml_value
+def _override(key: str, value: Any, where: str, label: str | None = None) -> str:
+    """``key=value`` (value as a TOML literal); an :class:`~slam.config.Override` naming
+    ``label`` when one is given (where the user gave it, for the configuration's messages)."""
+    from slam.config import Override, _toml_value
     from slam.errors import ConfigError
 
     if not isinstance(key, str) or key.count(".") != 1:
@@ -260,14 +273,22 @@ def _override(key: str, value: Any, where: str) -> str:
             f"{where}: expected a key section.key (e.g. rbpf.temperature), found {key!r}"
         )
     try:
-        return f"{key}={_toml_value(value)}"
+        text = f"{key}={_toml_value(value)}"
     except ConfigError:
         raise UsageError(f"{where}: {key}: cannot use the value {value!r}") from None
+    return Override(text, label) if label is not None else text
 
 
-def grid_settings(axes: list[tuple[str, list[Any]]], where: str) -> tuple[Setting, ...]:
-    """The cartesian product of ``(key, values)`` axes as settings named ``key=value,...``."""
+def grid_settings(
+    axes: list[tuple[str, list[Any]]], where: str, labels: Mapping[str, str] | None = None
+) -> tuple[Setting, ...]:
+    """The cartesian product of ``(key, values)`` axes as settings named ``key=value,...``.
+
+    Each override names where its axis was given: ``labels[key]``, else ``<where> <key>``
+    (``FILE: [grid] rbpf.temperature``, ``--set rbpf.temperature``)."""
     from slam.config import _toml_value
+
+    labels = {key: (labels or {}).get(key, f"{where} {key}") for key, _values in axes}
 
     for key, values in axes:
         if not isinstance(values, list) or not values:
@@ -277,7 +298,7 @@ def grid_settings(axes: list[tuple[str, list[Any]]], where: str) -> tuple[Settin
     settings = []
     for combo in itertools.product(*(values for _key, values in axes)):
         pairs = tuple(zip((k for k, _v in axes), combo, strict=True))
-        overrides = tuple(_override(k, v, where) for k, v in pairs)
+        overrides = tuple(_override(k, v, where, labels[k]) for k, v in pairs)
         name = ",".join(f"{k.split('.', 1)[1]}={_toml_value(v)}" for k, v in pairs)
         settings.append(Setting(name or "default", overrides, pairs))
     return tuple(settings)
@@ -301,7 +322,7 @@ def _explicit_settings(items: Any, where: str) -> tuple[Setting, ...]:
         if not isinstance(values, dict):
             raise UsageError(f"{here}: set: expected a table of section.key = value")
         pairs = tuple(values.items())
-        overrides = tuple(_override(k, v, f"{here}: set") for k, v in pairs)
+        overrides = tuple(_override(k, v, f"{here}: set", f"{here} set {k}") for k, v in pairs)
         seeds = parse_seeds(item["seeds"], f"{here}: seeds") if "seeds" in item else None
         settings.append(Setting(name, overrides, pairs, seeds, grid=False))
     return tuple(settings)
@@ -350,37 +371,9 @@ def spec_from_toml(data: dict[str, Any], source: Path | None) -> SweepSpec:
             raise UsageError(
                 f"{here}: [sweep] unknown key {key!r} (expected {', '.join(SWEEP_KEYS)})"
             )
-    logs = sweep.get("logs", [])
-    if isinstance(logs, str):
-        logs = [x.strip() for x in logs.split(",") if x.strip()]
-    if not isinstance(logs, list) or not all(isinstance(x, str) and x for x in logs):
-        raise UsageError(f"{here}: [sweep] logs: expected a list of dataset names or paths")
-    logs = [_log_path(x, base) for x in logs]
+    logs, evaluation = _logs_and_evaluation(sweep, here, base)
     seeds = parse_seeds(sweep["seeds"], f"{here}: [sweep] seeds") if "seeds" in sweep else (0,)
-    evaluation = sweep.get("evaluation", {})
-    if not isinstance(evaluation, dict):
-        raise UsageError(f"{here}: [sweep] evaluation: expected a table log = metric")
-    for log, metric in evaluation.items():
-        if metric not in METRICS:
-            raise UsageError(
-                f"{here}: [sweep.evaluation] {log}: expected one of {', '.join(METRICS)}, found {metric!r}"
-            )
-    run_table = data.get("run", {})
-    if not isinstance(run_table, dict):
-        raise UsageError(f"{here}: [run] must be a table")
-    run_values: dict[str, Any] = {}
-    for key, value in run_table.items():
-        if key not in RUN_OPTIONS:
-            raise UsageError(
-                f"{here}: [run] unknown key {key!r} (expected {', '.join(RUN_OPTIONS)})"
-            )
-        run_values[key] = _typed(value, RUN_OPTIONS[key], f"{here}: [run] {key}")
-    if "config" in run_values:
-        run_values["config"] = base / run_values["config"]
-    if "set" in run_values:
-        if not all(isinstance(x, str) for x in run_values["set"]):
-            raise UsageError(f"{here}: [run] set: expected a list of 'section.key=value' strings")
-        run_values["set"] = tuple(run_values["set"])
+    run = _run_options(data.get("run", {}), here, base)
     grid = data.get("grid", {})
     if not isinstance(grid, dict):
         raise UsageError(f'{here}: [grid] must be a table of "section.key" = [values]')
@@ -393,17 +386,87 @@ def spec_from_toml(data: dict[str, Any], source: Path | None) -> SweepSpec:
     out = sweep.get("out")
     workers = sweep.get("workers")
     return SweepSpec(
-        logs=tuple(logs),
+        logs=logs,
         seeds=seeds,
         settings=settings,
-        run=RunOptions(**run_values),
-        evaluation=tuple((_log_path(k, base), v) for k, v in evaluation.items()),
+        run=run,
+        evaluation=evaluation,
         out=base / _typed(out, str, f"{here}: [sweep] out") if out is not None else None,
         workers=_typed(workers, int, f"{here}: [sweep] workers") if workers is not None else None,
         executor=sweep.get("executor", "local"),
         address=sweep.get("address"),
         source=source,
+        logs_where=f"{here}: [sweep] logs",
     )
+
+
+def _logs_and_evaluation(
+    sweep: dict[str, Any], here: str, base: Path
+) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
+    """``[sweep] logs`` and ``[sweep.evaluation]``, checked; an evaluation must name one of the
+    logs when the file gives them (else :func:`build_spec` checks it against the sweep's)."""
+    logs = sweep.get("logs", [])
+    if isinstance(logs, str):
+        logs = [x.strip() for x in logs.split(",") if x.strip()]
+    if not isinstance(logs, list) or not all(isinstance(x, str) and x for x in logs):
+        raise UsageError(f"{here}: [sweep] logs: expected a list of dataset names or paths")
+    logs = tuple(_log_path(x, base) for x in logs)
+    evaluation = sweep.get("evaluation", {})
+    if not isinstance(evaluation, dict):
+        raise UsageError(f"{here}: [sweep] evaluation: expected a table log = metric")
+    for log, metric in evaluation.items():
+        if metric not in METRICS:
+            raise UsageError(
+                f"{here}: [sweep.evaluation] {log}: expected one of {', '.join(METRICS)}, found {metric!r}"
+            )
+    pairs = tuple((_log_path(k, base), v) for k, v in evaluation.items())
+    if logs:
+        check_evaluation_logs(pairs, logs, f"{here}: [sweep.evaluation]")
+    return logs, pairs
+
+
+def check_evaluation_logs(
+    evaluation: tuple[tuple[str, str], ...], logs: tuple[str, ...], where: str
+) -> None:
+    """Refuse a per-log evaluation of a log the sweep does not run (a typo would otherwise leave
+    that log on ``auto`` without a word): one line naming it and the logs there are."""
+    for log, _metric in evaluation:
+        if log not in logs:
+            near = difflib.get_close_matches(log, logs, n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else ""
+            raise UsageError(
+                f"{where} {log}: not a log of the sweep; expected one of its logs "
+                f"({', '.join(logs)}), found {log!r}{hint}"
+            )
+
+
+def _run_options(table: Any, here: str, base: Path) -> RunOptions:
+    """The ``[run]`` table, checked; its ``set`` items name ``FILE: [run] set KEY``."""
+    if not isinstance(table, dict):
+        raise UsageError(f"{here}: [run] must be a table")
+    values: dict[str, Any] = {}
+    for key, value in table.items():
+        if key not in RUN_OPTIONS:
+            raise UsageError(
+                f"{here}: [run] unknown key {key!r} (expected {', '.join(RUN_OPTIONS)})"
+            )
+        values[key] = _typed(value, RUN_OPTIONS[key], f"{here}: [run] {key}")
+    if "config" in values:
+        values["config"] = base / values["config"]
+    if "set" in values:
+        from slam.config import Override
+
+        items = []
+        for item in values["set"]:
+            key = item.split("=", 1)[0].strip() if isinstance(item, str) else ""
+            if not isinstance(item, str) or "=" not in item or key.count(".") != 1:
+                raise UsageError(
+                    f"{here}: [run] set: expected 'section.key=value' strings "
+                    f"(e.g. 'map.resolution=0.05'), found {item!r}"
+                )
+            items.append(Override(item, f"{here}: [run] set {key}"))
+        values["set"] = tuple(items)
+    return RunOptions(**values)
 
 
 def _log_path(log: str, base: Path) -> str:
@@ -419,6 +482,7 @@ def apply_command_line(spec: SweepSpec, args: Any) -> SweepSpec:
     changes: dict[str, Any] = {}
     if getattr(args, "logs", None):
         changes["logs"] = tuple(x.strip() for x in args.logs.split(",") if x.strip())
+        changes["logs_where"] = "--logs"
     if getattr(args, "seeds", None) is not None:
         changes["seeds"] = parse_seeds(args.seeds, "--seeds")
     run = {}
@@ -449,7 +513,8 @@ def apply_command_line(spec: SweepSpec, args: Any) -> SweepSpec:
             raise UsageError("--set with several values cannot be combined with [[setting]] tables")
         grid = dict(_axes_of(spec.settings))
         grid.update(dict(axes))
-        changes["settings"] = grid_settings(list(grid.items()), "--set")
+        labels = {k: v for k, v in _labels_of(spec.settings).items() if k not in dict(axes)}
+        changes["settings"] = grid_settings(list(grid.items()), "--set", labels)
     for flag in ("out", "workers", "executor", "address"):
         if getattr(args, flag, None) is not None:
             changes[flag] = getattr(args, flag)
@@ -466,12 +531,27 @@ def _axes_of(settings: tuple[Setting, ...]) -> list[tuple[str, list[Any]]]:
     return list(axes.items())
 
 
+def _labels_of(settings: tuple[Setting, ...]) -> dict[str, str]:
+    """Where each grid axis of ``settings`` was given (its overrides' labels), by key."""
+    from slam.config import Override
+
+    return {
+        key: override.option
+        for setting in settings
+        for (key, _value), override in zip(setting.values, setting.overrides, strict=False)
+        if isinstance(override, Override)
+    }
+
+
 def build_spec(path: Path | None, args: Any) -> SweepSpec:
     """The spec of ``slam sweep [SPEC.toml] [options]``, checked (see the module docstring)."""
     data = read_spec_file(path) if path is not None else {}
-    spec = apply_command_line(spec_from_toml(data, path), args)
+    from_file = spec_from_toml(data, path)
+    spec = apply_command_line(from_file, args)
     if not spec.logs:
         raise UsageError(f"{spec.where('sweep')}: no logs (give [sweep] logs or --logs intel,aces)")
+    if not from_file.logs:  # the file's evaluation is of the command line's logs
+        check_evaluation_logs(spec.evaluation, spec.logs, spec.where("sweep.evaluation"))
     if not spec.settings:
         spec = replace(spec, settings=(Setting("default"),))
     if spec.executor not in EXECUTORS:

@@ -152,8 +152,11 @@ def parse_tune(data: dict[str, Any], where: str, args: Any = None) -> TuneSpec:
     return TuneSpec(tuple(ranges), trials, search, seed)
 
 
-def trial_settings(tune: TuneSpec, where: str = "[tune]") -> tuple[Setting, ...]:
-    """Trial 0 (the default), then ``trials - 1`` random draws or the grid's points."""
+def trial_settings(
+    tune: TuneSpec, where: str = "[tune]", ranges: str = "[tune.ranges]"
+) -> tuple[Setting, ...]:
+    """Trial 0 (the default), then ``trials - 1`` random draws or the grid's points; a bad value
+    of a key names ``<ranges> <key>`` (``FILE: [tune.ranges] rbpf.temperature``)."""
     import numpy as np
 
     from slam.sweep.spec import _override
@@ -178,7 +181,7 @@ def trial_settings(tune: TuneSpec, where: str = "[tune]") -> tuple[Setting, ...]
                 points.append(point)
     for k, point in enumerate(points, start=1):
         pairs = tuple(zip((r.key for r in tune.ranges), point, strict=True))
-        overrides = tuple(_override(key, value, where) for key, value in pairs)
+        overrides = tuple(_override(key, value, where, f"{ranges} {key}") for key, value in pairs)
         settings.append(Setting(f"trial{k:03d}", overrides, pairs))
     return tuple(settings)
 
@@ -309,8 +312,8 @@ def write_tune_plot(folder: Path, trials: list[dict[str, Any]]) -> str | None:
 
 def tune_spec_for(spec: SweepSpec, tune: TuneSpec) -> SweepSpec:
     """The sweep whose settings are the trials."""
-    where = f"{spec.source}: [tune]" if spec.source else "[tune]"
-    return replace(spec, settings=trial_settings(tune, where))
+    file = f"{spec.source}: " if spec.source else ""
+    return replace(spec, settings=trial_settings(tune, f"{file}[tune]", f"{file}[tune.ranges]"))
 
 
 def report(spec: SweepSpec, outcome: Any) -> dict[str, Any]:
