@@ -329,6 +329,6 @@ def test_a_registry_run_of_another_log_says_why_there_is_no_ground_truth(
     assert warning.startswith("slam: warning: ") and warning.endswith("; left out")
     assert "is it the same log?" in error and "None" not in error
     assert error.endswith(
-        "and no ground truth either: the dataset's relations match none of the run's times (left "
-        "out above)"
+        "and no ground truth either: the dataset's relations were left out (the warning above "
+        "says why)"
     )

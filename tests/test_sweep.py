@@ -197,6 +197,18 @@ def test_a_bad_command_line_value_names_the_option(tmp_path, capsys, spec, optio
     assert not out.exists()
 
 
+def test_a_spec_without_logs_keeps_the_evaluation_of_logs_another_run_names(tmp_path):
+    """A spec without [sweep] logs, run for one log at a time (as tools/bench.py runs its spec):
+    the evaluation of the other logs stays, and only a name that is no dataset is refused."""
+    spec_file = tmp_path / "s.toml"
+    spec_file.write_text("[sweep.evaluation]\nmit-killian = 'quality'\nintel = 'relations'\n")
+    spec = build_spec(spec_file, no_args(logs="intel", seeds="0"))
+    assert spec.logs == ("intel",) and dict(spec.evaluation)["mit-killian"] == "quality"
+    spec_file.write_text("[sweep.evaluation]\nmit-kilian = 'quality'\n")
+    with pytest.raises(UsageError, match=r"\[sweep.evaluation\] mit-kilian: not a log of the"):
+        build_spec(spec_file, no_args(logs="intel", seeds="0"))
+
+
 def test_a_bad_tune_range_names_the_spec_file_and_key(tmp_path, capsys):
     spec_file, out = tmp_path / "t.toml", tmp_path / "out"
     spec_file.write_text(

@@ -112,7 +112,7 @@ def run_eval(args: argparse.Namespace) -> int:
             # not re-timed) must not cost the map score.
             print(f"slam: warning: {exc}; left out", file=sys.stderr)
             relations = None
-            no_truth = "the dataset's relations match none of the run's times (left out above)"
+            no_truth = "the dataset's relations were left out (the warning above says why)"
     if reference is not None:
         result["reference"] = str(reference)
         result.update(_reference(trajectory, reference, args))

@@ -70,8 +70,9 @@ def accept_negative_numbers(parser: argparse.ArgumentParser) -> None:
     ``_negative_number_matcher`` (``-19`` or ``-1.5``, not a list); this parser's matcher
     accepts :data:`NUMBER_LIST` too. No option of the command looks like a number, so nothing
     else changes; ``--initial=-19,-24,0`` keeps working."""
-    default = parser._negative_number_matcher
-    parser._negative_number_matcher = re.compile(f"{NUMBER_LIST.pattern}|{default.pattern}")
+    default = getattr(parser, "_negative_number_matcher", None)  # private: absent, use "="
+    if isinstance(default, re.Pattern):
+        parser._negative_number_matcher = re.compile(f"{NUMBER_LIST.pattern}|{default.pattern}")
 
 
 def localize_command(args: argparse.Namespace) -> int:

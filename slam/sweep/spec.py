@@ -550,8 +550,13 @@ def build_spec(path: Path | None, args: Any) -> SweepSpec:
     spec = apply_command_line(from_file, args)
     if not spec.logs:
         raise UsageError(f"{spec.where('sweep')}: no logs (give [sweep] logs or --logs intel,aces)")
-    if not from_file.logs:  # the file's evaluation is of the command line's logs
-        check_evaluation_logs(spec.evaluation, spec.logs, spec.where("sweep.evaluation"))
+    if not from_file.logs:  # the file's evaluation is of the command line's logs, or of logs
+        # that another --logs runs: only a name that is no dataset at all is a typo
+        from slam.io.registry import load_registry
+
+        names = {*load_registry(), "demo"}
+        typos = tuple((log, m) for log, m in spec.evaluation if log not in names)
+        check_evaluation_logs(typos, spec.logs, spec.where("sweep.evaluation"))
     if not spec.settings:
         spec = replace(spec, settings=(Setting("default"),))
     if spec.executor not in EXECUTORS:
@@ -563,5 +568,8 @@ def build_spec(path: Path | None, args: Any) -> SweepSpec:
             f"{spec.where('sweep')} workers: expected at least 1, found {spec.workers}"
         )
     if spec.address is not None and spec.executor != "ray":
-        raise UsageError("--address is the address of a Ray cluster: it needs --executor ray")
+        raise UsageError(
+            f"{spec.where('sweep')} address: the address of a Ray cluster needs executor "
+            f"'ray' (found {spec.executor!r})"
+        )
     return spec
