@@ -179,6 +179,11 @@ def test_a_bad_spec_value_names_the_spec_file_and_key_before_any_cell(
          "{spec}: [grid] rbpf.temperature: expected a finite number in [0.001, 1e+06], found -1.0\n"),
         (GRID + "'rbpf.temperature' = [10, 20]\n", ["--set", "rbpf.temperature=10,-1"],
          "--set rbpf.temperature: expected a finite number in [0.001, 1e+06], found -1.0\n"),
+        # one value for every cell and an axis of the same key: each cell's axis value would win
+        (GRID + "'rbpf.temperature' = [10, 20]\n", ["--set", "rbpf.temperature=-5"],
+         "--set rbpf.temperature=-5: rbpf.temperature is also an axis of the sweep's settings"),
+        (GRID + "'rbpf.temperature' = [10, 20]\n[run]\nset = ['rbpf.temperature=-3']\n", [],
+         "{spec}: [run] set rbpf.temperature: rbpf.temperature is also an axis of the sweep's "),
         # a spec without logs: its evaluation is checked against those of --logs
         ("[sweep.evaluation]\nmit-kilian = 'quality'\n", ["--logs", "intel"],
          "{spec}: [sweep.evaluation] mit-kilian: not a log of the sweep; expected one of its logs (intel), found 'mit-kilian'\n"),

@@ -425,6 +425,20 @@ def _logs_and_evaluation(
     return logs, pairs
 
 
+def check_once_or_axis(spec: SweepSpec) -> None:
+    """Refuse a key given one value for every cell (``--set`` or ``[run] set``) and also as an
+    axis of the settings: each cell's setting comes after it and would override it unseen."""
+    axes = {key for setting in spec.settings for key, _value in setting.values}
+    for item in spec.run.set:
+        key = str(item).split("=", 1)[0].strip()
+        if key in axes:
+            said = getattr(item, "option", None) or f"--set {item}"
+            raise UsageError(
+                f"{said}: {key} is also an axis of the sweep's settings, whose values each cell "
+                "takes instead; give it in one place"
+            )
+
+
 def check_evaluation_logs(
     evaluation: tuple[tuple[str, str], ...], logs: tuple[str, ...], where: str
 ) -> None:
@@ -559,6 +573,7 @@ def build_spec(path: Path | None, args: Any) -> SweepSpec:
         check_evaluation_logs(typos, spec.logs, spec.where("sweep.evaluation"))
     if not spec.settings:
         spec = replace(spec, settings=(Setting("default"),))
+    check_once_or_axis(spec)
     if spec.executor not in EXECUTORS:
         raise UsageError(
             f"{spec.where('sweep')} executor: expected one of {', '.join(EXECUTORS)}, found {spec.executor!r}"
