@@ -371,7 +371,9 @@ class Slam:
         It is built anew at each call, from every update's scan (as long as
         :class:`~slam.stages.FinalMap` takes on them: 0.1–2 s at the end of a benchmark log), so
         call it every few seconds, not at every scan. ``classic``: a copy of its own grid. The
-        call changes nothing in the run.
+        call changes nothing in the run. (Observers that ask for maps get a cheaper preview
+        instead, every ``map_every`` updates: each update's scan added once at the pose of that
+        moment, never redrawn when the best particle changes.)
         """
         if self._finished:
             raise UsageError("Slam.map: the run is finished (its map is the result's grid)")

@@ -206,7 +206,8 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
     An unknown name raises one :class:`UsageError` line, ``"<where>: '<name>' is not ...: <what a
     NAME may be>"``, followed by ``hint`` (e.g. the option that gives the dataset instead); a
     missing path (a NAME that :func:`looks_like_path`) says ``"<where>: <name>: no such file or
-    folder"`` instead.
+    folder"`` instead, and a NAME that differs from a dataset's only by letter case or spaces
+    (``Intel``) names that dataset (``did you mean 'intel'?``).
     """
     from slam.io import registry
 
