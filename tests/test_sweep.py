@@ -111,6 +111,9 @@ def test_spec_file_explicit_settings_and_per_setting_seeds(tmp_path):
     ("text", "message"),
     [
         ("[sweep]\nlogs = ['intel']\n[run]\nparticle = 3\n", "s.toml: [run] unknown key 'particle'"),
+        ("[sweep]\nlogs = ['intel']\n[run]\nparticles = 0\n", "s.toml: [run] particles: expected an integer in [1, 100000], found 0"),
+        ("[sweep]\nlogs = ['intel']\n[run]\nevery = 0\n", "s.toml: [run] every: expected an integer in [1, 1000000], found 0"),
+        ("[sweep]\nlogs = ['intel']\n[run]\nmethod = 'fast'\n", "s.toml: [run] method: expected one of odometry, classic, rbpf, found 'fast'"),
         ("[sweep]\nlogs = ['intel']\nseeds = 'x'\n", "s.toml: [sweep] seeds: expected seeds"),
         ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.temperature' = []\n", "[grid]: rbpf.temperature: expected a non-empty list"),
         ("[sweep]\nlogs = ['intel']\n[grid]\n'rbpf.nosuch' = [1, 2]\n", "s.toml: [grid] rbpf.nosuch: unknown key"),
@@ -214,17 +217,25 @@ def test_a_spec_without_logs_keeps_the_evaluation_of_logs_another_run_names(tmp_
         build_spec(spec_file, no_args(logs="intel", seeds="0"))
 
 
-def test_a_bad_tune_range_names_the_spec_file_and_key(tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("'loop.enabled' = { values = [true, false] }", "loop.enabled: unknown section [loop]; expected "),
+        ("'filter.particle' = { min = 1, max = 3 }", "filter.particle: unknown key; expected one of every, "),
+        # an end outside the key's bounds is named as written, not as a value drawn from it
+        ("'filter.particles' = { min = 0, max = 60, int = true }", "filter.particles: min: expected an integer in [1, 100000], found 0\n"),
+        ("'filter.particles' = { min = 10, max = 200000, int = true }", "filter.particles: max: expected an integer in [1, 100000], found 200000\n"),
+        ("'rbpf.temperature' = { min = -5.0, max = 80.0 }", "rbpf.temperature: min: expected a finite number in [0.001, 1e+06], found -5.0\n"),
+        ("'filter.method' = { values = ['rbpf', 'fast'] }", "filter.method: values[1]: expected one of odometry, classic, rbpf, found 'fast'\n"),
+        ("'filter.particles' = { values = [10, 'x'] }", "filter.particles: values[1]: expected an integer, found 'x'\n"),
+    ],
+)  # fmt: skip
+def test_a_bad_tune_range_names_the_spec_file_and_key(tmp_path, capsys, item, message):
     spec_file, out = tmp_path / "t.toml", tmp_path / "out"
-    spec_file.write_text(
-        "[sweep]\nlogs = ['intel']\n[tune]\ntrials = 3\n[tune.ranges]\n"
-        "'loop.enabled' = { values = [true, false] }\n"
-    )
+    spec_file.write_text(f"[sweep]\nlogs = ['intel']\n[tune]\ntrials = 3\n[tune.ranges]\n{item}\n")
     assert main(["tune", str(spec_file), "--out", str(out), *RUN_OPTIONS]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(
-        f"slam: error: {spec_file}: [tune.ranges] loop.enabled: unknown section [loop]; expected "
-    ), err
+    assert err.startswith(f"slam: error: {spec_file}: [tune.ranges] {message}"), err
     assert err.count("\n") == 1, err
     assert not out.exists()
 

@@ -465,6 +465,7 @@ def _run_options(table: Any, here: str, base: Path) -> RunOptions:
                 f"{here}: [run] unknown key {key!r} (expected {', '.join(RUN_OPTIONS)})"
             )
         values[key] = _typed(value, RUN_OPTIONS[key], f"{here}: [run] {key}")
+    _check_filter_options(values, here)
     if "config" in values:
         values["config"] = base / values["config"]
     if "set" in values:
@@ -481,6 +482,20 @@ def _run_options(table: Any, here: str, base: Path) -> RunOptions:
             items.append(Override(item, f"{here}: [run] set {key}"))
         values["set"] = tuple(items)
     return RunOptions(**values)
+
+
+def _check_filter_options(values: Mapping[str, Any], here: str) -> None:
+    """Refuse a ``[run]`` method, particle count, scan step or scan limit outside the bounds of
+    the ``[filter]`` field it sets, naming the spec's key (not the ``--particles`` it becomes)."""
+    from slam.config import FilterConfig
+    from slam.validate import FieldError
+
+    for key in ("method", "particles", "every", "max_scans"):
+        if key in values:
+            try:
+                FilterConfig(**{key: values[key]})
+            except FieldError as exc:
+                raise UsageError(f"{here}: [run] {key}: {exc.detail}") from None
 
 
 def _log_path(log: str, base: Path) -> str:

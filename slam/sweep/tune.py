@@ -17,7 +17,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -132,6 +132,8 @@ def parse_tune(data: dict[str, Any], where: str, args: Any = None) -> TuneSpec:
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise UsageError(f"{here}: steps: expected a positive integer, found {steps!r}")
         ranges.append(Range(key, (), low, high, log, integer, steps))
+    for declared in ranges:
+        _check_ends(declared, f"{where}: [tune.ranges] {declared.key}")
     trials = table.get("trials", DEFAULT_TRIALS)
     search = table.get("search", "random")
     seed = table.get("seed", 0)
@@ -150,6 +152,42 @@ def parse_tune(data: dict[str, Any], where: str, args: Any = None) -> TuneSpec:
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise UsageError(f"{where}: [tune] seed: expected an integer, found {seed!r}")
     return TuneSpec(tuple(ranges), trials, search, seed)
+
+
+def _check_ends(declared: Range, here: str) -> None:
+    """Refuse a range whose key is no configuration key, or whose ``min``, ``max`` or one of
+    whose ``values`` lies outside the key's bounds: named by the end, before any trial is drawn
+    (a drawn value would name a number the user never wrote)."""
+    from slam.config import section_types
+    from slam.errors import ConfigError
+    from slam.validate import Bounds, check_value, coerce, field_types
+
+    section, name = declared.key.split(".")
+    sections = section_types()
+    if section not in sections:
+        raise UsageError(
+            f"{here}: unknown section [{section}]; expected one of {', '.join(sorted(sections))}"
+        )
+    types_ = field_types(sections[section])
+    if name not in types_:
+        raise UsageError(f"{here}: unknown key; expected one of {', '.join(sorted(types_))}")
+    bounds = next(
+        f.metadata.get("bounds", Bounds()) for f in fields(sections[section]) if f.name == name
+    )
+    if declared.values:
+        ends = [(f"values[{i}]", v) for i, v in enumerate(declared.values)]
+    else:
+        ends = [("min", declared.low), ("max", declared.high)]
+        if declared.integer:
+            ends = [(which, int(round(v))) for which, v in ends]
+    for which, value in ends:
+        try:
+            typed = coerce(value, types_[name], here, which)
+        except ConfigError as exc:
+            raise UsageError(str(exc)) from None
+        problem = check_value(typed, types_[name], bounds)
+        if problem is not None:
+            raise UsageError(f"{here}: {which}: expected {problem}, found {value!r}")
 
 
 def trial_settings(
