@@ -416,6 +416,12 @@ def test_localized_time_is_summed_in_time_order():
     )
     m = trace_metrics(trace, np.zeros((n, 3)))
     assert m["duration_s"] == 3.0 and m["localized_time_s"] == 2.0
+    assert m["time_to_convergence_s"] == 1.0
+    # converged only at the scan behind the step back (1.5 s): the localizer had seen 0–2 s of
+    # the log then, not the 1.5 s its time stamp alone would say
+    trace.localized[:] = [False, False, False, True, True]
+    m = trace_metrics(trace, np.zeros((n, 3)))
+    assert m["time_to_convergence_s"] == 2.0 and m["localized_time_s"] == 0.5
     trace.localized[:] = True
     assert trace_metrics(trace, np.zeros((n, 3)))["localized_time_s"] == 3.0
     one = trace_metrics(

@@ -219,7 +219,10 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
         "scans": int(n),
         "duration_s": round(duration, 3),
         "converged": first >= 0,
-        "time_to_convergence_s": round(float(times[first] - times[0]), 3) if first >= 0 else None,
+        # the span of the log's clock the localizer had seen when it converged (file order)
+        "time_to_convergence_s": round(float(np.ptp(times[: first + 1])), 3)
+        if first >= 0
+        else None,
         "distance_to_convergence_m": round(float(driven[first]), 3) if first >= 0 else None,
         "localized_share": round(float(trace.localized.mean()), 4) if n else 0.0,
         "localized_time_s": round(localized_time, 3),
