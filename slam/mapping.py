@@ -54,7 +54,8 @@ def _check_growth(nbytes: float, what: str, width_m: float, height_m: float) -> 
         nbytes,
         f"{what} of {width_m:.0f} m × {height_m:.0f} m",
         "the trajectory left the area the odometry covers (a diverged filter or corrupt "
-        "odometry); check the configuration",
+        "odometry), or scans reach that far (ranges in millimetres, not metres? set range_max "
+        "or lidar.range_max for a laser's longest reading); check the configuration",
     )
 
 

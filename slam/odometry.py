@@ -231,6 +231,24 @@ def odometry_trajectory(log: Log, robot: RobotConfig) -> Trajectory:
     raise DataError(f"{log.name}: the log has no odometry (no encoders, scans or ODOM messages)")
 
 
+def _readings(values: ArrayLike, what: str, unit: str, ndim: int = 1) -> F64:
+    """``values`` as a float64 array of at least one dimension and at most ``ndim``, every
+    value finite; else :class:`DataError` naming ``what`` (``encoders: time``)."""
+    try:
+        array = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    except (TypeError, ValueError):
+        raise DataError(f"{what}: expected numbers ({unit}), found {values!r:.60}") from None
+    if array.ndim > ndim:
+        raise DataError(f"{what}: expected at most {ndim} dimension(s), found shape {array.shape}")
+    bad = ~np.isfinite(array)
+    if bad.any():
+        raise DataError(
+            f"{what}: expected finite {unit}, found {array[bad].ravel()[0]} at index "
+            f"{int(np.flatnonzero(bad.ravel())[0])}"
+        )
+    return array
+
+
 class OdometryIntegrator:
     """Causal dead reckoning of the ECE276A robot from readings fed as they arrive.
 
@@ -259,8 +277,8 @@ class OdometryIntegrator:
 
     def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
         """Add gyro z samples (rad/s) taken at ``time`` (s); scalars or arrays."""
-        times = np.atleast_1d(np.asarray(time, dtype=np.float64))
-        rates = np.atleast_1d(np.asarray(gyro_z, dtype=np.float64))
+        times = _readings(time, "IMU: time", "seconds")
+        rates = _readings(gyro_z, "IMU: gyro_z", "rad/s")
         if times.shape != rates.shape:
             raise DataError(f"IMU: {times.size} sample times for {rates.size} gyro readings")
         for t, x in zip(times.tolist(), rates.tolist(), strict=True):
@@ -325,8 +343,16 @@ class OdometryIntegrator:
         """Add encoder readings: ``counts`` ``(4,)`` or ``(4, K)`` ticks (FR, FL, RR, RL) since
         the previous reading, taken at ``time`` (s). The first reading ever only starts the clock
         (its ticks were counted before it)."""
-        times = np.atleast_1d(np.asarray(time, dtype=np.float64))
-        ticks = np.asarray(counts, dtype=np.float64).reshape(4, -1)
+        times = _readings(time, "encoders: time", "seconds")
+        ticks = _readings(counts, "encoders: counts", "ticks", ndim=2)
+        if ticks.ndim == 1 and ticks.size == 4:
+            ticks = ticks.reshape(4, 1)
+        if ticks.ndim != 2 or ticks.shape[0] != 4:
+            turned = " (readings as rows? pass counts.T)" if ticks.shape[-1] == 4 else ""
+            raise DataError(
+                "encoders: counts must be (4,) or (4, K) ticks (FR, FL, RR, RL), found shape "
+                f"{ticks.shape}{turned}"
+            )
         if ticks.shape[1] != times.size:
             raise DataError(f"encoders: {times.size} reading times for {ticks.shape[1]} readings")
         m, track = self.robot.meters_per_tick, self.robot.track_width

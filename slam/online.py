@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slam.config import Config, config_for
-from slam.errors import ConfigError, UsageError
+from slam.errors import ConfigError, DataError, UsageError
 from slam.geometry import compose, transform_points
 from slam.mapping import OccupancyGrid
 from slam.observers import CompositeObserver, Observer, StepRecord
@@ -47,7 +47,7 @@ from slam.particle_filter import (
     integrate_scan,
     make_filter,
 )
-from slam.scans import Scan, ScanSequence
+from slam.scans import Scan, ScanSequence, odometry_pose
 from slam.stages import Stage, build_map, default_stages, run_stages
 from slam.trajectory import Trajectory
 
@@ -185,8 +185,12 @@ class Slam:
                 f"filter.method: Slam runs the particle filters 'rbpf' and 'classic', found "
                 f"{config.filter.method!r} (dead reckoning: slam.run(..., method='odometry'))"
             )
-        if scan_period is not None and not scan_period >= 0:
-            raise UsageError(f"scan_period: expected seconds ≥ 0, found {scan_period}")
+        if scan_period is not None and (
+            isinstance(scan_period, bool)
+            or not isinstance(scan_period, int | float | np.number)
+            or not scan_period >= 0
+        ):
+            raise UsageError(f"scan_period: expected seconds ≥ 0, found {scan_period!r}")
         if odometry_source not in ("log", "laser"):
             raise UsageError(
                 f"odometry_source: expected 'log' or 'laser', found {odometry_source!r}"
@@ -196,7 +200,16 @@ class Slam:
         """Every scan processed so far, with its odometry (what the stages read)."""
         self.scans.odometry_source = odometry_source
         self.stages: list[Stage] = default_stages(config) if stages is None else list(stages)
-        self._observers: list[Observer] = list(observers)
+        for stage in self.stages:
+            if not callable(getattr(stage, "run", None)):
+                raise UsageError(
+                    f"stages: expected slam.stages.Stage objects (with a run method), found "
+                    f"{type(stage).__name__}"
+                )
+        self._observers: list[Observer] = []
+        for observer in observers:
+            self._check_observer(observer)
+            self._observers.append(observer)
         self._observer = CompositeObserver(self._observers) if self._observers else None
         self._scan_period = scan_period
         self._running_period = _RunningMedian()
@@ -205,14 +218,27 @@ class Slam:
         self._odometry: Any = None
         self._laser: Any = None
         self._live_map: OccupancyGrid | None = None
+        self._source: str | None = None
+        """Where the scans' odometry comes from: ``"given"`` (``odometry=``), ``"wheels"``
+        (the encoder + IMU integrator) or ``"laser"``; one source per run."""
         self._finished = False
         self._seconds: dict[str, float] = {"filter": 0.0}
 
     # -- inputs
     def add_observer(self, observer: Observer) -> None:
         """Let ``observer`` watch the steps from now on."""
+        self._check_observer(observer)
         self._observers.append(observer)
         self._observer = CompositeObserver(self._observers)
+
+    @staticmethod
+    def _check_observer(observer: object) -> None:
+        """Refuse what is no :class:`~slam.observers.Observer` (before the first step needs it)."""
+        if not all(callable(getattr(observer, name, None)) for name in ("on_step", "on_map")):
+            raise UsageError(
+                f"observers: expected slam.observers.Observer objects (on_step, on_map, ...), "
+                f"found {type(observer).__name__}"
+            )
 
     @property
     def odometry(self) -> Any:
@@ -264,12 +290,20 @@ class Slam:
             self.add_encoders(*encoders)
         resolved = scan.resolved(self.config.lidar)
         if odometry is None:
-            odometry = self._odometry_at(resolved)
+            odometry, source = self._odometry_at(resolved)
         elif self._laser is not None:
             from slam.laser_odometry import refuse_given
 
             raise refuse_given("Slam.update")
+        else:
+            source = "given"
+            if self._odometry is not None and self._odometry.has_encoders:
+                self._source = self._source or "wheels"  # the readings fed are the odometry
+            self._one_source(source, resolved)
+            odometry = odometry_pose(resolved, odometry)
+            self._check_jump(resolved, odometry)
         k = self.scans.append(resolved, odometry)
+        self._source = source
         self._running_period.add(scan.time)
         start = time.perf_counter()
         if self._filter is None:
@@ -284,17 +318,19 @@ class Slam:
             self._notify(self._observer, outcome, estimate)
         return estimate
 
-    def _odometry_at(self, scan: Scan) -> F64:
+    def _odometry_at(self, scan: Scan) -> tuple[F64, str]:
         """The odometry at ``scan`` when :meth:`update` got none: the encoder + IMU integrator's
         where encoder readings were fed before the first scan, else laser odometry
         (:mod:`slam.laser_odometry`, turning with the gyro where IMU readings were fed) unless
-        ``robot.odometry = "log"``; ``robot.odometry = "laser"`` leaves the encoders unread."""
+        ``robot.odometry = "log"``; ``robot.odometry = "laser"`` leaves the encoders unread.
+        Returns the pose and its source (:meth:`_one_source`)."""
         readings = self._odometry
         wheels = readings is not None and readings.has_encoders
         if wheels and self.config.robot.odometry == "laser":
             wheels = False  # asked for laser odometry: the encoders are not read
         if self._laser is None and wheels:
-            return readings.pose_at(scan.time)
+            self._one_source("wheels", scan)
+            return readings.pose_at(scan.time), "wheels"
         if self._laser is None:
             from slam.laser_odometry import start_for_update
 
@@ -307,7 +343,48 @@ class Slam:
             from slam.laser_odometry import refuse_given
 
             raise refuse_given("Slam.update")
-        return self._laser.pose_at(scan)
+        return self._laser.pose_at(scan), "laser"
+
+    _SOURCES = {
+        "given": "odometry= poses",
+        "wheels": "the encoder and IMU readings",
+        "laser": "laser odometry",
+    }
+
+    def _one_source(self, source: str, scan: Scan) -> None:
+        """Refuse a scan whose odometry would come from ``source`` where the earlier scans'
+        came from another (``odometry=`` poses after encoder readings, or the other way round:
+        the two frames differ, and the trajectory would jump between them)."""
+        if self._source is not None and source != self._source:
+            if source == "wheels" and self._source == "given":
+                why = "encoder readings were fed after scans given odometry="
+            elif source == "given" and self._source == "wheels":
+                why = "odometry= was given after encoder readings were fed"
+            else:
+                why = f"this scan's would come from {self._SOURCES[source]}"
+            raise UsageError(
+                f"Slam.update: scan at t={scan.time:.6f}: {why}; the earlier scans' odometry "
+                f"came from {self._SOURCES[self._source]}: one source for every scan of a run"
+            )
+
+    def _check_jump(self, scan: Scan, pose: F64) -> None:
+        """Refuse an odometry pose that moves faster than ``checks.max_speed`` since the
+        previous scan (time steps floored at the scan period), the check ``slam run`` makes
+        on a log's odometry (:func:`slam.io.plausibility.first_jump`)."""
+        if not len(self.scans):
+            return
+        max_speed = self.config.checks.max_speed
+        previous = self.scans.odometry[-1]
+        dt = abs(scan.time - float(self.scans.times[-1]))
+        period = self._scan_period or self._running_period.value or 1.0
+        distance = float(np.hypot(pose[0] - previous[0], pose[1] - previous[1]))
+        if not distance <= max_speed * max(dt, period):
+            raise DataError(
+                f"Slam.update: scan at t={scan.time:.6f}: odometry moves {distance:.4g} m from "
+                f"the previous scan's in {dt:.3g} s, more than checks.max_speed = "
+                f"{max_speed:g} m/s: a corrupt reading (raise checks.max_speed for a faster "
+                "robot)"
+            )
 
     def _estimate(self, outcome: StepOutcome) -> Estimate:
         k = outcome.step

@@ -293,6 +293,11 @@ class RbpfFilter:
         self._insert(0, self.particles[:1])
         self.maps.share_from(0)
         self.lineage = Lineage(self.particles)
+        self.mapped = bool(scans.hits(0)[0].size)
+        """Whether a scan with a return has built the map yet (scan 0 unless the laser started
+        blind: then the first scan that sees, :meth:`_first_map`)."""
+        self.blind = 0
+        """Updates that were due at a scan without a single return, and so were none."""
         self.parents = np.arange(p)
         """Parent of each current particle among those of the last lineage record."""
         self.best = 0
@@ -386,14 +391,15 @@ class RbpfFilter:
         moved = relative(self.last_odometry, self.scans.odometry[k])
         elapsed = (k - self.last_update) * scan_period
         if not self.rule.due(moved, elapsed):
-            self.n_eff_log.append(self.n_eff_log[-1])
-            self.max_weight_log.append(self.max_weight_log[-1])
-            pose = compose(self.particles[self.best], moved)
-            return StepOutcome(
-                k, pose, self.particles, self.weights, self.n_eff_log[-1],
-                self.max_weight_log[-1], False, False, motion=moved,
-            )  # fmt: skip
+            return self._carry(k, moved)
         hits = self.scans.hits(k, self.config.rbpf.match_beams)
+        if hits[0].size == 0:
+            # not one return: nothing to weigh the particles by (a matcher would draw them
+            # metres apart around an empty fit); the odometry carries them to the next scan
+            self.blind += 1
+            return self._carry(k, moved)
+        if not self.mapped:
+            return self._first_map(k, moved)
         predicted = self.predict(moved)
         match = self.propose(k, predicted, moved, hits)
         n_eff, max_weight = self.weight(match, moved)
@@ -404,6 +410,34 @@ class RbpfFilter:
         return StepOutcome(
             k, self.particles[self.best], self.particles, self.weights, n_eff, max_weight, True,
             resampled, hits=hits,
+        )  # fmt: skip
+
+    def _carry(self, k: int, moved: F64) -> StepOutcome:
+        """The outcome of scan ``k`` that is no update: the estimate moves on by ``moved``, the
+        odometry since the last update."""
+        self.n_eff_log.append(self.n_eff_log[-1])
+        self.max_weight_log.append(self.max_weight_log[-1])
+        pose = compose(self.particles[self.best], moved)
+        return StepOutcome(
+            k, pose, self.particles, self.weights, self.n_eff_log[-1],
+            self.max_weight_log[-1], False, False, motion=moved,
+        )  # fmt: skip
+
+    def _first_map(self, k: int, moved: F64) -> StepOutcome:
+        """Scan ``k``, the first with a return after scans with none (a laser that starts
+        blind): it builds the map, as scan 0 does in a run that starts seeing, at the
+        odometry's pose; every particle is still the same pose, and nothing is weighed."""
+        self.particles = compose(self.particles, moved)
+        self.map(k)
+        self.mapped = True
+        self.parents = np.arange(self.particles.shape[0])
+        self.n_eff_log.append(self.n_eff_log[-1])
+        self.max_weight_log.append(self.max_weight_log[-1])
+        self.last_odometry = self.scans.odometry[k]
+        self.last_update = k
+        return StepOutcome(
+            k, self.particles[self.best], self.particles, self.weights, self.n_eff_log[-1],
+            self.max_weight_log[-1], True, False,
         )  # fmt: skip
 
     def predict(self, moved: F64) -> F64:
@@ -675,6 +709,7 @@ class RbpfFilter:
                 "gross_shifts": self.gross_shifts,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
+                **({"blind_updates": self.blind} if self.blind else {}),
             },
         )
 

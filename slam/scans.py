@@ -49,10 +49,11 @@ def nominal_scan_period(times: ArrayLike) -> float:
     return float(np.median(steps)) if steps.size else 0.0
 
 
-def _kept(values: ArrayLike, dtype: type) -> NDArray:
+def _kept(values: ArrayLike, dtype: type, where: str, name: str) -> NDArray:
     """``values`` as the 1-D ``dtype`` array a :class:`Scan` keeps: a read-only one of that
     dtype as it is (a log's own arrays, shared by its scans: :class:`LogScans`), anything else
-    copied (a driver may reuse its buffer)."""
+    copied (a driver may reuse its buffer). :class:`DataError` naming ``where`` and ``name``
+    when they are not a 1-D sequence of numbers (a scalar, a 2-D array, strings, ``None``)."""
     if (
         isinstance(values, np.ndarray)
         and values.dtype == dtype
@@ -60,7 +61,47 @@ def _kept(values: ArrayLike, dtype: type) -> NDArray:
         and not values.flags.writeable
     ):
         return values
-    return np.array(values, dtype=dtype).reshape(-1)
+    try:
+        array = np.array(values, dtype=dtype)
+    except (TypeError, ValueError):
+        raise DataError(f"{where}: {name} must be numbers, found {_short(values)}") from None
+    if array.ndim != 1:
+        raise DataError(
+            f"{where}: {name} must be a 1-D array (one value per beam), found shape {array.shape}"
+        )
+    return array
+
+
+def _check_angles(angles: F64, where: str) -> None:
+    """Refuse beam angles that are infinite or span more than a turn (degrees given for
+    radians); NaN marks a beam that is not there (the padding of a log's shorter scans)."""
+    finite = angles[np.isfinite(angles)]
+    infinite = finite.size + int(np.count_nonzero(np.isnan(angles))) < angles.size
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
+    if infinite or hi - lo > 2 * np.pi + 1e-9:
+        raise DataError(
+            f"{where}: angles must be radians spanning at most 2π (360°), found {lo:.6g} .. "
+            f"{hi:.6g}{' and infinities' if infinite else ''} (degrees? multiply "
+            "by π/180)"
+        )
+
+
+def _short(value: object) -> str:
+    """``repr(value)`` cut to a readable length for a message."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _limit(value: object, where: str, name: str) -> float:
+    """A range limit of a scan as a float: a number ≥ 0 (``inf`` allowed), else
+    :class:`DataError` naming ``where`` and ``name``."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not number >= 0:
+        raise DataError(f"{where}: {name} must be a number of metres ≥ 0, found {_short(value)}")
+    return number
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,7 +111,7 @@ class Scan:
     time: float
     """Time the scan was taken (s)."""
     ranges: F32
-    """``(B,)`` ranges (m); NaN (or anything below ``range_min``) marks an invalid beam."""
+    """``(B,)`` ranges (m); NaN, 0 or anything below ``range_min`` marks an invalid beam."""
     angles: F64
     """``(B,)`` beam angles in the laser frame (rad, counter-clockwise, 0 = forward)."""
     range_min: float | None = None
@@ -88,15 +129,20 @@ class Scan:
     _ends: tuple[F32, F32] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        time = float(self.time)
+        try:
+            time = float(self.time)
+        except (TypeError, ValueError):
+            time = float("nan")
         if not np.isfinite(time):
-            raise DataError(f"scan: time must be a finite number of seconds, found {self.time!r}")
-        ranges = _kept(self.ranges, np.float32)
-        angles = _kept(self.angles, np.float64)
-        if ranges.shape != angles.shape:
             raise DataError(
-                f"scan at t={time:.6f}: {ranges.size} ranges for {angles.size} beam angles"
+                f"scan: time must be a finite number of seconds, found {_short(self.time)}"
             )
+        where = f"scan at t={time:.6f}"
+        ranges = _kept(self.ranges, np.float32, where, "ranges")
+        angles = _kept(self.angles, np.float64, where, "angles")
+        if ranges.shape != angles.shape:
+            raise DataError(f"{where}: {ranges.size} ranges for {angles.size} beam angles")
+        _check_angles(angles, where)
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "ranges", ranges)
         object.__setattr__(self, "angles", angles)
@@ -111,7 +157,7 @@ class Scan:
         for name in ("range_min", "range_max", "no_return"):
             value = getattr(self, name)
             if value is not None:
-                object.__setattr__(self, name, float(value))
+                object.__setattr__(self, name, _limit(value, where, name))
 
     @classmethod
     def from_angle_range(
@@ -125,6 +171,14 @@ class Scan:
         """A scan whose beam ``i`` points at ``angle_min + i · angle_increment`` (ROS
         ``LaserScan`` style); ``fields`` are the other :class:`Scan` fields."""
         ranges = np.asarray(ranges)
+        for name, value in (("angle_min", angle_min), ("angle_increment", angle_increment)):
+            if not isinstance(value, int | float | np.number) or not np.isfinite(value):
+                raise DataError(f"scan at t={time}: {name} must be finite radians, found {value!r}")
+        if angle_increment == 0 and ranges.size > 1:
+            raise DataError(
+                f"scan at t={time}: angle_increment is 0: every one of the {ranges.size} beams "
+                "would point the same way"
+            )
         angles = angle_min + angle_increment * np.arange(ranges.size, dtype=np.float64)
         return cls(time, ranges, angles, **fields)  # type: ignore[arg-type]
 
@@ -142,6 +196,11 @@ class Scan:
     def resolved(self, lidar: LidarConfig) -> Scan:
         """This scan with what it leaves out taken from ``lidar`` (see the field docs)."""
         if self.is_resolved:
+            if not self.range_min < self.range_max:  # type: ignore[operator]
+                raise DataError(
+                    f"scan at t={self.time:.6f}: no reading can be a return: range_min "
+                    f"{self.range_min:g} m is not below range_max {self.range_max:g} m"
+                )
             return self
 
         def pick(own: float | None, configured: float | None, default: float) -> float:
@@ -150,17 +209,21 @@ class Scan:
             return configured if configured is not None else default
 
         no_return = pick(self.no_return, lidar.no_return, np.inf)
-        range_max = pick(self.range_max, lidar.range_max, np.inf)
+        range_max = float(min(pick(self.range_max, lidar.range_max, np.inf), no_return))
+        range_min = pick(self.range_min, lidar.range_min, 0.0)
+        if not range_min < range_max:
+            raise DataError(
+                f"scan at t={self.time:.6f}: no reading can be a return: range_min "
+                f"{range_min:g} m is not below range_max {range_max:g} m (the smaller of "
+                "range_max and no_return, the scan's or else lidar.*)"
+            )
         offset = self.laser_offset
         if offset is None:
             offset = np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64)
         return replace(
-            self,
-            range_min=pick(self.range_min, lidar.range_min, 0.0),
-            range_max=float(min(range_max, no_return)),
-            no_return=no_return,
+            self, range_min=range_min, range_max=range_max, no_return=no_return,
             laser_offset=offset,
-        )
+        )  # fmt: skip
 
     def _require_resolved(self) -> None:
         if not self.is_resolved:
@@ -242,7 +305,7 @@ def ray_kinds(
     ``(S, 1)`` limits) give a ray for an occupancy update, which of those are hits, and each
     ray's length: the range semantics of :meth:`Scan.rays` and :meth:`ScanSequence.ray_table`.
     Returns ``(keep, hit, length)``, ``hit`` over all readings."""
-    valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min)
+    valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min) & (r > 0)
     hit = valid & (r < range_max)
     length = np.where(r < no_return, np.minimum(r, range_max), free_range_no_return)
     keep = hit | (valid & (length > 0))
@@ -258,7 +321,8 @@ def endpoint_rows(scans: list[Scan], width: int) -> tuple[F32, F32]:
     where no return or no beam, in one pass: the formula :meth:`Scan.endpoints` uses too (one
     scan, one row), so a row is that scan's endpoints to the bit.
 
-    A return is a finite reading in ``[range_min, range_max)``, the float32 ranges compared with
+    A return is a finite reading in ``[range_min, range_max)`` above 0 (a driver's 0 marks no
+    reading, whatever ``range_min`` says), the float32 ranges compared with
     each scan's limits in float32; its endpoint is the laser pose plus the range along the beam,
     in float64, then float32. The cosines and sines, most of the cost, are computed once for all
     the rows whose beam directions (laser heading plus beam angles) have the bits of the first
@@ -274,7 +338,7 @@ def endpoint_rows(scans: list[Scan], width: int) -> tuple[F32, F32]:
         limits[i, :2] = scan.range_min, scan.range_max
         limits[i, 2:] = scan.laser_offset
     low, high = limits[:, 0:1].astype(np.float32), limits[:, 1:2].astype(np.float32)
-    r[~(np.isfinite(r) & np.isfinite(a) & (r >= low) & (r < high))] = np.nan
+    r[~(np.isfinite(r) & np.isfinite(a) & (r >= low) & (r > 0) & (r < high))] = np.nan
     cos, sin = row_trig(limits[:, 4:5] + a)
     ex = (limits[:, 2:3] + r * cos).astype(np.float32)
     ey = (limits[:, 3:4] + r * sin).astype(np.float32)
@@ -284,7 +348,10 @@ def endpoint_rows(scans: list[Scan], width: int) -> tuple[F32, F32]:
 def odometry_pose(scan: Scan, odometry: ArrayLike) -> NDArray[np.float64]:
     """``odometry``, the pose the robot's odometry gave at ``scan``, as ``(3,)`` float64;
     :class:`DataError` naming the scan's time when it is not a finite ``(x, y, theta)``."""
-    pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
+    try:
+        pose = np.asarray(odometry, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        pose = np.full(0, np.nan)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
         raise DataError(
             f"scan at t={scan.time:.6f}: odometry must be a finite pose (x, y, theta), "

@@ -184,6 +184,19 @@ def odometry_jump(log: Log, config: Config) -> str | None:
         else:
             where, since = f"{source}: scan {k} odometry", f"scan {k - 1}"
         return f"{where} moves {dist:.4g} m from {since} in {dt:.3g} s ({dist / max(dt, 1e-9):.3g} m/s), {advice}"
+    odometry = log.odometry
+    if odometry is not None and len(odometry.time) > 1:  # a stream of its own (ROS bags)
+        order = np.argsort(odometry.time, kind="stable")
+        found = first_jump(odometry.time[order], odometry.poses[order, :2], max_speed)
+        if found is None:
+            return None
+        k, dist, dt = found
+        what = log.meta.get("odom_source") or "odometry"
+        return (
+            f"{log.source or log.name}: {what} at t={float(odometry.time[order][k]):.6f} moves "
+            f"{dist:.4g} m from the reading before in {dt:.3g} s "
+            f"({dist / max(dt, 1e-9):.3g} m/s), {advice}"
+        )
     if log.encoders is not None:
         from slam.odometry import wheel_travel
 
@@ -228,7 +241,7 @@ def check_valid_beams(
     no_return: float,
     checks: ChecksConfig,
 ) -> str | None:
-    """Count the valid beams of the processed scans ``ranges`` (finite readings in
+    """Count the valid beams of the processed scans ``ranges`` (finite readings above 0 in
     ``[range_min, range_max)``: the obstacle hits a scan matcher can use).
 
     :class:`DataError` naming the file and what its readings are when no scan has one; a warning
@@ -236,7 +249,7 @@ def check_valid_beams(
     ``checks.min_valid_beams``; else ``None``.
     """
     with np.errstate(invalid="ignore"):
-        valid = np.isfinite(ranges) & (ranges >= range_min) & (ranges < range_max)
+        valid = np.isfinite(ranges) & (ranges >= range_min) & (ranges > 0) & (ranges < range_max)
     per_scan = valid.sum(axis=1)
     n = int(per_scan.shape[0])
     window = f"[range_min, range_max) = [{range_min:g}, {range_max:g}) m"
