@@ -26,6 +26,7 @@ on its result. :func:`run_dataset` (``slam.run``) is the same pipeline as one Py
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import resource
@@ -256,6 +257,8 @@ def execute(request: RunRequest) -> Result:
         messages += source.notes
         metrics = result.metrics
         metrics["warnings"] = messages
+        if source.log.kind == "rosbag":  # what slam eval needs to read the same scans again
+            metrics["bag_options"] = dataclasses.asdict(request.bag)
         _evaluate(result, source)
         write_text(tmp / "config.toml", dumps(config))
         write_trajectories(tmp, result.trajectory)  # sorted by time; file order if it differs
@@ -331,6 +334,11 @@ def run_dataset(
     """
     from slam.io.datadir import resolve_data_dir
 
+    if not isinstance(name, str | os.PathLike):
+        raise UsageError(
+            f"slam.run: expected a dataset name or a log's path, found {type(name).__name__} "
+            "(to run your own arrays, feed them to slam.Slam scan by scan: docs/api.md)"
+        )
     unknown = sorted(set(options) - set(RUN_OPTIONS))
     if unknown:
         raise UsageError(

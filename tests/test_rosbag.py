@@ -478,3 +478,75 @@ def test_publication_order_needs_distinct_sequence_numbers():
     np.testing.assert_array_equal(publication_order(np.array([5, 3, 4])), [1, 2, 0])
     assert publication_order(np.array([0, 1, 1])) is None  # two publishers
     assert publication_order(np.array([-1, -1])) is None  # ROS 2: no seq
+
+
+# --- odometry and scans a bag should not have -----------------------------------------------
+
+
+def test_a_nan_odometry_pose_names_the_message(tmp_path, capsys):
+    """The bug: one NaN x in /odom reached the numba kernels of the odometry synchronisation
+    and the run died of a segmentation fault (exit 139, a partial folder left)."""
+    content = straight_run(20)
+    content.odom[5].x = math.nan
+    bag = write_ros1_bag(tmp_path / "nan.bag", content)
+    out = tmp_path / "out"
+    code, _, err = _run(capsys, "run", str(bag), "--no-record", "--no-texture", "--out", str(out))
+    assert code == 2 and not out.exists()
+    assert err == (
+        f"slam: error: {bag}: /odom: message 6: expected a finite stamp and pose, found "
+        "t=101.0, x=nan, y=0.0, yaw=0.0 (1 such message(s))\n"
+    )
+
+
+def test_an_odometry_jump_in_a_bag_is_refused_before_the_run(tmp_path, capsys):
+    """The bug: one /odom x of 1e9 m went on to a memory estimate of 1.1 PiB, blamed on the
+    trajectory; the jump rule of CARMEN logs did not look at a bag's odometry topic."""
+    content = straight_run(20)
+    content.odom[5].x = 1e9
+    bag = write_ros1_bag(tmp_path / "jump.bag", content)
+    code, _, err = _run(capsys, "run", str(bag), "--no-record", "--out", str(tmp_path / "o"))
+    assert code == 2
+    assert err.startswith(
+        f"slam: error: {bag}: /odom at t=101.000000 moves 1e+09 m from the reading before in 0.2 s"
+    ), err
+    assert "more than checks.max_speed = 10 m/s" in err
+
+
+def test_a_zero_angle_increment_is_refused(tmp_path):
+    content = straight_run(5)
+    content.scans[2].angle_increment = 0.0
+    bag = write_ros1_bag(tmp_path / "zero.bag", content)
+    with pytest.raises(DataError) as caught:
+        load_bag(bag)
+    assert str(caught.value) == (
+        f"{bag}: /scan: scan 3: angle_increment is 0, so all 90 beams would point the same "
+        "way; expected the angle between neighbouring beams (rad)"
+    )
+
+
+def test_data_inspect_of_an_empty_bag_shows_no_time_span(tmp_path, capsys):
+    bag = write_ros1_bag(tmp_path / "empty.bag", BagContent())
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0
+    assert "time span: 0.000 s, from 0.000 to 0.000; 0 messages" in out
+
+
+def test_slam_eval_reads_a_bag_run_with_the_topics_the_run_chose(tmp_path, capsys):
+    """The bug: a run made with --scan-topic could not be scored (slam eval re-read the bag
+    without it and stopped at the two scan topics); the run now records its bag options."""
+    content = straight_run(30)
+    content.scans += [Scan(t=s.t + 0.05, ranges=s.ranges[:45], topic="/scan_rear")
+                      for s in content.scans]  # fmt: skip
+    bag = write_ros1_bag(tmp_path / "two.bag", content)
+    out = tmp_path / "o"
+    code, _, err = _run(capsys, "run", str(bag), "--scan-topic", "/scan_rear", "--no-record",
+                        "--no-texture", "--out", str(out), "--quiet")  # fmt: skip
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["bag_options"] == {"scan_topic": "/scan_rear", "odom_topic": None,
+                                      "base_frame": None, "odom_sync": "interpolate"}  # fmt: skip
+    code, printed, err = _run(capsys, "eval", str(out), "--json")
+    assert code == 0, err
+    report = json.loads(printed)
+    assert report["dataset"] == str(bag) and report["poses"] == 30
+    assert report["quality"]["returns"] > 500  # the rear laser's 45 beams, read again

@@ -23,13 +23,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import Config, load_config
-from slam.errors import DataError
+from slam.errors import DataError, SlamError
 from slam.eval.quality import QualityResult, Rays, map_quality, scan_rays, select_scans, summary
 from slam.io.atomic import write_png
 from slam.io.log import Log, ScanStream
 
 if TYPE_CHECKING:
     from slam.io.registry import Dataset
+    from slam.io.rosbag import BagOptions
     from slam.io.sources import DatasetRef
     from slam.trajectory import Trajectory
 
@@ -175,6 +176,25 @@ def recorded_source(run_dir: Path) -> Path | None:
     return Path(value) if isinstance(value, str) and value else None
 
 
+def recorded_bag_options(run_dir: Path) -> BagOptions | None:
+    """The bag options (``--scan-topic``, ``--odom-topic``, ``--base-frame``, ``--odom-sync``)
+    a run of a ROS bag recorded in its ``metrics.json``, so that its scans are read again as the
+    run read them (``None``: not a bag's run, or recorded before the options were)."""
+    from slam.io.rosbag import BagOptions
+
+    path = run_dir / "metrics.json"
+    try:
+        value = json.loads(path.read_text()).get("bag_options") if path.is_file() else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(value, dict):
+        return None
+    try:
+        return BagOptions(**value)
+    except (TypeError, ValueError, SlamError) as exc:
+        raise DataError(f"{path}: bag_options: {exc}") from None
+
+
 def score_scans(
     trajectory: Trajectory, scans: ScanStream, config: Config, where: Path
 ) -> QualityResult:
@@ -200,7 +220,7 @@ def evaluate_run(
     config = _run_config(run_dir)
     if trajectory is None:
         trajectory = read_tum(run_dir / "trajectory.tum")
-    scans = sources.load(log, config, need=("scans",)).log.scans
+    scans = sources.load(log, config, need=("scans",), bag=recorded_bag_options(run_dir)).log.scans
     if scans is None or len(scans) == 0:
         raise DataError(f"{log.path}: the log has no laser scans to score the map with")
     result = score_scans(trajectory, scans, config, run_dir / "trajectory.tum")

@@ -225,6 +225,8 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         IndexError,
         zlib.error,
         AssertionError,
+        OverflowError,  # a corrupt length field in an MCAP record
+        MemoryError,  # ... or one that asks for an impossible buffer
     )
 
 
@@ -900,7 +902,7 @@ def load_bag(
         parents = {e.child: e for e in static}
         need_tf = _need_tf(reader, sel, lidar, parents, base, laser_frame)
         _drop_unread_indexes(reader, [*sel.scan, *sel.odom, *sel.imu, *(sel.tf if need_tf else [])])
-        streams = _stream(reader, sel, need_tf)
+        streams = _stream(reader, sel, need_tf, path)
 
     scans = streams.scans
     notes = list(sel.notes)
@@ -1117,7 +1119,7 @@ def _read_tf(reader: Any, conns: list[Any]) -> list[_Edge]:
     return edges
 
 
-def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
+def _stream(reader: Any, sel: _Selection, need_tf: bool, path: Path) -> _Streams:
     """One pass over the selected topics, filling preallocated per-topic arrays."""
     n_scan = sum(c.msgcount for c in sel.scan)
     scans = _ScanRows(
@@ -1149,7 +1151,7 @@ def _stream(reader: Any, sel: _Selection, need_tf: bool) -> _Streams:
     for conn, record_ns, raw in reader.messages(connections=selected):
         kind = kinds[id(conn)]
         if kind == "scan":
-            _add_scan(scans, scan_decode(raw), record_ns, conn.topic)
+            _add_scan(scans, scan_decode(raw), record_ns, f"{path}: {conn.topic}")
         elif kind == "odom":
             o = odom_decode(raw)
             out.odom_children.add(o.child)
@@ -1201,6 +1203,11 @@ def _add_scan(scans: _ScanRows, s: _Scan, record_ns: int, topic: str) -> None:
         raise DataError(
             f"{topic}: scan {scans.time.n + 1}: expected finite angle_min and angle_increment, "
             f"found {s.angle_min} and {s.angle_increment}"
+        )
+    if s.angle_increment == 0 and n > 1:
+        raise DataError(
+            f"{topic}: scan {scans.time.n + 1}: angle_increment is 0, so all {n} beams would "
+            "point the same way; expected the angle between neighbouring beams (rad)"
         )
     stamp = s.stamp_ns
     if stamp == 0:
@@ -1305,6 +1312,7 @@ def _odometry(
         a = streams.odom.array()
         if a.shape[0] == 0:
             raise DataError(f"{path}: {sel.odom_topic} holds no messages")
+        _check_finite(a, f"{path}: {sel.odom_topic}")
         children = {c.lstrip("/") for c in streams.odom_children} - {""}
         if children and base not in children:
             raise DataError(
@@ -1329,6 +1337,7 @@ def _odometry(
             f"to it, found {found} (moving transforms: {_edge_list(dynamic) or 'none'})"
         )
     a = dynamic[edges[0]].array()
+    _check_finite(a, f"{path}: /tf {edges[0][0]} → {base}")
     published = _published(a, 4)
     order = np.argsort(a[:, 0], kind="stable")
     a = a[order]
@@ -1337,6 +1346,20 @@ def _odometry(
         f"tf:{edges[0][0]}->{base}",
         a[:, :4] if published is None else published,
     )
+
+
+def _check_finite(rows: F64, where: str) -> None:
+    """Refuse odometry rows ``(time, x, y, yaw, ...)`` with a stamp or pose that is not finite,
+    naming the message (1-based, in the bag's order) and its values: a NaN pose would reach the
+    numba kernels, which do not check."""
+    bad = ~np.isfinite(rows[:, :4]).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        t, x, y, yaw = (float(v) for v in rows[i, :4])
+        raise DataError(
+            f"{where}: message {i + 1}: expected a finite stamp and pose, found t={t}, x={x}, "
+            f"y={y}, yaw={yaw} ({int(bad.sum())} such message(s))"
+        )
 
 
 def _published(rows: F64, seq_column: int) -> F64 | None:
@@ -1558,6 +1581,8 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
                     key = (e.parent, e.child, static)
                     tf_edges[key] = tf_edges.get(key, 0) + 1
         start, end = _seconds(reader.start_time), _seconds(reader.end_time)
+        if not counts:  # an empty bag: the readers' start and end are their sentinels
+            start = end = 0.0
         try:
             sel = select_topics(path, reader, options)
             plan: dict[str, Any] = {
