@@ -95,11 +95,13 @@ def _needs(config: Config) -> tuple[str, ...]:
     return ("encoders", "imu", "scans")
 
 
-def load_source(name: str, data_dir: Path, config: Config, progress: bool = False) -> Source:
+def load_source(
+    name: str, data_dir: Path, config: Config, progress: bool = False, **bag: BagOptions | None
+) -> Source:
     """Load the log ``name`` (see :func:`slam.io.sources.resolve`) with the streams the
-    configured method needs."""
+    configured method needs; ``bag=BagOptions(...)`` chooses a ROS bag's topics."""
     ref = sources.resolve(name, data_dir, where="slam run NAME")
-    return sources.load(ref, config, _needs(config), progress)
+    return sources.load(ref, config, _needs(config), progress, **bag)
 
 
 def default_run_dir(name: str) -> Path:

@@ -550,3 +550,70 @@ def test_slam_eval_reads_a_bag_run_with_the_topics_the_run_chose(tmp_path, capsy
     report = json.loads(printed)
     assert report["dataset"] == str(bag) and report["poses"] == 30
     assert report["quality"]["returns"] > 500  # the rear laser's 45 beams, read again
+
+
+def test_a_bag_named_otherwise_is_read_by_its_content(tmp_path):
+    """The reader goes by the suffix, and a ROS 1 bag or an MCAP file named otherwise was
+    refused ("rename or link it"), against data.md's "whatever its name": it is read through a
+    link of the right name in a temporary folder, and the log keeps its own name."""
+    content = straight_run(5)
+    bag = write_ros1_bag(tmp_path / "a.bag", content).rename(tmp_path / "robot.dat")
+    mcap = write_bare_mcap(tmp_path / "b.mcap", content).rename(tmp_path / "robot-mcap")
+    for path in (bag, mcap):
+        log = load_bag(path)
+        assert log.name == path.name and log.source == path and len(log.scans) == 5
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot-mcap", "robot.dat"]
+
+
+def test_damage_messages_are_one_line_with_the_truncation_hint(tmp_path):
+    whole = write_ros1_bag(tmp_path / "whole.bag", straight_run(10))
+    head = tmp_path / "head.bag"
+    head.write_bytes(whole.read_bytes()[:13])
+    mcap = write_bare_mcap(tmp_path / "whole.mcap", straight_run(40))
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    for path in (head, cut):
+        with pytest.raises(DataError) as caught:
+            load_bag(path)
+        message = str(caught.value)
+        assert message.startswith(f"{path}: cannot read the ") and "\n" not in message
+        assert "('" not in message and "looks truncated" in message, message
+
+
+def test_bag_options_on_a_log_that_is_no_bag_are_refused(tmp_path, capsys):
+    """The bug: `slam run aces --scan-topic /front/scan` ran and ignored the option."""
+    log = tmp_path / "room.clf"
+    log.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\n")
+    out = tmp_path / "o"
+    code, _, err = _run(capsys, "run", str(log), "--scan-topic", "/front", "--out", str(out))
+    assert code == 2 and not out.exists()
+    assert (
+        err
+        == "slam: error: --scan-topic: options of a ROS bag or MCAP file, but room is a carmen log\n"
+    )
+    code, _, err = _run(
+        capsys, "data", "inspect", str(log), "--odom-topic", "tf", "--odom-sync", "latest"
+    )
+    assert code == 2
+    assert err == (
+        f"slam: error: --odom-topic, --odom-sync: options of a ROS bag or MCAP file, but {log} is a carmen log\n"
+    )
+
+
+def test_data_calibrate_takes_the_bag_options(tmp_path, capsys):
+    """The bug: on a bag of two scan topics `slam data calibrate` asked for --scan-topic, which
+    it did not have."""
+    content = straight_run(30)
+    content.scans += [Scan(t=s.t + 0.05, ranges=s.ranges[:45], topic="/scan_rear")
+                      for s in content.scans]  # fmt: skip
+    bag = write_ros1_bag(tmp_path / "two.bag", content)
+    code, _, err = _run(capsys, "data", "calibrate", str(bag))
+    assert code == 2 and "choose one with --scan-topic TOPIC" in err
+    # with the option it reads the rear laser and goes on to the measurement, which a straight
+    # run without a turn cannot make
+    code, _, err = _run(capsys, "data", "calibrate", str(bag), "--scan-topic", "/scan_rear")
+    assert code == 2
+    assert err == (
+        f"slam: error: {bag}: the laser's mount: 0 turning scan pairs fitted; at least 10 are "
+        "needed\n"
+    )

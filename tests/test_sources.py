@@ -102,11 +102,20 @@ def test_ece276a_folder_number_and_names(tmp_path):
 
 def test_folder_with_none_or_several_datasets_is_one_clear_error(tmp_path):
     several = ece276a_folder(tmp_path / "all", numbers=("20", "21", "23"))
-    with pytest.raises(DataError, match=r"all: expected the files of one ECE276A dataset .* found those of 20, 21, 23"):  # fmt: skip
+    with pytest.raises(DataError, match=r"all: expected the files of one ECE276A dataset .* found the files of 20, 21, 23"):  # fmt: skip
         sources.resolve(str(several), tmp_path)
     (tmp_path / "empty").mkdir()
-    with pytest.raises(DataError, match=r"empty: expected the files of one ECE276A .* found none"):
+    with pytest.raises(
+        DataError, match=r"empty: expected the files of one ECE276A .* found neither$"
+    ):
         sources.resolve(str(tmp_path / "empty"), tmp_path)
+    # a folder that holds a log: the message points at it
+    (tmp_path / "bags").mkdir()
+    (tmp_path / "bags" / "run.bag").write_bytes(b"#ROSBAG V2.0\n")
+    with pytest.raises(
+        DataError, match=r"bags: expected .* found neither; it holds run.bag: give that path$"
+    ):
+        sources.resolve(str(tmp_path / "bags"), tmp_path)
 
 
 def test_unknown_name_lists_what_a_name_may_be(tmp_path, monkeypatch):

@@ -93,6 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_log_argument(calibrate, "LOG")
     add_data_dir_argument(calibrate)
     add_config_arguments(calibrate)
+    add_bag_arguments(calibrate)
     calibrate.add_argument("--json", action="store_true", help="print the report as JSON")
     calibrate.set_defaults(func=run_calibrate)
 
@@ -261,7 +262,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     ref = resolve(args.name, data_dir, where="slam data calibrate LOG")
     name = ref.config_name if ref.shipped_config else ""
     config = load_config(name, args.config, overrides_from(args))
-    source = load_source(args.name, data_dir, config)
+    source = load_source(args.name, data_dir, config, bag=bag_options_from(args))
     config = source.configured(config)  # the beam step measured when it loaded, if applied
     log = source.log
     with warnings.catch_warnings(record=True) as caught:  # said as `slam run` says them

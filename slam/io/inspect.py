@@ -35,6 +35,9 @@ def inspect_path(path: Path, options: BagOptions | None = None) -> dict[str, Any
 
         return inspect_bag(path, options)
     from slam.config import load_config
+    from slam.io.sources import refuse_bag_options
+
+    refuse_bag_options(options, str(path), fmt)
 
     dataset, shipped = run_config_name(str(path))
     config = load_config(dataset if shipped else "")

@@ -69,6 +69,7 @@ import contextlib
 import dataclasses
 import math
 import struct
+import tempfile
 import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -245,30 +246,35 @@ def open_bag(path: Path) -> Iterator[tuple[Any, str]]:
     if fmt == "rosbag2" and path.name == "metadata.yaml":
         path = path.parent
     expected = {"ros1": ".bag", "mcap": ".mcap"}.get(fmt)
-    if expected and path.suffix != expected:
-        raise DataError(
-            f"{path}: a {_FORMAT_NAMES[fmt]} by its content, but named {path.suffix or 'without a suffix'!r}; "
-            f"the reader needs the {expected} suffix: rename or link it"
-        )
-    store = Stores.ROS1_NOETIC if fmt == "ros1" else Stores.LATEST
-    errors = _reader_errors()
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(store))
-        reader.open()
-    except errors as exc:
-        raise _read_error(path, fmt, exc) from None
-    try:
-        yield reader, fmt
-    except errors as exc:
-        raise _read_error(path, fmt, exc) from None
-    finally:
-        with contextlib.suppress(Exception):
-            reader.close()
+    with contextlib.ExitStack() as stack:
+        read = path
+        if expected and path.suffix != expected:  # the reader goes by the suffix: a link has it
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="slam-bag-")))
+            read = folder / f"{path.stem or 'bag'}{expected}"
+            read.symlink_to(path.resolve())
+        store = Stores.ROS1_NOETIC if fmt == "ros1" else Stores.LATEST
+        errors = _reader_errors()
+        try:
+            reader = AnyReader([read], default_typestore=get_typestore(store))
+            reader.open()
+        except errors as exc:
+            raise _read_error(path, fmt, exc) from None
+        try:
+            yield reader, fmt
+        except errors as exc:
+            raise _read_error(path, fmt, exc) from None
+        finally:
+            with contextlib.suppress(Exception):
+                reader.close()
 
 
 def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
-    text = " ".join(str(a) for a in exc.args) or type(exc).__name__
-    if isinstance(exc, EOFError | struct.error) or "ndex" in text or "runcat" in text:
+    def flat(args: tuple[Any, ...]) -> list[str]:  # a reader may wrap its message in a tuple
+        return [t for a in args for t in (flat(a) if isinstance(a, tuple) else [str(a)])]
+
+    text = " ".join(" ".join(flat(exc.args)).split()) or type(exc).__name__
+    signs = ("ndex", "runcat", "eader could not", "magic is invalid")
+    if isinstance(exc, EOFError | struct.error) or any(sign in text for sign in signs):
         text += "; the file looks truncated or unindexed (copy it again, or `rosbag reindex` it)"
     return DataError(f"{path}: cannot read the {_FORMAT_NAMES[fmt]}: {text}")
 

@@ -22,6 +22,7 @@ suffix or folder content) and a branch of :func:`load`.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
@@ -294,10 +295,17 @@ def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
 
         numbers = dataset_numbers(path)
         if len(numbers) != 1:
-            found = f"those of {', '.join(numbers)}" if numbers else "none"
+            found = f"the files of {', '.join(numbers)}" if numbers else "neither"
+            logs = sorted(
+                p.name
+                for p in path.iterdir()
+                if p.suffix in (".bag", ".mcap", ".clf", ".gz") or (p / ROSBAG2_METADATA).is_file()
+            )[:3]
+            inside = f"; it holds {', '.join(logs)}: give that path" if logs and not numbers else ""
             raise DataError(
                 f"{path}: expected the files of one ECE276A dataset in the folder (EncodersNN.npz, "
-                f"ImuNN.npz, HokuyoNN.npz, KinectNN.npz), found {found}"
+                f"ImuNN.npz, HokuyoNN.npz, KinectNN.npz) or a ROS 2 bag (metadata.yaml), found "
+                f"{found}{inside}"
             )
         return DatasetRef(
             name, Kind.ECE276A, path, stem, path.name, "ece276a", data_dir, numbers[0],
@@ -315,6 +323,24 @@ def ensure(ref: DatasetRef, progress: bool = False) -> Path:
 
         return ensure_demo(ref.path.parent, progress=progress)
     return ref.path
+
+
+def refuse_bag_options(bag: BagOptions | None, name: str, fmt: str) -> None:
+    """A :class:`UsageError` when ``bag`` chooses anything (``--scan-topic``, ``--odom-topic``,
+    ``--base-frame``, ``--odom-sync``) for a log that is no ROS bag (``name``, of format
+    ``fmt``): the option would be ignored without a word."""
+    from slam.io.rosbag import BagOptions
+
+    if bag is None or bag == BagOptions():
+        return
+    given = [
+        f"--{key.replace('_', '-')}"
+        for key, value in dataclasses.asdict(bag).items()
+        if value != getattr(BagOptions(), key)
+    ]
+    raise UsageError(
+        f"{', '.join(given)}: options of a ROS bag or MCAP file, but {name} is a {fmt} log"
+    )
 
 
 def load(
@@ -339,6 +365,7 @@ def load(
         from slam.io.rosbag import load_bag
 
         return Source(load_bag(ref.path, name=ref.display_name, lidar=config.lidar, options=bag))
+    refuse_bag_options(bag, ref.display_name, ref.loader)
     if ref.loader == "carmen":
         need = tuple(s for s in need if s not in CARMEN_ODOMETRY_STANDS_IN)
     if ref.kind is Kind.REGISTRY:
