@@ -371,6 +371,18 @@ def test_data_inspect_reports_why_a_bag_cannot_run(tmp_path, capsys):
     assert code == 0 and "slam run cannot use it as it is" in out and "--scan-topic" in out
     code, out, _ = _run(capsys, "data", "inspect", str(bag), "--scan-topic", "/scan2")
     assert f"run it: slam run {bag} --scan-topic /scan2" in out
+    # the frames too (the bug: inspect said "run it" for a laser frame no transform reaches,
+    # and the run then stopped)
+    content = straight_run(4)
+    for scan in content.scans:
+        scan.frame = "hokuyo_link"
+    bag = write_ros1_bag(tmp_path / "frame.bag", content)
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0 and "run it:" not in out
+    assert (
+        f"slam run cannot use it as it is: {bag}: no transform from the robot frame 'base_link' "
+        "to the laser frame 'hokuyo_link'"
+    ) in out
 
 
 def test_data_inspect_carmen_log(tmp_path, capsys):

@@ -1567,8 +1567,9 @@ def _mark_beams(
 def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]:
     """What the bag at ``path`` holds (``slam data inspect``): per topic its type, message count,
     rate and time span; the frames of ``/tf`` and ``/tf_static``; and what ``slam run`` would
-    read from it (or the error it would stop with). Reads every message's record time and
-    deserializes only the tf messages."""
+    read from it (or the error it would stop with: the bag is loaded as the run loads it, so a
+    frame chain or a mount the run refuses is found here too). Reads every message's record time
+    and deserializes the tf messages, then loads the bag."""
     path = Path(path)
     options = options or BagOptions()
     with open_bag(path) as (reader, fmt):
@@ -1599,6 +1600,11 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
             if sel.imu:
                 plan["imu_topic"] = sel.imu[0].topic
             plan["command"] = _command(path, options)
+        except (DataError, UsageError) as exc:
+            plan = {"error": str(exc), "command": None}
+    if plan["command"] is not None:  # the frames, the mount, the odometry: what the run reads
+        try:
+            load_bag(path, options=options)
         except (DataError, UsageError) as exc:
             plan = {"error": str(exc), "command": None}
     rows = []
