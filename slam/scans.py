@@ -74,7 +74,10 @@ def _kept(values: ArrayLike, dtype: type, where: str, name: str) -> NDArray:
 
 def _check_angles(angles: F64, where: str) -> None:
     """Refuse beam angles that are infinite or span more than a turn (degrees given for
-    radians); NaN marks a beam that is not there (the padding of a log's shorter scans)."""
+    radians); NaN marks a beam that is not there (the padding of a log's shorter scans). A
+    read-only array that passed is not checked again (a log's scans share one)."""
+    if angles is _checked[0]:
+        return
     finite = angles[np.isfinite(angles)]
     infinite = finite.size + int(np.count_nonzero(np.isnan(angles))) < angles.size
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
@@ -84,6 +87,12 @@ def _check_angles(angles: F64, where: str) -> None:
             f"{hi:.6g}{' and infinities' if infinite else ''} (degrees? multiply "
             "by π/180)"
         )
+    if not angles.flags.writeable:
+        _checked[0] = angles
+
+
+_checked: list[NDArray | None] = [None]
+"""The last read-only angle array :func:`_check_angles` passed."""
 
 
 def _short(value: object) -> str:
