@@ -645,7 +645,7 @@ def check_beam_geometry(
             sc = scans.scan(k)
             a = angles if readings[k] == short else long_angles
             r = np.asarray(sc.ranges[: a.size], dtype=np.float64)
-            ok = np.isfinite(r) & (r >= sc.range_min) & (r < sc.range_max)
+            ok = np.isfinite(r) & (r >= sc.range_min) & (r > 0) & (r < sc.range_max)
             return r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])
 
         motions, kept = pair_motions(laser_frame, odometry, pairs, config, settings)

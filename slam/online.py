@@ -284,24 +284,30 @@ class Slam:
             raise UsageError("Slam.update: the run is finished (make a new Slam)")
         if not isinstance(scan, Scan):
             raise UsageError(f"Slam.update: expected a slam.Scan, found {type(scan).__name__}")
+        # what can refuse the scan is checked before its readings are fed: a refused update
+        # leaves the object as it was
+        resolved = scan.resolved(self.config.lidar)
+        if odometry is not None:
+            if self._laser is not None:
+                from slam.laser_odometry import refuse_given
+
+                raise refuse_given("Slam.update")
+            if encoders is not None or (self._odometry is not None and self._odometry.has_encoders):
+                raise UsageError(
+                    f"Slam.update: scan at t={resolved.time:.6f}: odometry= was given, and encoder "
+                    "readings were fed: the two are odometries of different frames; give "
+                    "odometry= for every scan, or feed the encoders and leave it out"
+                )
+            self._one_source("given", resolved)
+            odometry = odometry_pose(resolved, odometry)
+            self._check_jump(resolved, odometry)
         if imu is not None:
             self.add_imu(*imu)
         if encoders is not None:
             self.add_encoders(*encoders)
-        resolved = scan.resolved(self.config.lidar)
+        source = "given"
         if odometry is None:
             odometry, source = self._odometry_at(resolved)
-        elif self._laser is not None:
-            from slam.laser_odometry import refuse_given
-
-            raise refuse_given("Slam.update")
-        else:
-            source = "given"
-            if self._odometry is not None and self._odometry.has_encoders:
-                self._source = self._source or "wheels"  # the readings fed are the odometry
-            self._one_source(source, resolved)
-            odometry = odometry_pose(resolved, odometry)
-            self._check_jump(resolved, odometry)
         k = self.scans.append(resolved, odometry)
         self._source = source
         self._running_period.add(scan.time)
@@ -358,8 +364,6 @@ class Slam:
         if self._source is not None and source != self._source:
             if source == "wheels" and self._source == "given":
                 why = "encoder readings were fed after scans given odometry="
-            elif source == "given" and self._source == "wheels":
-                why = "odometry= was given after encoder readings were fed"
             else:
                 why = f"this scan's would come from {self._SOURCES[source]}"
             raise UsageError(
@@ -371,8 +375,8 @@ class Slam:
         """Refuse an odometry pose that moves faster than ``checks.max_speed`` since the
         previous scan (time steps floored at the scan period), the check ``slam run`` makes
         on a log's odometry (:func:`slam.io.plausibility.first_jump`)."""
-        if not len(self.scans):
-            return
+        if not len(self.scans) or self.scans.odometry_source == "laser":
+            return  # a scan matcher's odometry is no reading that can be corrupt
         max_speed = self.config.checks.max_speed
         previous = self.scans.odometry[-1]
         dt = abs(scan.time - float(self.scans.times[-1]))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 import warnings
+import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -74,25 +75,48 @@ def _kept(values: ArrayLike, dtype: type, where: str, name: str) -> NDArray:
 
 def _check_angles(angles: F64, where: str) -> None:
     """Refuse beam angles that are infinite or span more than a turn (degrees given for
-    radians); NaN marks a beam that is not there (the padding of a log's shorter scans). A
-    read-only array that passed is not checked again (a log's scans share one)."""
-    if angles is _checked[0]:
-        return
-    finite = angles[np.isfinite(angles)]
-    infinite = finite.size + int(np.count_nonzero(np.isnan(angles))) < angles.size
-    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
-    if infinite or hi - lo > 2 * np.pi + 1e-9:
+    radians; a float32 turn of a 360° laser may overshoot 2π by a few 1e-7, which passes); NaN
+    marks a beam that is not there (the padding of a log's shorter scans). A read-only view of
+    a float64 array is checked with every row of that array, once: a log's scans are such views
+    of its one angle array (:class:`LogScans`), and the array is remembered, weakly, until the
+    next one."""
+    base = angles.base
+    if isinstance(base, np.ndarray):
+        if _checked[0] is not None and _checked[0]() is base:
+            return
+        if (
+            not angles.flags.writeable
+            and base.dtype == np.float64
+            and base.ndim <= 2
+            and not _bad_rows(base).any()
+        ):
+            _checked[0] = weakref.ref(base)
+            return
+    if _bad_rows(angles).any():
+        finite = angles[np.isfinite(angles)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
+        infinite = bool(np.isinf(angles).any())
         raise DataError(
             f"{where}: angles must be radians spanning at most 2π (360°), found {lo:.6g} .. "
-            f"{hi:.6g}{' and infinities' if infinite else ''} (degrees? multiply "
-            "by π/180)"
+            f"{hi:.6g}{' and infinities' if infinite else ''} (degrees? multiply by π/180)"
         )
-    if not angles.flags.writeable:
-        _checked[0] = angles
 
 
-_checked: list[NDArray | None] = [None]
-"""The last read-only angle array :func:`_check_angles` passed."""
+def _bad_rows(angles: NDArray) -> NDArray[np.bool_]:
+    """Per row of ``angles`` (``(B,)`` or ``(S, B)``): whether an angle is infinite or the
+    finite ones span more than 2π + 1e-3 rad."""
+    rows = np.atleast_2d(angles)
+    if rows.shape[1] == 0:  # scans without a beam
+        return np.zeros(rows.shape[0], dtype=bool)
+    finite = np.isfinite(rows)
+    lo = np.where(finite, rows, np.inf).min(axis=1)
+    hi = np.where(finite, rows, -np.inf).max(axis=1)
+    span = np.where(finite.any(axis=1), hi - lo, 0.0)
+    return np.isinf(rows).any(axis=1) | (span > 2 * np.pi + 1e-3)
+
+
+_checked: list[weakref.ref | None] = [None]
+"""The last base array whose every row :func:`_check_angles` passed (weakly held)."""
 
 
 def _short(value: object) -> str:

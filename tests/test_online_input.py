@@ -98,8 +98,35 @@ def test_odometry_comes_from_one_source_per_run():
         s.update(scan_at(poses[1], 0.1))
     s = slam.Slam(seed=0)
     s.add_encoders(0.0, counts)
-    with pytest.raises(UsageError, match="odometry= was given after encoder readings were fed"):
+    with pytest.raises(UsageError, match="odometry= was given, and encoder readings were fed"):
         s.update(scan_at(poses[0], 0.1), odometry=poses[0])
+    # in any order: odometry=, then encoders fed, then odometry= again
+    s = slam.Slam(seed=0)
+    s.update(scan_at(poses[0], 0.0), odometry=poses[0])
+    s.add_encoders(0.05, counts)
+    with pytest.raises(UsageError, match="odometry= was given, and encoder readings were fed"):
+        s.update(scan_at(poses[1], 0.1), odometry=poses[1])
+
+
+@pytest.mark.filterwarnings("ignore:odometry. encoder intervals outside the IMU")
+def test_a_refused_update_leaves_the_run_as_it_was():
+    """The bug: the readings of a refused update's encoders= were fed before the checks, so
+    retrying the call counted them twice."""
+    poses = room_path(4)
+    ticks = np.full((4, 1), 100.0)
+
+    def run(retry: bool) -> np.ndarray:
+        s = slam.Slam(seed=0)
+        s.update(scan_at(poses[0], 0.0), encoders=(0.0, ticks))
+        if retry:  # a scan whose limits are wrong, with the next readings
+            bad = slam.Scan(0.1, ray_cast(poses[1], ANGLES), ANGLES, laser_offset=(0, 0, 0),
+                            range_min=5.0, range_max=1.0)  # fmt: skip
+            with pytest.raises(DataError, match="range_min 5 m is not below range_max 1 m"):
+                s.update(bad, encoders=(0.1, ticks))
+        s.update(scan_at(poses[1], 0.1), encoders=(0.1, ticks))
+        return s.finish().poses
+
+    np.testing.assert_array_equal(run(True), run(False))
 
 
 def test_an_odometry_jump_is_refused_as_slam_run_refuses_it():

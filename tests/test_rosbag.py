@@ -564,17 +564,32 @@ def test_slam_eval_reads_a_bag_run_with_the_topics_the_run_chose(tmp_path, capsy
     assert report["quality"]["returns"] > 500  # the rear laser's 45 beams, read again
 
 
-def test_a_bag_named_otherwise_is_read_by_its_content(tmp_path):
+def test_a_bag_named_otherwise_is_read_by_its_content(tmp_path, monkeypatch):
     """The reader goes by the suffix, and a ROS 1 bag or an MCAP file named otherwise was
     refused ("rename or link it"), against data.md's "whatever its name": it is read through a
     link of the right name in a temporary folder, and the log keeps its own name."""
+    import tempfile
+
+    links = tmp_path / "links"  # where the temporary folders of the links go
+    links.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(links))
     content = straight_run(5)
     bag = write_ros1_bag(tmp_path / "a.bag", content).rename(tmp_path / "robot.dat")
     mcap = write_bare_mcap(tmp_path / "b.mcap", content).rename(tmp_path / "robot-mcap")
     for path in (bag, mcap):
         log = load_bag(path)
         assert log.name == path.name and log.source == path and len(log.scans) == 5
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot-mcap", "robot.dat"]
+    cut = tmp_path / "cut.dat"  # and on the way out of an error
+    cut.write_bytes(bag.read_bytes()[:300])
+    with pytest.raises(DataError, match=r"cut\.dat: cannot read the ROS 1 bag"):
+        load_bag(cut)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "cut.dat",
+        "links",
+        "robot-mcap",
+        "robot.dat",
+    ]
+    assert not any(links.iterdir())
 
 
 def test_damage_messages_are_one_line_with_the_truncation_hint(tmp_path):
@@ -629,3 +644,29 @@ def test_data_calibrate_takes_the_bag_options(tmp_path, capsys):
         f"slam: error: {bag}: the laser's mount: 0 turning scan pairs fitted; at least 10 are "
         "needed\n"
     )
+
+
+def test_data_inspect_finds_the_odometry_jump_the_run_stops_at(tmp_path, capsys):
+    content = straight_run(20)
+    content.odom[5].x = 1e9
+    bag = write_ros1_bag(tmp_path / "jump.bag", content)
+    code, out, _ = _run(capsys, "data", "inspect", str(bag))
+    assert code == 0 and "run it:" not in out
+    assert f"slam run cannot use it as it is: {bag}: /odom at t=101.000000 moves 1e+09 m" in out
+
+
+def test_odometry_in_bursts_is_no_jump(tmp_path):
+    """intel's bag publishes its odometry in bursts (median step 1 ms, mean 0.1 s): a step of
+    5 cm in 3 ms is 16 m/s against the median's floor, and no corrupt reading."""
+    from slam.config import Config
+    from slam.io.plausibility import odometry_jump
+
+    content = straight_run(20)
+    for k, odom in enumerate(content.odom):  # pairs 1 ms apart, 0.4 s between the pairs
+        odom.t = 100.0 + 0.4 * (k // 2) + 0.001 * (k % 2)
+        odom.x = 0.1 * k
+    log = load_bag(write_ros1_bag(tmp_path / "bursts.bag", content))
+    assert odometry_jump(log, Config()) is None
+    content.odom[7].x += 5.0
+    log = load_bag(write_ros1_bag(tmp_path / "bursts-jump.bag", content))
+    assert "moves 5.1 m" in odometry_jump(log, Config())

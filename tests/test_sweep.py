@@ -228,6 +228,8 @@ def test_a_spec_without_logs_keeps_the_evaluation_of_logs_another_run_names(tmp_
         ("'rbpf.temperature' = { min = -5.0, max = 80.0 }", "rbpf.temperature: min: expected a finite number in [0.001, 1e+06], found -5.0\n"),
         ("'filter.method' = { values = ['rbpf', 'fast'] }", "filter.method: values[1]: expected one of odometry, classic, rbpf, found 'fast'\n"),
         ("'filter.particles' = { values = [10, 'x'] }", "filter.particles: values[1]: expected an integer, found 'x'\n"),
+        ("'filter.particles' = { min = 0.6, max = 2, int = true }", "filter.particles: min: expected a whole number with int = true, found 0.6\n"),
+        ("'filter.particles' = { min = 10, max = 60 }", "filter.particles: an integer key: add int = true (draws whole numbers)\n"),
     ],
 )  # fmt: skip
 def test_a_bad_tune_range_names_the_spec_file_and_key(tmp_path, capsys, item, message):

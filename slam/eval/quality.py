@@ -117,7 +117,7 @@ def scan_rays(
     a = np.asarray(angles, dtype=np.float64)
     a = a[None, :] if a.ndim == 1 else a
     range_max = min(float(range_max), float(no_return))
-    valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min)
+    valid = np.isfinite(r) & np.isfinite(a) & (r >= range_min) & (r > 0)  # 0: no reading
     hit = valid & (r < range_max)
     length = np.where(r < no_return, np.minimum(r, range_max), free_range_no_return)
     ray = hit | (valid & (length > 0))

@@ -220,7 +220,8 @@ def evaluate_run(
     config = _run_config(run_dir)
     if trajectory is None:
         trajectory = read_tum(run_dir / "trajectory.tum")
-    scans = sources.load(log, config, need=("scans",), bag=recorded_bag_options(run_dir)).log.scans
+    bag = recorded_bag_options(run_dir) if log.kind is sources.Kind.BAG else None
+    scans = sources.load(log, config, need=("scans",), bag=bag).log.scans
     if scans is None or len(scans) == 0:
         raise DataError(f"{log.path}: the log has no laser scans to score the map with")
     result = score_scans(trajectory, scans, config, run_dir / "trajectory.tum")

@@ -68,6 +68,7 @@ import bisect
 import contextlib
 import dataclasses
 import math
+import re
 import struct
 import tempfile
 import zlib
@@ -227,7 +228,6 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         zlib.error,
         AssertionError,
         OverflowError,  # a corrupt length field in an MCAP record
-        MemoryError,  # ... or one that asks for an impossible buffer
     )
 
 
@@ -273,9 +273,13 @@ def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
         return [t for a in args for t in (flat(a) if isinstance(a, tuple) else [str(a)])]
 
     text = " ".join(" ".join(flat(exc.args)).split()) or type(exc).__name__
+    text = re.sub(r"\('([^']*)',\)", r"\1", text)  # "damaged: ('Header ...',)": a wrapped tuple
     signs = ("ndex", "runcat", "eader could not", "magic is invalid")
     if isinstance(exc, EOFError | struct.error) or any(sign in text for sign in signs):
-        text += "; the file looks truncated or unindexed (copy it again, or `rosbag reindex` it)"
+        repair = {"ros1": "`rosbag reindex` it", "mcap": "`mcap recover` it"}.get(
+            fmt, "`ros2 bag reindex` it"
+        )
+        text += f"; the file looks truncated or unindexed (copy it again, or {repair})"
     return DataError(f"{path}: cannot read the {_FORMAT_NAMES[fmt]}: {text}")
 
 
@@ -1603,10 +1607,15 @@ def inspect_bag(path: Path, options: BagOptions | None = None) -> dict[str, Any]
         except (DataError, UsageError) as exc:
             plan = {"error": str(exc), "command": None}
     if plan["command"] is not None:  # the frames, the mount, the odometry: what the run reads
+        from slam.config import Config
+        from slam.io.plausibility import odometry_jump
+
         try:
-            load_bag(path, options=options)
+            jump = odometry_jump(load_bag(path, options=options), Config())
         except (DataError, UsageError) as exc:
-            plan = {"error": str(exc), "command": None}
+            jump = str(exc)
+        if jump is not None:
+            plan = {"error": jump, "command": None}
     rows = []
     for topic, msgtype, _ in topics:
         first, last = spans.get(topic, [math.nan, math.nan])

@@ -178,8 +178,15 @@ def _check_ends(declared: Range, here: str) -> None:
         ends = [(f"values[{i}]", v) for i, v in enumerate(declared.values)]
     else:
         ends = [("min", declared.low), ("max", declared.high)]
-        if declared.integer:
-            ends = [(which, int(round(v))) for which, v in ends]
+        if declared.integer:  # drawn as whole numbers between them: the ends must be whole
+            for which, value in ends:
+                if value != int(value):
+                    raise UsageError(
+                        f"{here}: {which}: expected a whole number with int = true, found {value}"
+                    )
+            ends = [(which, int(v)) for which, v in ends]
+        elif types_[name] is int:
+            raise UsageError(f"{here}: an integer key: add int = true (draws whole numbers)")
     for which, value in ends:
         try:
             typed = coerce(value, types_[name], here, which)
