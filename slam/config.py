@@ -882,7 +882,8 @@ class LocalizeConfig(Validated):
     localized_std_theta: float = bounded(0.05, gt=0.0, le=TAU)
     """... and in heading at most this (rad), in the tracking phase."""
     global_resolution: float = bounded(0.25, gt=0.0, le=10.0)
-    """Cell size of the global histogram filter (m); a multiple of the map's cell size."""
+    """Cell size of the global histogram filter (m), rounded to the nearest whole number of the
+    map's cells (at least one): 0.25 on a 0.05 m map, 0.3 on a 0.1 m map."""
     global_headings: int = bounded(36, ge=4, le=3600)
     """Heading bins of the global histogram filter."""
     global_beams: int = bounded(30, ge=1, le=100000)

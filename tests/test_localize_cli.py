@@ -155,6 +155,7 @@ def test_python_api_refuses_what_it_cannot_use(room):
         ("1,2,nan", "theta must be finite, found 'nan'"),
         ("1,2,3,0", "sigma must be > 0 m, found '0'"),
         ("1,2,3,-1", "sigma must be > 0 m, found '-1'"),
+        ("1,2,90", "theta must be radians within ±2π, found 90 (degrees? 1.571 rad)"),
     ],
 )
 def test_bad_initial_is_one_line(room, tmp_path, capsys, value, message):
@@ -185,7 +186,17 @@ def test_missing_or_bad_map_is_one_line(room, tmp_path, capsys):
     flat = tmp_path / "flat.npz"
     np.savez(flat, log_odds=np.zeros((4, 4)), resolution=0.05, origin=np.zeros(2))
     assert main(["localize", str(log), "--map", str(flat), "--out", str(tmp_path / "o")]) == 2
-    assert "map: no occupied cell" in one_line_error(capsys)
+    assert f"{flat}: no occupied cell (log-odds above map.occupied_threshold" in one_line_error(
+        capsys
+    )
+    # a map_server folder, or its image, point at the map.yaml
+    served = tmp_path / "served"
+    served.mkdir()
+    (served / "map.yaml").write_text("image: map.pgm\n")
+    (served / "map.pgm").write_bytes(b"P5\n1 1\n255\n\x00")
+    for given in (served, served / "map.pgm"):
+        assert main(["localize", str(log), "--map", str(given), "--out", str(tmp_path / "o")]) == 2
+        assert f"--map {served / 'map.yaml'}" in one_line_error(capsys)
     assert not (tmp_path / "o").exists()
 
 
@@ -381,3 +392,23 @@ def test_a_clock_stepping_back_is_written_and_counted_as_slam_run_does(room, tmp
     assert main(["eval", str(out), "--dataset", str(log), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["poses"] == SCANS and report["trajectory"] == str(out / "trajectory.tum")
+
+
+def test_a_map_of_another_building_is_warned_about(room, tmp_path, capsys):
+    """The bug: a log localized on a map of another building ended with exit 0, no warning and
+    `converged: true` (aces on intel's map: localized 1.3 % of its scans)."""
+    log, _ = room
+    other = tmp_path / "other.npz"  # a narrow corridor, nothing like the room
+    log_odds = np.full((60, 400), -5.0, dtype=np.float32)
+    log_odds[[0, 1, 58, 59], :] = 5.0
+    np.savez(other, log_odds=log_odds, resolution=0.05, origin=np.array([-10.0, -1.5]))
+    out = tmp_path / "o"
+    assert main(["localize", str(log), "--map", str(other), "--initial=0,0,0,0.1", "--no-record",
+                 "--out", str(out), "--quiet"]) == 0  # fmt: skip
+    m = json.loads((out / "metrics.json").read_text())
+    # its particles agree (localized on most scans), but its scans do not fit the map
+    assert m["mean_match_quality"] < 0.3 and m["map"] == str(other)
+    warning = (f"localized on {100 * m['localized_share']:.1f} % of the scans with a mean match "
+               f"quality of {m['mean_match_quality']:.2f} (on its own building's map a log scores "
+               f"0.8–0.94): is {other} a map of this log's building")  # fmt: skip
+    assert warning in capsys.readouterr().err and any(warning in w for w in m["warnings"])

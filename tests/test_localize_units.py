@@ -428,3 +428,33 @@ def test_localized_time_is_summed_in_time_order():
         LocalizationTrace(*(a[:1] for a in dataclasses.astuple(trace))), np.zeros((1, 3))
     )
     assert one["duration_s"] == 0.0 and one["localized_time_s"] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("resolution", "cells", "cell_m"),
+    [(0.05, 5, 0.25), (0.1, 3, 0.3), (0.04, 6, 0.24), (0.5, 1, 0.5)],
+)
+def test_the_histogram_cell_is_a_whole_number_of_map_cells(resolution, cells, cell_m):
+    """The bug: a map whose cell does not divide localize.global_resolution (0.1 m, 0.04 m, as
+    other tools write them) stopped the run with a configuration error the first time the
+    robot got lost. The histogram now takes the nearest whole number of map cells."""
+    occupied = np.zeros((40, 40), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    free = ~occupied
+    lmap = LikelihoodMap.from_masks(occupied, free, resolution, (0.0, 0.0))
+    hist = PoseHistogram(lmap, LocalizeConfig(), MOTION)
+    assert hist.factor == cells and hist.resolution == pytest.approx(cell_m)
+
+
+def test_a_wall_surface_too_large_for_memory_is_refused(monkeypatch):
+    import slam.localize.maps as maps
+    from slam.errors import UsageError
+
+    occupied = np.zeros((50, 80), dtype=bool)
+    occupied[10, 10:70] = True
+    monkeypatch.setattr(maps, "SURFACE_BYTES_PER_CELL", 1 << 40)
+    with pytest.raises(
+        UsageError,
+        match=r"the wall-surface field of a 80×50-cell map at 2× its resolution \(160×100 cells\) would need about",
+    ):
+        wall_surface(np.where(occupied, 5.0, -5.0), occupied, 1.0, 0.05, 2)

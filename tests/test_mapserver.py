@@ -22,6 +22,7 @@ from slam.io.mapserver import (
     write_map,
 )
 from slam.io.tum import format_tum, read_tum
+from slam.localize.maps import load_map
 from slam.trajectory import Trajectory
 
 RES = 0.05
@@ -106,7 +107,8 @@ def test_reader_applies_negate_scale_and_png(tmp_path):
         ("image: m.pgm\nresolution: 0.05\norigin: [0, 0]\nnegate: 0\noccupied_thresh: 0.65\n"
          "free_thresh: 0.196\n", r"m\.yaml:3: origin: expected 3 numbers"),
         ("image: m.pgm\nresolution: -1\n", r"m\.yaml:2: resolution: expected a positive"),
-        ("image: m.pgm\ncolour: red\n", r"m\.yaml:2: unknown key 'colour'"),
+        ("image: m.pgm\ncolour: red\n", r"m\.yaml: missing key\(s\) resolution, origin"),
+        ("map_name: a\nimage: m.pgm\nmap_name: b\n", r"m\.yaml:3: map_name is given twice"),
         ("image: m.pgm\nimage: n.pgm\n", r"m\.yaml:2: image is given twice"),
         ("image: m.pgm\nresolution: 0.05\n", r"missing key\(s\) origin, negate"),
         ("image: m.pgm\nnegate: 2\n", r"m\.yaml:2: negate: expected 0 or 1, found '2'"),
@@ -118,6 +120,97 @@ def test_reader_applies_negate_scale_and_png(tmp_path):
 def test_map_yaml_errors_name_the_line_and_key(text, message):
     with pytest.raises(DataError, match=message):
         parse_map_yaml(text, "m.yaml")
+
+
+KEYS = {
+    "image": "m.pgm",
+    "mode": "trinary",
+    "resolution": 0.05,
+    "origin": [-10.0, -5.0, 0.0],
+    "negate": 0,
+    "occupied_thresh": 0.65,
+    "free_thresh": 0.196,
+}
+BLOCK = (
+    "image: m.pgm\nresolution: 0.05\norigin: [-10.0, -5.0, 0.0]\nnegate: 0\n"
+    "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "\ufeff" + BLOCK,  # a byte-order mark (Windows editors)
+        "{image: m.pgm, resolution: 0.05, origin: [-10.0, -5.0, 0.0], negate: 0, "
+        "occupied_thresh: 0.65, free_thresh: 0.196}\n",  # a flow mapping on one line
+        '{"image": "m.pgm", "resolution": 0.05,\n "origin": [-10.0, -5.0,  # x, y\n  0.0],\n'
+        ' "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196, "meta": {"a": [1, 2]},}\n',
+        BLOCK.replace("[-10.0, -5.0, 0.0]", "\n  - -10.0\n  - -5.0\n  - 0.0"),  # a block list
+        BLOCK.replace("[-10.0, -5.0, 0.0]", "\n- -10.0\n- -5.0  # y\n\n- 0.0"),  # PyYAML's
+        BLOCK.replace("[-10.0, -5.0, 0.0]", "[-10.0,\n  -5.0, 0.0]"),  # a flow list over lines
+        "map_name: intel\n" + BLOCK + "saved_by: slam_toolbox\nnotes: |\n  a: [\n  # x\n"
+        "meta:\n  author: me\n  tags:\n  - a\nmore:\n- 1\n- 2\n",  # unknown keys
+        BLOCK.replace("0.0]", "-0.000001]"),  # float noise in the yaw
+    ],
+)
+def test_map_yaml_as_map_server_reads_it(text):
+    assert parse_map_yaml(text, "m.yaml") == KEYS
+    oracle = yaml.safe_load(text.removeprefix("\ufeff"))  # PyYAML: each case is valid YAML
+    assert {k: oracle[k] for k in KEYS if k not in ("mode", "origin")} == {
+        k: v for k, v in KEYS.items() if k not in ("mode", "origin")
+    }
+    np.testing.assert_allclose(oracle["origin"], KEYS["origin"], rtol=0, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("- image: m.pgm\n  resolution: 0.05\n",
+         r"m\.yaml:1: the file must be a mapping of keys \('key: value' lines\), found a list"),
+        ("[image, m.pgm]\n", r"m\.yaml:1: the file must be a mapping of keys"),
+        (BLOCK.replace("[-10.0, -5.0, 0.0]", "\n  - 1\n  - 2\n"),
+         r"m\.yaml:3: origin: expected 3 numbers \[x, y, yaw\], found 2"),
+        (BLOCK.replace("[-10.0, -5.0, 0.0]", "\n  x: 1\n"),
+         r"m\.yaml:4: origin: expected '- number' lines \[x, y, yaw\], found 'x: 1'"),
+        (BLOCK.replace("[-10.0, -5.0, 0.0]", "\n  - 1\n  - a\n  - 3\n"),
+         r"m\.yaml:5: origin: expected a number, found 'a'"),
+        (BLOCK.replace("[-10.0, -5.0, 0.0]", "[1, 2,\n"), r"m\.yaml:3: origin: '\[' is never closed"),
+        ("{image: m.pgm, resolution: -1}\n", r"m\.yaml:1: resolution: expected a positive"),
+        ("{image: m.pgm,\n resolution: 0.05, resolution: 1}\n",
+         r"m\.yaml:2: resolution is given twice"),
+        ("{image: m.pgm, resolution}\n", r"m\.yaml:1: expected 'key: value' in the mapping, "
+         r"found 'resolution'"),
+        ("{image: m.pgm} x\n", r"m\.yaml:1: expected nothing after the mapping's '}', found 'x'"),
+        ("{image: m.pgm}\nresolution: 1\n",
+         r"m\.yaml:2: expected nothing after the mapping that ends on line 1, found 'resolution"),
+        ("image:\n  m.pgm\n", r"m\.yaml:2: image: expected a value on the key's line"),
+    ],
+)  # fmt: skip
+def test_map_yaml_shape_errors(text, message):
+    with pytest.raises(DataError, match=message):
+        parse_map_yaml(text, "m.yaml")
+
+
+def test_origin_yaw_float_noise_is_zero_a_rotation_is_refused(tmp_path):
+    write_map(tmp_path / "map.pgm", _hand_made_map(), RES, ORIGIN)
+    text = (tmp_path / "map.yaml").read_text()
+    (tmp_path / "map.yaml").write_text(text.replace("0.0]", "-0.000001]"))
+    assert read_map_yaml(tmp_path / "map.yaml").origin.tolist() == [-1.5, 0.5, 0.0]
+    assert load_map(tmp_path / "map.yaml").occupied.sum() >= 1  # localize takes it
+    (tmp_path / "map.yaml").write_text(text.replace("0.0]", "0.5]"))
+    with pytest.raises(DataError, match=r"map\.yaml: origin yaw 0\.5 rad: expected 0"):
+        load_map(tmp_path / "map.yaml")
+    (tmp_path / "map.yaml").write_text(text.replace("0.0]", "0.0002]"))
+    with pytest.raises(DataError, match=r"origin yaw 0\.0002 rad: expected 0"):
+        load_map(tmp_path / "map.yaml")
+
+
+@pytest.mark.parametrize("data", [b"", b"x"])
+def test_an_empty_or_garbage_image_is_one_error(tmp_path, data):
+    (tmp_path / "map.yaml").write_text(BLOCK)
+    (tmp_path / "m.pgm").write_bytes(data)
+    with pytest.raises(DataError, match=r"m\.pgm: not a PGM or an image OpenCV can read"):
+        read_map_yaml(tmp_path / "map.yaml")
 
 
 def test_truncated_pgm_is_an_error(tmp_path):

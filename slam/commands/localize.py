@@ -103,7 +103,7 @@ def localize_command(args: argparse.Namespace) -> int:
         )
     )
     m = json.loads((out / "metrics.json").read_text())
-    summary = [f"{m['scans']} scans", f"localized {100 * m['localized_share']:.1f} % of the time"]
+    summary = [f"{m['scans']} scans", f"localized on {100 * m['localized_share']:.1f} % of them"]
     if m["time_to_convergence_s"] is not None:
         summary.append(f"converged after {m['time_to_convergence_s']:.1f} s")
     if m["mean_match_quality"] is not None:

@@ -16,8 +16,9 @@ anything else unknown (``scale`` mode: in between, ``99·(p − free)/(occ − f
 Writing thresholds the occupancy probability of the log-odds the same way, so a map read back
 equals the thresholded log-odds cell for cell.
 
-PyYAML is not a dependency: :func:`parse_map_yaml` is a small, strict reader of the flat
-``key: value`` subset map_server defines, with errors naming the line and key.
+PyYAML is not a dependency: :func:`parse_map_yaml` is a small reader of the YAML that
+map_server's files are written in (``key: value`` lines or one ``{key: value, ...}`` flow
+mapping, ``origin`` as ``[x, y, yaw]`` or ``- value`` lines), with errors naming the line and key.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,6 +34,9 @@ from numpy.typing import NDArray
 from slam.errors import DataError
 from slam.io.atomic import write_files
 from slam.io.text import decode_utf8, read_input
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 F64 = NDArray[np.float64]
 
@@ -47,6 +51,8 @@ OCCUPIED, FREE, UNKNOWN = 100, 0, -1
 
 MODES = ("trinary", "scale")
 """``mode`` values this reader interprets."""
+YAW_ZERO = 1e-4
+"""An origin yaw within this many radians of 0 is read as 0 (float noise of a map's writer)."""
 _KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 _REQUIRED = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 
@@ -240,9 +246,13 @@ def read_map_image(path: Path) -> NDArray[np.uint8]:
         return _parse_pgm(path, raw)
     import cv2
 
-    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
+    try:  # OpenCV asserts on an empty buffer
+        image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED) if raw else None
+    except cv2.error:
+        image = None
     if image is None:
-        raise DataError(f"{path}: not a PGM or an image OpenCV can read")
+        empty = " (the file is empty)" if not raw else ""
+        raise DataError(f"{path}: not a PGM or an image OpenCV can read{empty}")
     if image.dtype != np.uint8:
         raise DataError(f"{path}: expected an 8-bit image, found {image.dtype}")
     if image.ndim == 3:
@@ -295,34 +305,51 @@ def _parse_pgm(path: Path, raw: bytes) -> NDArray[np.uint8]:
 
 
 def parse_map_yaml(text: str, source: str = "map.yaml") -> dict[str, Any]:
-    """The keys of a map_server yaml (flat ``key: value`` lines, ``#`` comments), validated.
+    """The keys of a map_server yaml, validated.
 
-    Strict: an unknown, repeated, missing or malformed key is a :class:`DataError` naming the
-    line. Returns ``image`` (str), ``mode`` (default ``trinary``), ``resolution``, ``origin``
-    (3 floats), ``negate`` (0/1), ``occupied_thresh``, ``free_thresh``.
+    Reads the YAML map_server / nav2 / slam_toolbox / GMapping files are written in: a mapping of
+    ``key: value`` lines or one ``{key: value, ...}`` flow mapping (which may span lines), ``#``
+    comments, a leading byte-order mark, ``origin`` as a flow list ``[x, y, yaw]`` or as
+    ``- value`` lines below the key. Keys other than map_server's are ignored, as map_server
+    ignores them (with any block below them). A repeated, missing or malformed key, or a file
+    that is not a mapping, is a :class:`DataError` naming the line. Returns ``image`` (str),
+    ``mode`` (default ``trinary``), ``resolution``, ``origin`` (3 floats; a yaw within
+    :data:`YAW_ZERO` of 0 is 0), ``negate`` (0/1), ``occupied_thresh``, ``free_thresh``.
     """
-    values: dict[str, Any] = {}
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    lines = []
+    for lineno, line in enumerate(text.removeprefix("\ufeff").splitlines(), start=1):
         body = _strip_comment(line).rstrip()
-        if not body.strip() or body.strip() == "---":
-            continue
-        if body[0].isspace() or ":" not in body:
-            raise DataError(
-                f"{source}:{lineno}: expected a top-level 'key: value' line, found {line.strip()!r}"
-            )
-        key, raw = body.split(":", 1)
-        key, raw = key.strip(), raw.strip()
+        if body.strip() and body.strip() not in ("---", "..."):
+            lines.append((lineno, body))
+    if lines and lines[0][1].startswith("{"):
+        entries = _flow_entries(lines, source)
+    else:
+        entries = _block_entries(lines, source)
+    values: dict[str, Any] = {}
+    seen: set[str] = set()
+    for lineno, key, raw, block in entries:
+        where = f"{source}:{lineno}"
+        if key in seen:
+            raise DataError(f"{where}: {key} is given twice")
+        seen.add(key)
         if key not in _KEYS:
+            continue  # map_server ignores keys it does not know
+        if key == "origin" and not raw and block:
+            values[key] = _origin_lines(block, source, lineno)
+        elif block:
+            found = block[0][1].strip()
             raise DataError(
-                f"{source}:{lineno}: unknown key {key!r}; a map_server yaml has {', '.join(_KEYS)}"
+                f"{source}:{block[0][0]}: {key}: expected a value on the key's line, "
+                f"found the indented {found!r} below it"
             )
-        if key in values:
-            raise DataError(f"{source}:{lineno}: {key} is given twice")
-        values[key] = _value(key, raw, f"{source}:{lineno}")
+        else:
+            values[key] = _value(key, raw, where)
     missing = [k for k in _REQUIRED if k not in values]
     if missing:
         raise DataError(f"{source}: missing key(s) {', '.join(missing)}")
     values.setdefault("mode", "trinary")
+    if abs(values["origin"][2]) <= YAW_ZERO:
+        values["origin"][2] = 0.0
     if not values["free_thresh"] < values["occupied_thresh"]:
         raise DataError(
             f"{source}: expected free_thresh < occupied_thresh, found "
@@ -331,14 +358,179 @@ def parse_map_yaml(text: str, source: str = "map.yaml") -> dict[str, Any]:
     return values
 
 
-def _strip_comment(line: str) -> str:
-    quote = None
-    for i, ch in enumerate(line):
+_Line = tuple[int, str]
+"""A line's number and its text without comment or trailing blanks."""
+_Entry = tuple[int, str, str, list[_Line]]
+"""A key's line number, the key, its value on that line and the indented lines below it."""
+
+
+def _block_entries(lines: list[_Line], source: str) -> list[_Entry]:
+    """The ``key: value`` lines of a block mapping; a key with an empty value (or a ``|``/``>``
+    block scalar) takes the indented lines below it (and ``- item`` lines at its own indentation,
+    PyYAML's style for a list); a ``[``/``{`` value runs on until its brackets close."""
+    entries: list[_Entry] = []
+    i = 0
+    while i < len(lines):
+        lineno, body = lines[i]
+        where = f"{source}:{lineno}"
+        if body == "-" or body.startswith(("- ", "[")):
+            raise DataError(
+                f"{where}: the file must be a mapping of keys ('key: value' lines), "
+                f"found a list ({body.strip()!r})"
+            )
+        colon = _key_colon(body)
+        if body[0].isspace() or body.startswith("{") or colon < 0:
+            raise DataError(
+                f"{where}: expected a top-level 'key: value' line, found {body.strip()!r}"
+            )
+        key, raw = _string(body[:colon].strip()), body[colon + 1 :].strip()
+        i += 1
+        block: list[_Line] = []
+        if raw.startswith(("[", "{")) and _depth(raw) > 0:
+            joined, i = _balanced(lines, i - 1, raw, f"{where}: {key}")
+            raw = " ".join(text for _, text in joined)
+        elif not raw or raw[0] in "|>":
+            while i < len(lines) and (
+                lines[i][1][0].isspace() or (not raw and _is_item(lines[i][1]))
+            ):
+                block.append(lines[i])
+                i += 1
+        entries.append((lineno, key, raw, block))
+    return entries
+
+
+def _flow_entries(lines: list[_Line], source: str) -> list[_Entry]:
+    """The entries of a top-level ``{key: value, ...}`` mapping (``lines[0]`` starts it); commas
+    inside ``[..]``, ``{..}`` or quotes belong to the value."""
+    joined, end = _balanced(lines, 0, lines[0][1].strip(), f"{source}:{lines[0][0]}")
+    text = "\n".join(part for _, part in joined)
+
+    def line_at(offset: int) -> int:
+        return joined[text.count("\n", 0, offset)][0]
+
+    items: list[tuple[int, str]] = []
+    start, depth, close = 1, 0, len(text)
+    for i, ch in _unquoted(text):
+        if ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        if depth == 0 or (ch == "," and depth == 1):
+            items.append((start, text[start:i]))
+            start = i + 1
+            if depth == 0:
+                close = i
+                break
+    rest = text[close + 1 :].strip()
+    if text[close] != "}":
+        raise DataError(
+            f"{source}:{line_at(close)}: expected '}}' closing the mapping, found {text[close]!r}"
+        )
+    if rest:
+        raise DataError(
+            f"{source}:{line_at(close)}: expected nothing after the mapping's '}}', found {rest!r}"
+        )
+    if end < len(lines):
+        raise DataError(
+            f"{source}:{lines[end][0]}: expected nothing after the mapping that ends on line "
+            f"{line_at(close)}, found {lines[end][1].strip()!r}"
+        )
+    entries: list[_Entry] = []
+    for n, (offset, item) in enumerate(items):
+        lead = len(item) - len(item.lstrip())
+        item = item.strip()
+        where = f"{source}:{line_at(offset + lead)}"
+        if not item:
+            if n == len(items) - 1:
+                continue  # a trailing comma, or {}
+            raise DataError(f"{where}: expected 'key: value' between two commas, found nothing")
+        colon = _key_colon(item)
+        if colon < 0:
+            raise DataError(f"{where}: expected 'key: value' in the mapping, found {item!r}")
+        raw = item[colon + 1 :].strip().replace("\n", " ")
+        entries.append((line_at(offset + lead), _string(item[:colon].strip()), raw, []))
+    return entries
+
+
+def _balanced(lines: list[_Line], i: int, first: str, where: str) -> tuple[list[_Line], int]:
+    """``first`` (the rest of ``lines[i]`` from a ``[`` or ``{``) and the lines after it until
+    its brackets close, and the index of the next line."""
+    joined = [(lines[i][0], first)]
+    depth = _depth(first)
+    i += 1
+    while depth > 0:
+        if i == len(lines):
+            closing = "]" if first[0] == "[" else "}"
+            raise DataError(f"{where}: {first[0]!r} is never closed (expected a {closing!r})")
+        joined.append((lines[i][0], lines[i][1].strip()))
+        depth += _depth(joined[-1][1])
+        i += 1
+    return joined, i
+
+
+def _origin_lines(block: list[_Line], source: str, lineno: int) -> list[float]:
+    """``origin`` given as ``- value`` lines below the key."""
+    indent = len(block[0][1]) - len(block[0][1].lstrip())
+    numbers = []
+    for n, body in block:
+        item = body.strip()
+        if len(body) - len(body.lstrip()) != indent or not _is_item(item):
+            raise DataError(
+                f"{source}:{n}: origin: expected '- number' lines [x, y, yaw], found {item!r}"
+            )
+        numbers.append(_number("origin", item[1:].strip(), f"{source}:{n}"))
+    if len(numbers) != 3:
+        raise DataError(
+            f"{source}:{lineno}: origin: expected 3 numbers [x, y, yaw], found {len(numbers)} "
+            f"('- ' lines {block[0][0]}..{block[-1][0]})"
+        )
+    return numbers
+
+
+def _is_item(text: str) -> bool:
+    """``text`` (a line without its indentation) is an item of a block list."""
+    return text == "-" or text.startswith("- ")
+
+
+def _unquoted(text: str) -> Iterator[tuple[int, str]]:
+    """``(index, character)`` of ``text`` outside quoted scalars (a quote opens one only where a
+    scalar starts: at the start, or after ``[``, ``{``, ``,``, ``:`` or a list's ``-``)."""
+    quote, escaped = "", False
+    prev, dash = "", False  # the last non-blank character outside quotes; a list's '-'
+    for i, ch in enumerate(text):
         if quote:
-            quote = None if ch == quote else quote
-        elif ch in "'\"":
+            if escaped:
+                escaped = False
+            elif ch == "\\" and quote == '"':
+                escaped = True
+            elif ch == quote:
+                quote, prev, dash = "", ch, False
+            continue
+        if ch in "'\"" and (not prev or prev in "[{,:" or dash):
             quote = ch
-        elif ch == "#" and (i == 0 or line[i - 1].isspace()):
+            continue
+        if not ch.isspace():
+            dash = ch == "-" and (i == 0 or text[i - 1].isspace())
+            prev = ch
+        yield i, ch
+
+
+def _depth(text: str) -> int:
+    """How many ``[``/``{`` of ``text`` are not closed."""
+    depth = 0
+    for _, ch in _unquoted(text):
+        depth += (ch in "[{") - (ch in "]}")
+    return depth
+
+
+def _key_colon(text: str) -> int:
+    """The index of the ``:`` that ends the key of ``text`` (−1: none)."""
+    return next((i for i, ch in _unquoted(text) if ch == ":"), -1)
+
+
+def _strip_comment(line: str) -> str:
+    for i, ch in _unquoted(line):
+        if ch == "#" and (i == 0 or line[i - 1].isspace()):
             return line[:i]
     return line
 

@@ -1,7 +1,7 @@
 """Global localization: the exact histogram filter over (x, y, θ) cells of a saved map.
 
 This is the grid world's Bayes filter (:mod:`slam.discrete`), for real: the states are the cells
-of the map at a coarse resolution (``localize.global_resolution``, a multiple of the map's cell)
+of the map at a coarse resolution (``localize.global_resolution``, rounded to a whole number of the map's cells)
 times ``localize.global_headings`` heading bins, but only the cells the robot can be in — at
 least ``global_min_free`` of their map cells observed free. Every state's probability is computed,
 none is sampled, so a symmetric building keeps its symmetric modes until a scan tells them apart.
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import LocalizeConfig
 from slam.discrete.filter import normalize
-from slam.errors import ConfigError, DataError
+from slam.errors import DataError
 from slam.kernels.resample import systematic_draws
 from slam.localize.kernels import (
     apply_likelihood,
@@ -118,13 +118,8 @@ class PoseHistogram:
         motion: MotionModel,
         memory_share: float = DEFAULT_MEMORY_SHARE,
     ) -> None:
-        factor = config.global_resolution / lmap.resolution
-        self.factor = int(round(factor))
-        if self.factor < 1 or abs(factor - self.factor) > 1e-6:
-            raise ConfigError(
-                f"localize.global_resolution: expected a multiple of the map's cell size "
-                f"({lmap.resolution:g} m), found {config.global_resolution:g}"
-            )
+        # the nearest whole number of map cells (a 0.1 m map: 0.3 m for the default 0.25)
+        self.factor = max(1, int(math.floor(config.global_resolution / lmap.resolution + 0.5)))
         self.map = lmap
         self.config = config
         self.motion = motion

@@ -146,6 +146,7 @@ class Localizer:
             cfg.kld_bin_xy, cfg.kld_bin_theta, cfg.kld_epsilon, cfg.kld_delta,
             cfg.min_particles, cfg.max_particles,
         )  # fmt: skip
+        self.map.surface(cfg.subdivision, self.config.checks.max_memory_share)  # within budget
         self.particles = ParticleSet(
             self.map, self.motion, kld, cfg.temperature, self.rng, cfg.subdivision
         )

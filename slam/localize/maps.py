@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.budget import DEFAULT_MEMORY_SHARE, check_memory
 from slam.config import MapConfig
 from slam.errors import DataError
 from slam.localize.kernels import DistanceView
@@ -82,15 +83,19 @@ class LikelihoodMap:
         return self.grid.shape
 
     @classmethod
-    def from_grid(cls, grid: OccupancyGrid) -> LikelihoodMap:
+    def from_grid(cls, grid: OccupancyGrid, source: str = "map") -> LikelihoodMap:
         """Masks and distance field of ``grid``: occupied above ``map.occupied_threshold``, free
-        where the log-odds are negative (observed, and more often traversed than hit)."""
+        where the log-odds are negative (observed, and more often traversed than hit).
+        ``source`` names the map in a message."""
         import cv2
 
         occupied = np.ascontiguousarray(grid.log_odds > grid.config.occupied_threshold)
         free = np.ascontiguousarray((grid.log_odds < 0) & ~occupied)
         if not occupied.any():
-            raise DataError("map: no occupied cell, nothing to localize against")
+            raise DataError(
+                f"{source}: no occupied cell (log-odds above map.occupied_threshold = "
+                f"{grid.config.occupied_threshold:g}), nothing to localize against"
+            )
         # distanceTransform measures from every non-zero pixel to the nearest zero pixel
         source = np.where(occupied, 0, 255).astype(np.uint8)
         pixels = cv2.distanceTransform(source, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
@@ -104,15 +109,18 @@ class LikelihoodMap:
         free: NDArray[np.bool_],
         resolution: float,
         origin: tuple[float, float],
+        source: str = "map",
     ) -> LikelihoodMap:
         """A map from masks (tests, hand-made worlds, map_server files): occupied cells get
-        log-odds +10, free −10, the rest 0 (unknown)."""
+        log-odds +10, free −10, the rest 0 (unknown). ``source`` names the map in a message."""
         occupied = np.asarray(occupied, dtype=bool)
+        if not occupied.any():
+            raise DataError(f"{source}: no occupied cell, nothing to localize against")
         log_odds = np.where(occupied, 10.0, np.where(np.asarray(free, bool), -10.0, 0.0))
         grid = OccupancyGrid.from_arrays(
             log_odds.astype(np.float32), resolution, np.asarray(origin, np.float64), MapConfig()
         )
-        return cls.from_grid(grid)
+        return cls.from_grid(grid, source)
 
     def view(self) -> DistanceView:
         """The distance field as the likelihood kernels read it."""
@@ -120,15 +128,18 @@ class LikelihoodMap:
             self.distance, float(self.origin[0]), float(self.origin[1]), 1.0 / self.resolution
         )
 
-    def surface(self, subdivision: int) -> NDArray[np.float32]:
+    def surface(
+        self, subdivision: int, memory_share: float = DEFAULT_MEMORY_SHARE
+    ) -> NDArray[np.float32]:
         """The wall-surface distance field on a grid ``subdivision`` times finer than the map
-        (:func:`wall_surface`; computed on first use, then kept)."""
+        (:func:`wall_surface`, within ``memory_share`` of the machine's memory; computed on
+        first use, then kept)."""
         subdivision = int(subdivision)
         cached = self._surfaces.get(subdivision)
         if cached is None:
             cached = wall_surface(
                 self.grid.log_odds, self.occupied, self.grid.config.occupied_threshold,
-                self.resolution, subdivision,
+                self.resolution, subdivision, memory_share,
             )  # fmt: skip
             self._surfaces[subdivision] = cached
         return cached
@@ -178,12 +189,21 @@ def wall_points(
     return rows.astype(np.int64), cols.astype(np.int64), px, py
 
 
+SURFACE_BYTES_PER_CELL = 14
+"""Memory of :func:`wall_surface` per fine cell: the drawn mask (1 byte), OpenCV's labels and
+distances (4 + 4) and the field (4), the temporaries bounded by :data:`SURFACE_BLOCK_CELLS`."""
+
+SURFACE_BLOCK_CELLS = 1 << 20
+"""Fine cells whose distances :func:`wall_surface` computes at once."""
+
+
 def wall_surface(
     log_odds: NDArray[np.floating],
     occupied: NDArray[np.bool_],
     threshold: float,
     resolution: float,
     subdivision: int,
+    memory_share: float = DEFAULT_MEMORY_SHARE,
 ) -> NDArray[np.float32]:
     """Distance (m) from the centre of every cell of a grid ``subdivision`` times finer than the
     map to the nearest wall, the walls being the segments between the :func:`wall_points` of
@@ -191,11 +211,20 @@ def wall_surface(
     ``2·subdivision`` equal parts; each fine cell holding samples keeps their mean, and every fine
     cell centre reads its Euclidean distance to that point of the nearest such cell
     (``cv2.distanceTransformWithLabels``). ``(H·subdivision, W·subdivision)`` float32, the same
-    origin as the map."""
+    origin as the map. Refused (:class:`~slam.errors.UsageError`) when it would need more than
+    ``memory_share`` of the machine's memory (:data:`SURFACE_BYTES_PER_CELL`)."""
     import cv2
 
     h, w = occupied.shape
     f = int(subdivision)
+    check_memory(
+        SURFACE_BYTES_PER_CELL * h * f * w * f,
+        f"the wall-surface field of a {w}×{h}-cell map at {f}× its resolution "
+        f"({w * f}×{h * f} cells)",
+        "use a smaller map (crop it to the building) or a lower localize.subdivision",
+        share=memory_share,
+        setting="checks.max_memory_share",
+    )
     rows, cols, px, py = wall_points(log_odds, occupied, threshold)
     index = np.full((h, w), -1, dtype=np.int64)
     index[rows, cols] = np.arange(rows.size)
@@ -229,10 +258,16 @@ def wall_surface(
     _, labels = cv2.distanceTransformWithLabels(
         fine, cv2.DIST_L2, cv2.DIST_MASK_5, labelType=cv2.DIST_LABEL_PIXEL
     )
-    nearest = labels.astype(np.int64) - 1
-    cy, cx = np.mgrid[0 : h * f, 0 : w * f]
-    distance = np.hypot(cx + 0.5 - mean_x[nearest], cy + 0.5 - mean_y[nearest])
-    return np.ascontiguousarray(distance * (resolution / f), dtype=np.float32)
+    del fine
+    out = np.empty((h * f, w * f), dtype=np.float32)
+    cx = np.arange(w * f) + 0.5
+    block = max(1, SURFACE_BLOCK_CELLS // (w * f))  # rows at a time: bounded temporaries
+    for r0 in range(0, h * f, block):
+        nearest = labels[r0 : r0 + block].astype(np.int64) - 1
+        cy = np.arange(r0, r0 + nearest.shape[0])[:, None] + 0.5
+        distance = np.hypot(cx - mean_x[nearest], cy - mean_y[nearest])
+        out[r0 : r0 + block] = distance * (resolution / f)
+    return out
 
 
 def _read_npz(path: Path) -> OccupancyGrid:
@@ -275,18 +310,25 @@ def load_map(path: Path | str) -> LikelihoodMap:
     if path.is_dir():
         npz = path / "map.npz"
         if not npz.is_file():
-            raise DataError(f"{path}: no map.npz in this folder (expected a slam run folder)")
-        return LikelihoodMap.from_grid(_read_npz(npz))
+            yamls = sorted(p.name for p in path.glob("*.y*ml"))
+            beside = f"; give the map_server file: --map {path / yamls[0]}" if yamls else ""
+            raise DataError(
+                f"{path}: no map.npz in this folder (expected a slam run folder){beside}"
+            )
+        return LikelihoodMap.from_grid(_read_npz(npz), str(npz))
     if not path.exists():
         raise DataError(
             f"{path}: map not found (expected a run folder, a map.npz or a map.yaml file)"
         )
     if path.suffix == ".npz":
-        return LikelihoodMap.from_grid(_read_npz(path))
+        return LikelihoodMap.from_grid(_read_npz(path), str(path))
     if path.suffix in (".yaml", ".yml"):
         return _from_map_yaml(path)
+    yamls = sorted(p.name for p in path.parent.glob("*.y*ml"))
+    beside = f"; the map_server file beside it: --map {path.parent / yamls[0]}" if yamls else ""
     raise DataError(
-        f"{path}: unknown map format (expected a run folder, a .npz or a map_server .yaml file)"
+        f"{path}: unknown map format (expected a run folder, a .npz or a map_server .yaml "
+        f"file){beside}"
     )
 
 
@@ -295,7 +337,7 @@ def _from_map_yaml(path: Path) -> LikelihoodMap:
     from slam.io.mapserver import read_map_yaml
 
     m = read_map_yaml(path)
-    if abs(float(m.origin[2])) > 1e-9:
+    if abs(float(m.origin[2])) > 1e-4:  # a writer's rounding of 0 passes
         raise DataError(
             f"{path}: origin yaw {float(m.origin[2]):g} rad: expected 0 (maps are axis-aligned "
             "grids here, as map_server writes them)"
@@ -303,6 +345,11 @@ def _from_map_yaml(path: Path) -> LikelihoodMap:
     occupancy = np.asarray(m.occupancy)
     occupied = occupancy >= 100  # read_map_yaml already applied the file's thresholds
     free = occupancy == 0
+    if not occupied.any():
+        raise DataError(
+            f"{path}: no occupied cell (no pixel of the image reaches occupied_thresh), nothing "
+            "to localize against"
+        )
     return LikelihoodMap.from_masks(
-        occupied, free, m.resolution, (float(m.origin[0]), float(m.origin[1]))
+        occupied, free, m.resolution, (float(m.origin[0]), float(m.origin[1])), str(path)
     )
