@@ -163,3 +163,21 @@ def test_intel_odometry_through_the_cli(carmen_dir, tmp_path, capsys):
     stats = json.loads(capsys.readouterr().out)["relations"]
     assert stats["count"] == 2984 and stats["unmatched"] == 0
     assert stats["trans_mean"] > 1.0  # dead reckoning; the figure itself is reported, not pinned
+
+
+def test_eval_replaces_no_file_in_a_folder_slam_did_not_make(run_dir, tmp_path, capsys):
+    """The bug: `slam eval` on a folder of another tool's trajectory replaced the user's own
+    eval.json. It writes one where there is none, and otherwise says why it did not."""
+    rel = write_relations(tmp_path / "r.relations", [(0, 1), (1, 2)])
+    assert main(["eval", str(run_dir), "--relations", str(rel), "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert json.loads((run_dir / "eval.json").read_text()) == first  # none was there
+    (run_dir / "eval.json").write_text("mine\n")
+    assert main(["eval", str(run_dir), "--relations", str(rel), "--json"]) == 0
+    captured = capsys.readouterr()
+    message = (
+        f"{run_dir / 'eval.json'} not written: it exists, and {run_dir} is not a folder slam made"
+    )
+    assert f"slam: warning: {message}\n" in captured.err
+    assert json.loads(captured.out)["warnings"] == [message]
+    assert (run_dir / "eval.json").read_text() == "mine\n"

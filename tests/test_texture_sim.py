@@ -200,3 +200,36 @@ def test_missing_image_folders_skip_the_stage_without_failing_the_run(small, tmp
     assert "slam: warning: texture: skipped, RGB-D image folders missing" in capsys.readouterr().err
     assert main(["texture", str(out), "--dataset", str(bare), "--quiet"]) == 2
     assert "RGB-D image folders missing" in capsys.readouterr().err
+
+
+def test_slam_texture_replaces_nothing_with_an_empty_texture_or_in_a_foreign_folder(
+    small, small_run, tmp_path, capsys
+):
+    """The bugs: `slam texture RUN --dataset OTHER`, whose frames lie nowhere on the run's
+    trajectory, replaced the run's texture with an empty one and exited 0; and in a folder that
+    `slam run` did not make it replaced the user's texture.png."""
+    run = tmp_path / "run"
+    shutil.copytree(small_run, run)
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    shifted = tmp_path / "shifted"  # the same recording, its Kinect clock 1000 s later
+    _link_dataset(small, shifted)
+    kinect = shifted / "Kinect20.npz"
+    with np.load(small / "Kinect20.npz") as k:
+        arrays = {name: k[name] for name in k.files}
+    kinect.unlink()
+    np.savez(kinect, **{n: a + 1000.0 if "time" in n else a for n, a in arrays.items()})
+    assert main(["texture", str(run), "--dataset", str(shifted), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith(f"slam: error: {shifted}: no RGB-D frame of its ") and err.count("\n") == 1
+    )
+    assert "is it the log of this run? Nothing was written" in err
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+    mine = tmp_path / "mine"  # the run's files, copied by hand: no marker
+    mine.mkdir()
+    for name in ("trajectory.tum", "map.npz", "config.toml"):
+        shutil.copyfile(small_run / name, mine / name)
+    (mine / "texture.png").write_text("mine")
+    assert main(["texture", str(mine), "--dataset", str(small), "--quiet"]) == 2
+    assert "not a folder `slam run` made (no .slam-run)" in capsys.readouterr().err
+    assert (mine / "texture.png").read_text() == "mine" and not (mine / "texture.npz").exists()

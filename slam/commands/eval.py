@@ -16,6 +16,7 @@ counts under ``map`` (read with :func:`slam.io.mapserver.read_map_yaml`).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -138,6 +139,9 @@ def run_eval(args: argparse.Namespace) -> int:
             picture = render_quality(scored)
             result["quality"]["picture"] = str(run_dir / PICTURE)
 
+    ours = _made_by_slam(run_dir)
+    if picture is not None and not _may_write(run_dir / PICTURE, ours, result):
+        picture = result["quality"]["picture"] = None
     if picture is not None:
         from slam.io.atomic import write_png
 
@@ -145,12 +149,34 @@ def run_eval(args: argparse.Namespace) -> int:
             write_png(run_dir / PICTURE, picture)
         except OSError as exc:
             raise DataError(f"{run_dir / PICTURE}: cannot write ({exc.strerror or exc})") from None
-    try:
-        write_eval_json(run_dir, result)
-    except OSError as exc:
-        raise DataError(f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})") from None
+    if _may_write(run_dir / "eval.json", ours, result):
+        try:
+            write_eval_json(run_dir, result)
+        except OSError as exc:
+            raise DataError(
+                f"{run_dir / 'eval.json'}: cannot write ({exc.strerror or exc})"
+            ) from None
     print(to_json(result) if args.json else format_table(result), end="")
     return 0
+
+
+def _made_by_slam(run_dir: Path) -> bool:
+    """Whether ``run_dir`` is a folder of ``slam run`` or ``slam localize`` (its marker)."""
+    from slam.io.runfolder import is_own_output
+
+    return is_own_output(run_dir, "run") or is_own_output(run_dir, "localize")
+
+
+def _may_write(path: Path, ours: bool, result: dict[str, Any]) -> bool:
+    """Whether ``slam eval`` writes ``path``: always into a folder slam made; into another
+    folder (a trajectory of another tool) only where no such file is, with a warning (and a
+    note in the result) otherwise: a run never replaces what it did not make."""
+    if ours or not os.path.lexists(path):
+        return True
+    message = f"{path} not written: it exists, and {path.parent} is not a folder slam made"
+    print(f"slam: warning: {message}", file=sys.stderr)
+    result.setdefault("warnings", []).append(message)
+    return False
 
 
 def _checked_run_dir(args: argparse.Namespace) -> Path:

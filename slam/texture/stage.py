@@ -55,12 +55,15 @@ def texture_stage(
     config: Config,
     out_dir: Path,
     progress: bool = False,
+    require_frames: bool = False,
 ) -> dict[str, Any]:
     """Compute the texture of ``log`` along ``trajectory`` on ``grid``, write the outputs into
     ``out_dir`` and return the figures for ``metrics.json`` (with the ground-truth evaluation when
     the log's folder is a simulated dataset).
 
-    When the image folders are missing nothing is written and the figures say why.
+    When the image folders are missing nothing is written and the figures say why. With
+    ``require_frames`` a texture of no frame at all is a :class:`DataError`, before anything is
+    written (``slam texture``: an empty texture would replace the run's).
     """
     tc = config.texture
     index = log.rgbd
@@ -74,9 +77,22 @@ def texture_stage(
     cpu = time.process_time()
     result = build_texture(index, trajectory, grid, tc, progress)
     cpu = time.process_time() - cpu  # every thread of the process, the decoding ones included
-    write_outputs(out_dir, result.texture, grid)
     plan = result.plan
     used = int(result.used.sum())
+    if require_frames and used == 0:
+        span = (
+            f"{float(index.rgb_time.min()):.3f}..{float(index.rgb_time.max()):.3f} s"
+            if index.rgb_time.size
+            else "none"
+        )
+        raise DataError(
+            f"{log.source or log.name}: no RGB-D frame of its {index.rgb_time.size} (times "
+            f"{span}) could be used along the run's trajectory "
+            f"({float(trajectory.times.min()):.3f}..{float(trajectory.times.max()):.3f} s; "
+            f"skipped: {', '.join(f'{k} {v}' for k, v in sorted(plan.skipped.items())) or 'none'}"
+            "): is it the log of this run? Nothing was written"
+        )
+    write_outputs(out_dir, result.texture, grid)
     gaps = np.abs(plan.rgb_time[result.used] - plan.disparity_time[result.used])
     coloured = int(result.texture.coloured.sum())
     metrics: dict[str, Any] = {
@@ -184,7 +200,15 @@ def recompute_run(
     why = images_missing(log)
     if why is not None:
         raise DataError(f"dataset {name}: RGB-D image folders {why}")
-    figures = texture_stage(log, trajectory, grid, config, run_dir, progress)
+    from slam.io.runfolder import get_kind, is_own_output
+
+    if not is_own_output(run_dir, "run"):  # the texture files would replace a user's own
+        raise DataError(
+            f"{run_dir}: not a folder `slam run` made (no {get_kind('run').marker}): slam texture "
+            "writes texture.npz, texture.png, texture_overlay.png and metrics.json into a run "
+            "folder and replaces nothing it did not make"
+        )
+    figures = texture_stage(log, trajectory, grid, config, run_dir, progress, require_frames=True)
     update_metrics(run_dir / "metrics.json", figures)
     return figures
 
