@@ -500,3 +500,76 @@ def test_a_file_where_the_folder_should_be(tmp_path):
     (tmp_path / "ece276a").write_text("not a folder")
     with pytest.raises(DataError, match="expected the ECE276A data folder, found a file"):
         load_ece276a(tmp_path / "ece276a", 20)
+
+
+# --- units a student's own recording may be in ---------------------------------------------
+
+
+def test_hokuyo_in_millimetres_or_degrees_is_named(tmp_path):
+    """The bugs: ranges in millimetres loaded as scans of "no return" readings (a run then made
+    an empty map, exit 0), a range_max in millimetres ended in a 32.7 TiB memory refusal, and
+    angles in degrees reached the scans unnamed."""
+    write_hokuyo(tmp_path / "mm", ranges=np.full((1081, 30), 5000.0, dtype=np.float32))
+    with pytest.raises(DataError) as caught:
+        load_ece276a(tmp_path / "mm", 20, need=("scans",))
+    assert str(caught.value) == (
+        f"{tmp_path / 'mm' / 'Hokuyo20.npz'}: key 'ranges': the median reading is 5000, 167 times "
+        "range_max = 30 m: expected metres (millimetres? divide by 1000)"
+    )
+    write_hokuyo(tmp_path / "mm2", range_max=np.array([[30000.0]]))
+    with pytest.raises(
+        DataError, match=r"key 'range_max': expected metres \(at most 1000\), found 30000"
+    ):
+        load_ece276a(tmp_path / "mm2", 20, need=("scans",))
+    degrees = {"angle_min": np.array([[-135.0]]), "angle_max": np.array([[135.0]]),
+               "angle_increment": np.array([[0.25]])}  # fmt: skip
+    write_hokuyo(tmp_path / "deg", **degrees)
+    with pytest.raises(
+        DataError,
+        match=r"Hokuyo20.npz: keys 'angle_min', 'angle_max': expected radians spanning at most 2π, found -135 .. 135 \(degrees\?",
+    ):
+        load_ece276a(tmp_path / "deg", 20, need=("scans",))
+
+
+def test_a_gyro_in_degrees_per_second_is_named(tmp_path):
+    """The bug: a gyro read in deg/s was taken as rad/s: the run turned 57 times too far and
+    exited 0 without a warning. The wheels turn 0.5 rad/s here."""
+    from slam.config import load_config
+    from slam.io.plausibility import check_plausibility
+
+    config = load_config("")
+    n = 800  # 20 s of encoders turning on the spot, right wheels forward, left back
+    ticks = round(0.25 * config.robot.track_width / 40 / config.robot.meters_per_tick)
+    counts = np.tile(np.array([[ticks], [-ticks], [ticks], [-ticks]], dtype=np.int16), (1, n))
+    write_encoders(tmp_path, n=n, counts=counts)
+    for rate, refused in ((0.5, False), (np.degrees(0.5), True)):  # rad/s, then deg/s
+        angular = np.zeros((3, 2100))
+        angular[2] = rate
+        write_imu(tmp_path, n=2100, angular_velocity=angular)
+        log = load_ece276a(tmp_path, 20, need=("encoders", "imu"))
+        if not refused:
+            check_plausibility(log, config)
+            continue
+        with pytest.raises(
+            DataError,
+            match=r"Imu20.npz: key 'angular_velocity': the gyro turns the robot \d+ times as far as its wheels .* expected rad/s \(degrees per second",
+        ):
+            check_plausibility(log, config)
+
+
+def test_kinect_times_matter_only_to_a_run_that_makes_a_texture(tmp_path):
+    """The bug: Kinect time stamps on another clock stopped `slam run --no-texture` (and dead
+    reckoning), which never read them."""
+    from slam.config import load_config
+    from slam.io.plausibility import check_plausibility
+
+    write_encoders(tmp_path)
+    write_imu(tmp_path)
+    path = write_kinect(tmp_path)
+    with np.load(path) as k:
+        shifted = {name: k[name] + 1000.0 for name in k.files}
+    np.savez(path, **shifted)
+    log = load_ece276a(tmp_path, 20, need=("encoders", "imu", "kinect"))
+    with pytest.raises(DataError, match="Kinect20.npz: key 'rgb_time_stamps'"):
+        check_plausibility(log, load_config(""))
+    assert check_plausibility(log, load_config("", overrides=["texture.enabled=false"])) == []

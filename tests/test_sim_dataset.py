@@ -161,6 +161,9 @@ def test_cli_errors_are_one_line_and_exit_2(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
     assert main(["sim", "small", "--out", str(tmp_path / "y"), "--duration", "-1"]) == 2
     assert "--duration" in capsys.readouterr().err
+    assert main(["sim", "small", "--out", str(tmp_path / "y"), "--seed", "-1"]) == 2
+    assert capsys.readouterr().err == "slam: error: --seed: expected an integer ≥ 0, found -1\n"
+    assert not (tmp_path / "y").exists()
     (tmp_path / "z").mkdir()
     (tmp_path / "z" / "keep.txt").write_text("mine")
     assert _sim(tmp_path / "z", "--no-rgbd") == 2

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.budget import DEFAULT_MEMORY_SHARE, check_memory, format_bytes
-from slam.config import LidarConfig
+from slam.config import MAX_RANGE_M, LidarConfig
 from slam.errors import DataError, UsageError
 from slam.io.datadir import check_readable_dir, is_present, put_files_hint
 from slam.io.log import (
@@ -514,6 +514,11 @@ def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStre
     increment = _scalar(path, "angle_increment", raw["angle_increment"])
     if increment <= 0:
         raise DataError(f"{path}: key 'angle_increment' must be positive, found {increment}")
+    if angle_max - angle_min > 2 * np.pi + ANGLE_TOLERANCE:
+        raise DataError(
+            f"{path}: keys 'angle_min', 'angle_max': expected radians spanning at most 2π, found "
+            f"{angle_min:g} .. {angle_max:g} (degrees? the Hokuyo's are -2.356194 .. 2.356194 rad)"
+        )
     last = angle_min + (beams - 1) * increment
     if abs(last - angle_max) > ANGLE_TOLERANCE:
         raise DataError(
@@ -530,6 +535,12 @@ def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStre
             f"{path}: range limits must satisfy 0 <= range_min < range_max, found "
             f"range_min = {range_min}, range_max = {range_max}"
         )
+    if file_max > MAX_RANGE_M:
+        raise DataError(
+            f"{path}: key 'range_max': expected metres (at most {MAX_RANGE_M:g}), found "
+            f"{file_max:g} (millimetres? the Hokuyo's is 30 m)"
+        )
+    _check_range_unit(path, ranges_in, range_max)
     no_return = range_max if lidar.no_return is None else float(lidar.no_return)
 
     ranges, invalid_beams = valid_ranges(np.ascontiguousarray(ranges_in.T), range_min)
@@ -544,6 +555,25 @@ def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStre
         laser_offset=np.array([lidar.x, lidar.y, lidar.yaw], dtype=np.float64),
         invalid_beams=invalid_beams,
     )
+
+
+RANGE_UNIT_FACTOR = 10.0
+"""A Hokuyo file whose median valid reading is this many times its ``range_max`` holds
+another unit than metres (millimetres: 1000 times)."""
+
+
+def _check_range_unit(path: Path, ranges: NDArray, range_max: float) -> None:
+    """Refuse ranges whose median positive finite reading is :data:`RANGE_UNIT_FACTOR` times
+    ``range_max`` or more: millimetres (or centimetres) for metres, which would otherwise load as
+    scans of "no return" readings and a run of an empty map."""
+    sample = np.asarray(ranges[:, :: max(1, ranges.shape[1] // 200)], dtype=np.float64)
+    readings = sample[np.isfinite(sample) & (sample > 0)]
+    if readings.size and float(np.median(readings)) >= RANGE_UNIT_FACTOR * range_max:
+        raise DataError(
+            f"{path}: key 'ranges': the median reading is {float(np.median(readings)):g}, "
+            f"{float(np.median(readings)) / range_max:.0f} times range_max = {range_max:g} m: "
+            "expected metres (millimetres? divide by 1000)"
+        )
 
 
 def _load_kinect(

@@ -61,8 +61,9 @@ def _ece_file(log: Log, stream: str) -> Path:
     return stream_file(log.source or Path("."), log.meta.get("dataset_number", "NN"), stream)
 
 
-def _streams(log: Log) -> dict[str, _Stream]:
-    """The time-stamped streams of ``log`` with labels naming their files."""
+def _streams(log: Log, kinect: bool = True) -> dict[str, _Stream]:
+    """The time-stamped streams of ``log`` with labels naming their files (the Kinect's only
+    with ``kinect``: a run that makes no texture does not read them)."""
     out: dict[str, _Stream] = {}
     if log.kind == "ece276a":
         pairs = [
@@ -74,11 +75,11 @@ def _streams(log: Log) -> dict[str, _Stream]:
             if data is not None:
                 label = f"{_ece_file(log, stream)}: key {field!r}"
                 out[key] = _Stream(key, label, np.asarray(data.time, np.float64))
-        if log.rgbd is not None:
-            kinect = _ece_file(log, "kinect")
-            out["rgb"] = _Stream("rgb", f"{kinect}: key 'rgb_time_stamps'", log.rgbd.rgb_time)
+        if log.rgbd is not None and kinect:
+            file = _ece_file(log, "kinect")
+            out["rgb"] = _Stream("rgb", f"{file}: key 'rgb_time_stamps'", log.rgbd.rgb_time)
             out["disparity"] = _Stream(
-                "disparity", f"{kinect}: key 'disparity_time_stamps'", log.rgbd.disparity_time
+                "disparity", f"{file}: key 'disparity_time_stamps'", log.rgbd.disparity_time
             )
         return out
     source = log.source or Path(log.name)
@@ -98,11 +99,14 @@ _PAIRS: tuple[tuple[str, str, str], ...] = (
 """(stream, partner, why): the stream's readings must lie within the partner's time span."""
 
 
-def time_base_problems(log: Log, checks: ChecksConfig) -> tuple[list[str], list[str]]:
-    """``(errors, warnings)`` about the time base of ``log`` (see the module docstring)."""
+def time_base_problems(
+    log: Log, checks: ChecksConfig, kinect: bool = True
+) -> tuple[list[str], list[str]]:
+    """``(errors, warnings)`` about the time base of ``log`` (see the module docstring); the
+    Kinect's streams only with ``kinect``."""
     errors: list[str] = []
     warnings: list[str] = []
-    streams = _streams(log)
+    streams = _streams(log, kinect)
     for s in streams.values():
         n = s.time.shape[0]
         if n < 2:
@@ -223,13 +227,47 @@ def odometry_jump(log: Log, config: Config) -> str | None:
 def check_plausibility(log: Log, config: Config) -> list[str]:
     """Raise :class:`DataError` for the first time-base error or odometry jump of ``log``;
     return the warnings (time-base errors too, with ``checks.strict_time = false``)."""
-    errors, warnings = time_base_problems(log, config.checks)
+    # the Kinect's clock matters to the texture only (slam texture checks its frames itself)
+    errors, warnings = time_base_problems(log, config.checks, config.texture.enabled)
     if errors and config.checks.strict_time:
         raise DataError(f"{errors[0]} (checks.strict_time = false accepts it)")
     jump = odometry_jump(log, config)
     if jump is not None:
         raise DataError(jump)
+    unit = gyro_unit(log, config)
+    if unit is not None:
+        raise DataError(unit)
     return errors + warnings
+
+
+GYRO_WHEEL_RATIO = 10.0
+"""A gyro that turns the robot this many times as far as its wheels do reads another unit
+than rad/s (deg/s: 57 times); skid-steered wheels overstate turns, so the ratio is below 1."""
+
+
+def gyro_unit(log: Log, config: Config) -> str | None:
+    """The error of an ECE276A log whose gyro reads degrees per second: over the encoders' time
+    span, the gyro's total turn ``∫|ω| dt`` is :data:`GYRO_WHEEL_RATIO` times the wheels'
+    ``Σ|Δθ|`` or more (judged once the wheels turned 2 rad); else ``None``."""
+    if log.kind != "ece276a" or log.encoders is None or log.imu is None or len(log.imu) < 2:
+        return None
+    from slam.odometry import wheel_travel
+
+    right, left = wheel_travel(log.encoders, config.robot)
+    wheels = float(np.abs(right - left).sum()) / config.robot.track_width
+    t, rate = log.imu.time, np.asarray(log.imu.angular_velocity[2], dtype=np.float64)
+    inside = (t >= log.encoders.time.min()) & (t <= log.encoders.time.max())
+    if wheels < 2.0 or np.count_nonzero(inside) < 2:
+        return None
+    dt = np.diff(t[inside])
+    gyro = float(np.sum(np.abs(rate[inside][1:]) * np.where(dt > 0, dt, 0.0)))
+    if gyro < GYRO_WHEEL_RATIO * wheels:
+        return None
+    return (
+        f"{_ece_file(log, 'imu')}: key 'angular_velocity': the gyro turns the robot "
+        f"{gyro / wheels:.0f} times as far as its wheels ({gyro:.0f} rad against {wheels:.1f} rad "
+        "over the encoders' time span): expected rad/s (degrees per second? multiply by π/180)"
+    )
 
 
 def scan_source(log: Log) -> str:

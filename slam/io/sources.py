@@ -302,6 +302,13 @@ def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
                 if p.suffix in (".bag", ".mcap", ".clf", ".gz") or (p / ROSBAG2_METADATA).is_file()
             )[:3]
             inside = f"; it holds {', '.join(logs)}: give that path" if logs and not numbers else ""
+            if len(numbers) > 1:  # the course's layout: the registry reads <data dir>/ece276a
+                inside = (
+                    f"; name one: slam run dataset{numbers[0]} --data-dir {path.parent}"
+                    if path.name == "ece276a"
+                    else "; give a folder that holds one of them (or name the folder ece276a "
+                    f"and run dataset{numbers[0]} with --data-dir its parent)"
+                )
             raise DataError(
                 f"{path}: expected the files of one ECE276A dataset in the folder (EncodersNN.npz, "
                 f"ImuNN.npz, HokuyoNN.npz, KinectNN.npz) or a ROS 2 bag (metadata.yaml), found "

@@ -102,6 +102,8 @@ class SimOptions:
     wheels: WheelSpec = field(default_factory=WheelSpec)
 
     def __post_init__(self) -> None:
+        if self.seed is not None and not 0 <= self.seed < 2**63:
+            raise UsageError(f"--seed: expected an integer ≥ 0, found {self.seed}")
         if not 0 <= self.number <= 99:
             raise UsageError(f"--number: expected 0..99, found {self.number}")
         if not 0 < self.rgbd_rate <= 30:
