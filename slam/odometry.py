@@ -274,6 +274,8 @@ class OdometryIntegrator:
         self._last_interval = 0.0
         self.wheel_yaw_intervals = 0
         """Encoder intervals whose yaw came from the wheels (outside the IMU's time range)."""
+        self._turns = [0.0, 0.0]  # the gyro's and the wheels' total |turn| where both are read
+        self._unit_warned = False
 
     def add_imu(self, time: ArrayLike, gyro_z: ArrayLike) -> None:
         """Add gyro z samples (rad/s) taken at ``time`` (s); scalars or arrays."""
@@ -372,6 +374,7 @@ class OdometryIntegrator:
             dt = t - last
             if heading is not None and self._imu_heading is not None:
                 dtheta = heading - self._imu_heading
+                self._watch_gyro_unit(abs(dtheta), abs(right - left) / track)
             else:
                 dtheta = (right - left) / track
                 self._count_wheel_yaw()
@@ -381,6 +384,23 @@ class OdometryIntegrator:
             self._speed = distance / dt if dt > 0 else 0.0
             self._turn_rate = dtheta / dt if dt > 0 else 0.0
             self._last_interval = dt
+
+    def _watch_gyro_unit(self, gyro: float, wheels: float) -> None:
+        """Warn once when the gyro has turned the robot ten times as far as its wheels, after the
+        wheels turned 2 rad: a gyro read in degrees per second (57 times; the course's logs
+        0.45–0.48), the check :func:`slam.io.plausibility.gyro_unit` makes on a whole log."""
+        self._turns[0] += gyro
+        self._turns[1] += wheels
+        g, w = self._turns
+        if not self._unit_warned and w >= 2.0 and g >= 10.0 * w:
+            self._unit_warned = True
+            warnings.warn(
+                f"odometry: the gyro has turned the robot {g / w:.0f} times as far as its wheels "
+                f"({g:.0f} rad against {w:.1f} rad): expected rad/s (degrees per second? "
+                "multiply by π/180)",
+                OdometryWarning,
+                stacklevel=4,
+            )
 
     def _count_wheel_yaw(self) -> None:
         if self.robot.yaw_source == "imu" and self.wheel_yaw_intervals == 0:

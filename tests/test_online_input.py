@@ -3,6 +3,8 @@ the argument, or — for a scan that sees nothing — the odometry carrying the 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from synthetic_logs import path as room_path
@@ -172,3 +174,26 @@ def test_slam_run_names_what_it_takes():
         UsageError, match="slam.run: expected a dataset name or a log's path, found ndarray"
     ):
         slam.run(np.zeros((10, 3)))  # type: ignore[arg-type]
+
+
+def test_a_gyro_in_degrees_per_second_is_warned_about_online():
+    """The audit's case: gyro samples in deg/s fed to the encoder odometry ended 3 m from the
+    truth without a word; the integrator now warns once the gyro has turned 10 times as far as
+    the wheels."""
+    from slam.odometry import OdometryIntegrator, OdometryWarning
+
+    robot = slam.Config().robot
+    ticks = round(0.25 * robot.track_width / 40 / robot.meters_per_tick)  # 0.5 rad/s in place
+    counts = np.array([ticks, -ticks, ticks, -ticks], dtype=float)
+    for rate, warned in ((0.5, False), (np.degrees(0.5), True)):
+        odometry = OdometryIntegrator(robot)
+        odometry.add_imu(np.arange(0.0, 8.0, 0.01), np.full(800, rate))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for k in range(300):
+                odometry.add_encoders(k / 40, counts)
+        said = [str(w.message) for w in caught if issubclass(w.category, OdometryWarning)]
+        assert len(said) == int(warned), said
+        if warned:
+            assert said[0].startswith("odometry: the gyro has turned the robot ")
+            assert "expected rad/s (degrees per second?" in said[0]
