@@ -240,7 +240,13 @@ def test_study_is_seeded_and_writes_a_png(tmp_path, capsys):
     assert "    3×3  0.001      4" in text
     image = cv2.imread(str(out))
     assert image is not None and image.shape[2] == 3 and image.shape[0] > 400
-    assert main([*args, "--json"]) == 0
+    # an existing file is replaced only with --force (a run replaces no file it did not make)
+    assert main([*args, "--json"]) == 2
+    assert capsys.readouterr().err == (
+        f"slam: error: --out {out}: exists; it was left alone (choose another name, or give "
+        "--force to replace it)\n"
+    )
+    assert main([*args, "--json", "--force"]) == 0
     rows = json.loads(capsys.readouterr().out)["rows"]
     assert [(r["size"], r["error"]) for r in rows] == [
         (3, 0.001),
@@ -265,8 +271,17 @@ def test_study_ceiling_is_real():
 
 
 def test_study_rejects_bad_settings(capsys, tmp_path):
-    with pytest.raises(UsageError, match="study errors"):
+    with pytest.raises(
+        UsageError, match=r"--errors: expected probabilities in \[0, 1\), found 1.5"
+    ):
         StudyConfig(errors=(1.5,))
+    for option, value, message in (
+        ("--seed", "-1", "--seed: expected an integer ≥ 0, found -1"),  # was a numpy traceback
+        ("--trials", "0", "--trials: expected at least 1, found 0"),
+        ("--sizes", "0", "--sizes: expected grid sides ≥ 1, found 0"),
+    ):
+        assert main(["grid", "study", option, value, "--out", str(tmp_path / "s.png")]) == 2
+        assert capsys.readouterr().err == f"slam: error: {message}\n"
     assert main(["grid", "study", "--sizes", "3,x", "--out", str(tmp_path / "a.png")]) == 2
     assert "--sizes '3,x': expected comma-separated numbers" in capsys.readouterr().err
     assert main(["grid", "study", "--out", str(tmp_path / "a.jpg")]) == 2

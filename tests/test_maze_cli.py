@@ -64,22 +64,31 @@ def test_show_writes_a_png(maze_dir, tmp_path, capsys):
     assert main(["maze", "show", str(maze_dir / "a.txt"), "--out", str(out), "--cell", "20"]) == 0
     image = cv2.imread(str(out))
     assert image is not None and image.shape[1] == 6 * 20 + 20
-    assert (
-        main(
-            [
-                "maze",
-                "show",
-                str(maze_dir / "a.txt"),
-                "--out",
-                str(out),
-                "--walls-only",
-                "--cell",
-                "20",
-            ]
-        )
-        == 0
-    )
+    walls = ["maze", "show", str(maze_dir / "a.txt"), "--out", str(out), "--walls-only"]
+    assert main([*walls, "--cell", "20"]) == 2  # the file exists: left alone without --force
+    assert "exists; it was left alone" in capsys.readouterr().err
+    assert main([*walls, "--cell", "20", "--force"]) == 0
     assert cv2.imread(str(out)).shape[0] == 6 * 20 + 20
+
+
+def test_outputs_replace_no_file_without_force(maze_dir, tmp_path, capsys):
+    """The bug: `slam maze convert`, `maze show --out`, `maze run --record` (and `slam grid`'s
+    outputs) replaced a user's file of that name without a word."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    record = tmp_path / "keep.rrd"
+    record.write_text("mine")
+    picture = tmp_path / "mine.jpg"
+    for argv, message in (
+        (["maze", "convert", str(maze_dir / "a.txt"), str(notes)], f"OUT {notes}: exists"),
+        (["maze", "run", str(maze_dir / "a.txt"), "--record", str(record)], f"--record {record}: exists"),
+        (["maze", "show", str(maze_dir / "a.txt"), "--out", str(picture)], f"--out {picture}: expected a .png file name"),
+        (["grid", "run", "tutorial-1d", "--record", str(record)], f"--record {record}: exists"),
+    ):  # fmt: skip
+        assert main(argv) == 2, argv
+        assert message in capsys.readouterr().err
+    assert notes.read_text() == "mine" and record.read_text() == "mine"
+    assert not picture.exists()
 
 
 def test_convert_round_trip(maze_dir, tmp_path):
@@ -108,3 +117,15 @@ def test_data_relative_names(data_dir, capsys):
     out = capsys.readouterr().out
     assert "score 19.633" in out and "optimal run 1: 17 steps" in out
     assert read_maze(data_dir / "maze" / "udacity" / "test_maze_01.txt").width == 12
+
+
+def test_a_start_inside_the_goal_is_one_error(tmp_path, capsys):
+    """The bug: a 2×2 Udacity maze (the centre goal covers the start) ended in an IndexError
+    traceback in every robot."""
+    maze = tmp_path / "u2.txt"
+    maze.write_text("2\n0,0\n0,0\n")
+    assert main(["maze", "run", str(maze)]) == 2
+    assert capsys.readouterr().err == (
+        "slam: error: u2: the start cell (0, 0) is a goal cell (goal [(0, 0), (0, 1), (1, 0), "
+        "(1, 1)]): expected a start outside the goal (a Udacity maze of side 4 or more)\n"
+    )

@@ -18,8 +18,10 @@ from pathlib import Path
 from slam.commands._common import (
     add_actions,
     add_data_dir_argument,
+    add_file_force_argument,
     add_quiet_argument,
     add_record_argument,
+    check_new_file,
     data_dir_from,
     show_progress,
 )
@@ -44,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     p_run.add_argument("--json", action="store_true", help="print the steps as JSON")
     add_record_argument(p_run, "the posterior heat map after every step")
+    add_file_force_argument(p_run)
     p_run.add_argument(
         "--no-stop",
         action="store_true",
@@ -79,6 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", type=Path, default=Path("grid-study.png"), help="PNG plot (default: %(default)s)"
     )
     p_study.add_argument("--json", action="store_true", help="print the rows as JSON")
+    add_file_force_argument(p_study)
     add_quiet_argument(p_study)
     p_study.set_defaults(func=cmd_study)
 
@@ -114,6 +118,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     from slam.discrete.world import DIRECTIONS
 
+    if args.record is not None:  # before any work
+        from slam.viz.stream import check_recording_path
+
+        check_recording_path(check_new_file(args.record, "--record", args.force))
     data_dir = data_dir_from(args) if args.scenario.startswith("udacity:") else None
     scenario = resolve_scenario(args.scenario, data_dir)
     if not scenario.steps:
@@ -121,9 +129,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     result = run_scenario(scenario, stop_when_localized=not args.no_stop)
     if args.record is not None:
         from slam.viz.grid import record_grid_run
-        from slam.viz.stream import check_recording_path
 
-        record_grid_run(result, check_recording_path(args.record))
+        record_grid_run(result, args.record)
     world = scenario.world
     if args.json:
         out = {
@@ -211,6 +218,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     check_world_memory(side, side, 1, f"--sizes {args.sizes}")
     if args.out.suffix.lower() != ".png":
         raise UsageError(f"--out {args.out}: expected a .png file name")
+    check_new_file(args.out, "--out", args.force)
     total = len(config.sizes) * len(config.errors) * config.trials
     bar = None
     if show_progress(args):

@@ -25,8 +25,10 @@ from typing import Any
 from slam.commands._common import (
     add_actions,
     add_data_dir_argument,
+    add_file_force_argument,
     add_quiet_argument,
     add_record_argument,
+    check_new_file,
     data_dir_from,
     show_progress,
 )
@@ -62,6 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--json", action="store_true", help="JSON with the per-step history and wall knowledge"
     )
     add_record_argument(run, "known walls and the path after every step")
+    add_file_force_argument(run)
     run.set_defaults(func=run_maze)
 
     bench = sub.add_parser("bench", help="many mazes: score against the lower bound")
@@ -82,6 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     show.add_argument(
         "--walls-only", action="store_true", help="draw the maze alone, without a trial"
     )
+    add_file_force_argument(show)
     show.set_defaults(func=show_maze)
 
     convert = sub.add_parser("convert", help="convert between the Udacity and ASCII formats")
@@ -92,6 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=["udacity", "ascii"],
         help="output format (default: the other one)",
     )
+    add_file_force_argument(convert)
     add_data_dir_argument(convert)
     convert.set_defaults(func=convert_maze)
 
@@ -138,14 +143,17 @@ def run_maze(args: argparse.Namespace) -> int:
     from slam.maze.bench import trial
     from slam.maze.planner import lower_bound, optimal_plan
 
+    if args.record is not None:  # before any work
+        from slam.viz.stream import check_recording_path
+
+        check_recording_path(check_new_file(args.record, "--record", args.force))
     maze = _load(args)
     optimal = optimal_plan(maze)
     result = trial(maze, args.robot, **_options(args.set))
-    if getattr(args, "record", None) is not None:
+    if args.record is not None:
         from slam.viz.maze import record_maze_trial
-        from slam.viz.stream import check_recording_path
 
-        record_maze_trial(result, check_recording_path(args.record))
+        record_maze_trial(result, args.record)
     bound = lower_bound(optimal.steps, result.exploration_weight)
     if args.json:
         out = result.to_dict(history=True)
@@ -202,8 +210,11 @@ def show_maze(args: argparse.Namespace) -> int:
     maze = _load(args)
     if args.cell < 8:
         raise UsageError(f"--cell must be at least 8 pixels, got {args.cell}")
+    out = args.out or Path(f"{maze.name}-{'walls' if args.walls_only else args.robot}.png")
+    if out.suffix.lower() != ".png":
+        raise UsageError(f"--out {out}: expected a .png file name")
+    check_new_file(out, "--out", args.force)
     result = None if args.walls_only else trial(maze, args.robot, **_options(args.set))
-    out = args.out or Path(f"{maze.name}-{'walls' if result is None else args.robot}.png")
     write_png(out, render_trial(maze, result, args.cell))
     print(f"wrote {out}")
     return 0
@@ -216,6 +227,7 @@ def convert_maze(args: argparse.Namespace) -> int:
     path = locate_maze(args.maze, data_dir_from(args))
     if args.out.exists() and args.out.samefile(path):
         raise UsageError(f"{args.out}: OUT is the maze being converted; write to another file")
+    check_new_file(args.out, "OUT", args.force)
     text = read_maze_text(path)
     source_format = detect_format(text, str(path))
     maze = parse_maze(text, str(path), name=path.stem, fmt=source_format)

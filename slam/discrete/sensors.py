@@ -96,7 +96,7 @@ class ConfusionSensor:
         sums = m.sum(axis=1)
         if not np.allclose(sums, 1.0, atol=1e-9):
             bad = int(np.argmax(np.abs(sums - 1.0)))
-            raise ConfigError(f"sensor.matrix: row {bad} sums to {sums[bad]!r}; expected 1")
+            raise ConfigError(f"sensor.matrix: row {bad} sums to {float(sums[bad]):g}; expected 1")
         if self.observations and len(self.observations) != m.shape[1]:
             raise ConfigError(
                 f"sensor.observations: {len(self.observations)} names for a matrix with "

@@ -66,20 +66,20 @@ class StudyConfig:
 
     def __post_init__(self) -> None:
         if not self.sizes or min(self.sizes) < 1:
-            raise UsageError(f"study sizes: expected grid sides ≥ 1, found {self.sizes}")
+            listed = ",".join(str(v) for v in self.sizes) or "nothing"
+            raise UsageError(f"--sizes: expected grid sides ≥ 1, found {listed}")
         if not self.errors or not all(0.0 <= e < 1.0 for e in self.errors):
-            raise UsageError(f"study errors: expected probabilities in [0, 1), found {self.errors}")
+            listed = ",".join(f"{v:g}" for v in self.errors) or "nothing"
+            raise UsageError(f"--errors: expected probabilities in [0, 1), found {listed}")
         if not 2 <= self.colours <= len(COLOUR_NAMES):
-            raise UsageError(
-                f"study colours: expected 2..{len(COLOUR_NAMES)}, found {self.colours}"
-            )
-        if self.trials < 1 or self.max_steps < 1:
-            raise UsageError(
-                f"study: trials and max steps must be at least 1, found {self.trials}, "
-                f"{self.max_steps}"
-            )
+            raise UsageError(f"--colours: expected 2..{len(COLOUR_NAMES)}, found {self.colours}")
+        for option, value in (("--trials", self.trials), ("--max-steps", self.max_steps)):
+            if value < 1:
+                raise UsageError(f"{option}: expected at least 1, found {value}")
         if not 0.0 < self.threshold <= 1.0:
-            raise UsageError(f"study threshold: expected (0, 1], found {self.threshold}")
+            raise UsageError(f"--threshold: expected (0, 1], found {self.threshold:g}")
+        if not 0 <= self.seed < 2**63:
+            raise UsageError(f"--seed: expected an integer ≥ 0, found {self.seed}")
 
 
 @dataclass(frozen=True)

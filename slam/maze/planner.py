@@ -141,6 +141,12 @@ def optimal_plan(maze: Maze, max_move: int = MAX_MOVE) -> Plan:
     """The step-optimal run-1 plan on the true maze, from the start facing north."""
     if not maze.goal:
         raise DataError(f"{maze.name or 'maze'}: no goal cells (none marked 'G')")
+    if maze.start in maze.goal:
+        raise DataError(
+            f"{maze.name or 'maze'}: the start cell {maze.start} is a goal cell (goal "
+            f"{sorted(maze.goal)}): expected a start outside the goal (a Udacity maze of side 4 "
+            "or more)"
+        )
     plan = plan_run(maze.open_mask, (*maze.start, 0), maze.goal_mask(), max_move)
     if plan is None:
         raise DataError(

@@ -180,6 +180,12 @@ def run_trial(
     """Let ``robot`` make its two runs in ``maze`` under the tester's rules (module docstring)."""
     if not maze.goal:
         raise DataError(f"{maze.name or 'maze'}: no goal cells (none marked 'G'), cannot run")
+    if maze.start in maze.goal:
+        raise DataError(
+            f"{maze.name or 'maze'}: the start cell {maze.start} is a goal cell (goal "
+            f"{sorted(maze.goal)}), cannot run: expected a start outside the goal (a Udacity "
+            "maze of side 4 or more)"
+        )
     open_mask = maze.open_mask
     rays = ray_lengths(np.ascontiguousarray(open_mask, dtype=np.uint8))
     goal = maze.goal_mask()
