@@ -295,3 +295,49 @@ def test_export_never_overwrites_without_force(tmp_path, capsys):
     assert (tmp_path / "elsewhere" / "m.yaml").read_text().startswith("image: m.pgm\n")
     assert main(["export", str(tmp_path / "nope"), "--format", "tum"]) == 2
     assert "run folder not found" in capsys.readouterr().err
+
+
+def test_export_guards_the_run_and_names_a_damaged_map(tmp_path, capsys):
+    """The audit's bugs: `--format pgm --out m.yaml` wrote the YAML over the image; `--force`
+    let an export replace the run's own map.npz or trajectory.tum; a dangling link was replaced
+    without --force; an image name with '#' was cut at it by YAML readers; a damaged map.npz
+    gave a BadZipFile, EOFError or TypeError traceback."""
+    run = _run_folder(tmp_path)
+    cases = (
+        (["--format", "pgm", "--out", str(tmp_path / "m.yaml")], "expected a .pgm name for --format pgm"),
+        (["--format", "npz", "--out", str(run / "map.npz"), "--force"], "map.npz would be written into the run folder itself"),
+        (["--format", "kitti", "--out", str(run / "trajectory.tum"), "--force"], "trajectory.tum would be written into the run folder itself"),
+    )  # fmt: skip
+    for argv, message in cases:
+        assert main(["export", str(run), *argv]) == 2
+        assert message in capsys.readouterr().err
+    dangling = tmp_path / "dl.tum"
+    dangling.symlink_to(tmp_path / "nowhere")
+    assert main(["export", str(run), "--format", "tum", "--out", str(dangling)]) == 2
+    assert "exists; use --force" in capsys.readouterr().err and dangling.is_symlink()
+    odd = tmp_path / "maps" / "map #2.pgm"
+    odd.parent.mkdir()
+    assert main(["export", str(run), "--format", "pgm", "--out", str(odd)]) == 0
+    assert (odd.parent / "map #2.yaml").read_text().startswith('image: "map #2.pgm"\n')
+    assert read_map_yaml(odd.parent / "map #2.yaml").occupancy.shape == (80, 100)
+    data = (run / "map.npz").read_bytes()
+    for damage, message in (
+        (data[:200], "not a readable .npz archive"),
+        (b"", "expected an .npz archive (a zip of arrays), found an empty file"),
+        (b"resolution: 0.05\n", "expected an .npz archive (a zip of arrays), found a file starting b'reso'"),
+    ):  # fmt: skip
+        (run / "map.npz").write_bytes(damage)
+        assert main(["export", str(run), "--format", "png", "--out", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    for arrays, message in (
+        ({"resolution": np.array([0.05, 0.05])}, "key 'resolution': expected one finite number > 0"),
+        ({"resolution": np.array("0.05")}, "key 'resolution': expected one finite number > 0"),
+        ({"resolution": np.inf}, "key 'resolution': expected one finite number > 0"),
+        ({"origin": np.array([np.inf, 0.0])}, "key 'origin': expected 2 finite numbers"),
+        ({"log_odds": np.zeros((0, 0))}, "key 'log_odds': expected a non-empty 2-D numeric array"),
+    ):  # fmt: skip
+        fields = {"log_odds": np.zeros((4, 4)), "resolution": 0.05, "origin": np.zeros(2), **arrays}
+        np.savez(run / "map.npz", **fields)
+        assert main(["export", str(run), "--format", "pgm", "--out", str(tmp_path / "y.pgm")]) == 2
+        assert message in capsys.readouterr().err

@@ -54,6 +54,28 @@ def test_view_errors_are_one_line(tmp_path, capsys):
     assert main(["view", str(other)]) == 2
     assert "expected a run folder or a .rrd file" in capsys.readouterr().err
     assert main(["view", str(tmp_path), "--web", "--port", "70000"]) == 2
+    capsys.readouterr()
+    # not a recording: refused before a viewer serves it empty (the bug: exit 0, an empty viewer)
+    fake = tmp_path / "fake.rrd"
+    for content, found in ((b"", "an empty file"), (b'{"wall_s": 1}', "a file starting b'{\"wa'")):
+        fake.write_bytes(content)
+        assert main(["view", str(fake), "--web"]) == 2
+        assert capsys.readouterr().err == (
+            f"slam: error: {fake}: expected a rerun recording (starting b'RRF2'), found {found}\n"
+        )
+
+
+def test_view_without_a_display_points_at_web(recording, monkeypatch, capsys):
+    """The bug: without a display the native viewer printed rerun's log lines and a winit
+    error, exit 1."""
+    monkeypatch.setattr("sys.platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(recording)]) == 2
+    assert capsys.readouterr().err == (
+        f"slam: error: {recording}: no display for the native viewer (neither DISPLAY nor "
+        "WAYLAND_DISPLAY is set): serve it to a browser with --web\n"
+    )
 
 
 @pytest.mark.skipif(not Path("/proc/net/tcp").is_file(), reason="needs Linux /proc/net/tcp")
@@ -100,6 +122,26 @@ def _stand_in_viewer(tmp_path: Path) -> Path:
     return script
 
 
+def _stop(pid: int) -> None:
+    """End process ``pid``: SIGINT, then SIGTERM, then SIGKILL, each given a few seconds."""
+    for sig, wait_s in ((signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            return
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            try:
+                if os.waitpid(pid, os.WNOHANG)[0] == pid:
+                    return
+            except ChildProcessError:  # not our child: poll for its end
+                try:
+                    os.kill(pid, 0)
+                except ProcessLookupError:
+                    return
+            time.sleep(0.1)
+
+
 def test_run_viewer_streams_live_to_a_viewer_on_loopback(tmp_path, monkeypatch):
     """``--viewer`` spawns the viewer bound to 127.0.0.1 and streams to it while the run writes
     its own recording. The viewer is a stand-in: the real rerun binary with ``--save`` (a gRPC
@@ -117,11 +159,10 @@ def test_run_viewer_streams_live_to_a_viewer_on_loopback(tmp_path, monkeypatch):
     assert args[args.index("--bind") + 1] == "127.0.0.1"
     port = int(args[args.index("--port") + 1])
     assert listeners(port) == {LOOPBACK_HEX}
-    pid = int((tmp_path / "pid.txt").read_text())
-    os.kill(pid, signal.SIGINT)  # the viewer outlives the run; stop our stand-in
-    deadline = time.monotonic() + 20
-    while listeners(port) and time.monotonic() < deadline:
-        time.sleep(0.2)
+    # the viewer outlives the run: stop our stand-in, whatever it takes (rerun --save may
+    # keep serving after SIGINT, and a test leaves no process behind)
+    _stop(int((tmp_path / "pid.txt").read_text()))
+    assert not listeners(port)
     live = summarize(tmp_path / "live.rrd")
     saved = summarize(out / "recording.rrd")
     for entity in (bp.TRAJECTORY, bp.N_EFF, bp.PARTICLES):

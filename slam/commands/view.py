@@ -10,6 +10,7 @@ line and exit 2 before anything starts. The viewer process dies with
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import subprocess
 import sys
@@ -46,12 +47,32 @@ def find_recording(path: Path) -> Path:
                 f"{path}: no {RECORDING_NAME} in this folder (runs record unless --no-record; "
                 "'slam grid run --record FILE' and 'slam maze run --record FILE' write elsewhere)"
             )
-        return rrd
+        return _checked_rrd(rrd)
     if path.is_file():
         if path.suffix != ".rrd":
             raise UsageError(f"{path}: expected a run folder or a .rrd file")
-        return path
+        return _checked_rrd(path)
     raise DataError(f"{path}: no such run folder or recording")
+
+
+RRD_MAGIC = b"RRF2"
+"""The first bytes of a rerun recording file."""
+
+
+def _checked_rrd(path: Path) -> Path:
+    """``path`` when it starts as a rerun recording does; else one :class:`DataError` (the
+    viewer would serve an empty recording and say so only in its own log)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(RRD_MAGIC))
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if head != RRD_MAGIC:
+        found = "an empty file" if not head else f"a file starting {head!r}"
+        raise DataError(
+            f"{path}: expected a rerun recording (starting {RRD_MAGIC!r}), found {found}"
+        )
+    return path
 
 
 def _check_port(port: int | None) -> None:
@@ -76,6 +97,13 @@ def view_command(args: argparse.Namespace) -> int:
     if args.port is not None or args.web:
         check_port_free(args.port or 9090, "--port")
     if not args.web:
+        if sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        ):
+            raise UsageError(
+                f"{args.run_dir}: no display for the native viewer (neither DISPLAY nor "
+                "WAYLAND_DISPLAY is set): serve it to a browser with --web"
+            )
         cmd = viewer_command(rrd, port=args.port or free_port())
         return subprocess.run(
             cmd, env=viewer_env(), check=False, preexec_fn=die_with_parent()

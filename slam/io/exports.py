@@ -16,6 +16,7 @@ unless asked to, each file atomically.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -121,27 +122,75 @@ def format_kitti(poses: F64) -> str:
 
 
 def read_run_map(run_dir: Path) -> tuple[NDArray[np.float32], float, F64]:
-    """``(log_odds, resolution, origin)`` of a run folder's ``map.npz``."""
+    """``(log_odds, resolution, origin)`` of a run folder's ``map.npz`` (:func:`read_map_npz`)."""
     path = Path(run_dir) / "map.npz"
     if not path.is_file():
-        raise DataError(f"{path}: not found (the run has no map: was it an odometry-only run?)")
+        raise DataError(
+            f"{path}: not found (expected a run folder of slam run or slam localize, which "
+            "write their map there)"
+        )
+    return read_map_npz(path)
+
+
+MAP_KEYS = ("log_odds", "resolution", "origin")
+"""The arrays of a run's ``map.npz``."""
+
+
+def read_map_npz(path: Path) -> tuple[NDArray[np.float32], float, F64]:
+    """``(log_odds, resolution, origin)`` of the ``map.npz`` at ``path``, every reader's one
+    reader: a 2-D, non-empty, finite ``log_odds``, one finite ``resolution`` > 0, two finite
+    numbers ``origin``; else one :class:`DataError` naming the file and the key (a damaged,
+    empty or foreign file too; never a pickle)."""
+    import zipfile
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if head != b"PK\x03\x04":
+        found = "an empty file" if not head else f"a file starting {head!r}"
+        raise DataError(f"{path}: expected an .npz archive (a zip of arrays), found {found}")
     try:
         with np.load(path, allow_pickle=False) as data:
-            log_odds = np.asarray(data["log_odds"], dtype=np.float32)
-            resolution = float(data["resolution"])
-            origin = np.asarray(data["origin"], dtype=np.float64)
-    except KeyError as exc:
+            missing = [k for k in MAP_KEYS if k not in data.files]
+            if missing:
+                raise DataError(
+                    f"{path}: expected keys {', '.join(MAP_KEYS)}; missing {', '.join(missing)} "
+                    f"(found {', '.join(data.files) or 'none'})"
+                )
+            arrays = {k: np.asarray(data[k]) for k in MAP_KEYS}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise DataError(f"{path}: not a readable .npz archive ({exc})") from None
+    log_odds, resolution, origin = arrays["log_odds"], arrays["resolution"], arrays["origin"]
+    if (
+        log_odds.ndim != 2
+        or min(log_odds.shape) < 1
+        or not np.issubdtype(log_odds.dtype, np.number)
+    ):
         raise DataError(
-            f"{path}: missing key {exc.args[0]!r} (expected log_odds, resolution, origin)"
-        ) from None
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{path}: not a readable map.npz ({exc})") from None
-    if log_odds.ndim != 2 or origin.shape != (2,) or not resolution > 0:
-        raise DataError(
-            f"{path}: expected a 2-D log_odds, a positive resolution and a 2-vector origin, found "
-            f"shapes {log_odds.shape}, {origin.shape} and resolution {resolution}"
+            f"{path}: key 'log_odds': expected a non-empty 2-D numeric array, found "
+            f"{log_odds.dtype} of shape {log_odds.shape}"
         )
-    return log_odds, resolution, origin
+    if not np.all(np.isfinite(log_odds)):
+        raise DataError(f"{path}: key 'log_odds': holds NaN or infinite values")
+    numeric = np.issubdtype(resolution.dtype, np.number)
+    if resolution.size != 1 or not numeric or not 0 < float(resolution.reshape(())) < np.inf:
+        raise DataError(
+            f"{path}: key 'resolution': expected one finite number > 0 (m), found {resolution!r}"
+        )
+    if (
+        origin.shape != (2,)
+        or not np.issubdtype(origin.dtype, np.number)
+        or not np.all(np.isfinite(origin))
+    ):
+        raise DataError(f"{path}: key 'origin': expected 2 finite numbers (x, y), found {origin!r}")
+    return (
+        log_odds.astype(np.float32),
+        float(resolution.reshape(())),
+        origin.astype(np.float64),
+    )
 
 
 def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = False) -> list[Path]:
@@ -160,12 +209,22 @@ def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = F
     target = Path(out) if out is not None else run_dir / EXPORT_DIR / DEFAULT_NAMES[fmt]
     if target.is_dir():
         raise UsageError(f"--out {target}: expected a file path, found a folder")
+    suffix = {"pgm": ".pgm", "png": ".png", "npz": ".npz"}.get(fmt)
+    if suffix is not None and target.suffix.lower() != suffix:
+        raise UsageError(f"--out {target}: expected a {suffix} name for --format {fmt}")
     companions = {
         "pgm": [target.with_suffix(".yaml")],
         "kitti": [target.with_name(target.stem + "_times.txt")],
     }.get(fmt, [])
     written = [target, *companions]
-    existing = [p for p in written if p.exists()]
+    own = run_dir.resolve()
+    for path in written:  # the run's own files are its inputs, never an export's output
+        if path.resolve().parent == own:
+            raise UsageError(
+                f"--out {target}: {path.name} would be written into the run folder itself, "
+                f"beside the files export reads; write to {run_dir / EXPORT_DIR} or elsewhere"
+            )
+    existing = [p for p in written if os.path.lexists(p)]
     if existing and not force:
         raise UsageError(f"{existing[0]}: exists; use --force to replace it")
     if fmt in ("pgm", "png", "npz"):

@@ -24,6 +24,7 @@ mapping, ``origin`` as ``[x, y, yaw]`` or ``- value`` lines), with errors naming
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -101,6 +102,9 @@ def map_yaml_text(
 ) -> str:
     """The ``map.yaml`` of a trinary map (floats written so they read back exactly)."""
     x, y, yaw = (float(v) for v in origin)
+    plain = re.fullmatch(r"[A-Za-z0-9_./][A-Za-z0-9_./ -]*", image) and not image.endswith(" ")
+    if not plain:  # '#' starts a comment, ': ' a mapping...: a double-quoted YAML string
+        image = '"' + image.replace("\\", "\\\\").replace('"', '\\"') + '"'
     return (
         f"image: {image}\n"
         f"mode: trinary\n"
@@ -563,8 +567,12 @@ def _value(key: str, raw: str, where: str) -> Any:
 
 
 def _string(raw: str) -> str:
-    if len(raw) >= 2 and raw[0] == raw[-1] and raw[0] in "'\"":
-        return raw[1:-1]
+    """A YAML scalar string: plain, 'single-quoted' (``''`` a quote) or "double-quoted" (``\\"``
+    and ``\\\\`` escapes, as :func:`map_yaml_text` writes a name with ``#`` or ``: ``)."""
+    if len(raw) >= 2 and raw[0] == raw[-1] == "'":
+        return raw[1:-1].replace("''", "'")
+    if len(raw) >= 2 and raw[0] == raw[-1] == '"':
+        return re.sub(r"\\(.)", r"\1", raw[1:-1])
     return raw
 
 

@@ -271,36 +271,11 @@ def wall_surface(
 
 
 def _read_npz(path: Path) -> OccupancyGrid:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = {"log_odds", "resolution", "origin"} - set(data.files)
-            if missing:
-                raise DataError(
-                    f"{path}: expected keys log_odds, resolution, origin; missing "
-                    f"{', '.join(sorted(missing))}"
-                )
-            log_odds = np.asarray(data["log_odds"])
-            resolution = np.asarray(data["resolution"])
-            origin = np.asarray(data["origin"])
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{path}: not a readable map.npz ({exc})") from None
-    if (
-        log_odds.ndim != 2
-        or min(log_odds.shape) < 1
-        or not np.issubdtype(log_odds.dtype, np.number)
-    ):
-        raise DataError(
-            f"{path}: log_odds must be a 2-D numeric array, found shape {log_odds.shape}"
-        )
-    if resolution.size != 1 or not float(resolution) > 0 or not np.isfinite(float(resolution)):
-        raise DataError(f"{path}: resolution must be one number > 0, found {resolution!r}")
-    if origin.shape != (2,) or not np.all(np.isfinite(origin)):
-        raise DataError(f"{path}: origin must be 2 finite numbers (x, y), found {origin!r}")
-    if not np.all(np.isfinite(log_odds)):
-        raise DataError(f"{path}: log_odds holds NaN or infinite values")
-    return OccupancyGrid.from_arrays(
-        log_odds.astype(np.float32), float(resolution), origin.astype(np.float64), MapConfig()
-    )
+    """The grid of a ``map.npz`` (:func:`slam.io.exports.read_map_npz`)."""
+    from slam.io.exports import read_map_npz
+
+    log_odds, resolution, origin = read_map_npz(path)
+    return OccupancyGrid.from_arrays(log_odds, resolution, origin, MapConfig())
 
 
 def load_map(path: Path | str) -> LikelihoodMap:

@@ -27,7 +27,7 @@ from slam.io.atomic import write_text
 from slam.io.log import Log
 from slam.mapping import OccupancyGrid
 from slam.texture.accumulate import build_texture
-from slam.texture.evaluate import evaluate_texture, load_ground_truth, load_npz
+from slam.texture.evaluate import evaluate_texture, load_ground_truth
 from slam.texture.outputs import write_outputs
 from slam.texture.pairing import TextureWarning
 from slam.trajectory import Trajectory
@@ -214,18 +214,9 @@ def recompute_run(
 
 
 def read_map(path: Path, config: Config) -> OccupancyGrid:
-    """The occupancy grid of a run's ``map.npz`` (``log_odds``, ``resolution``, ``origin``),
-    with :class:`DataError` naming the file when an array has the wrong shape."""
-    arrays = load_npz(path, ("log_odds", "resolution", "origin"))
-    log_odds = np.asarray(arrays["log_odds"], dtype=np.float32)
-    if log_odds.ndim != 2:
-        raise DataError(f"{path}: log_odds must be 2-D, found {log_odds.shape}")
-    resolution, origin = np.asarray(arrays["resolution"]), np.asarray(arrays["origin"])
-    if resolution.size != 1 or origin.size != 2:
-        raise DataError(
-            f"{path}: expected a scalar resolution and a 2-element origin, found "
-            f"resolution of shape {resolution.shape} and origin of shape {origin.shape}"
-        )
-    return OccupancyGrid.from_arrays(
-        log_odds, float(resolution.reshape(())), origin.reshape(2), config.map
-    )
+    """The occupancy grid of a run's ``map.npz`` (:func:`slam.io.exports.read_map_npz`: one
+    :class:`DataError` naming the file and the key when it is damaged)."""
+    from slam.io.exports import read_map_npz
+
+    log_odds, resolution, origin = read_map_npz(path)
+    return OccupancyGrid.from_arrays(log_odds, resolution, origin, config.map)
