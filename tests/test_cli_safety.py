@@ -354,6 +354,24 @@ def test_runs_clean_removes_only_stale_partial_folders(tmp_path, capsys):
     assert out.splitlines()[-1] == "removed 1 stale partial folder(s) (0.0 MB); kept 2"
     assert not stale.exists() and live.is_dir() and (foreign / "img.jpg").is_file()
     assert main(["runs", "clean", str(tmp_path / "nowhere")]) == 2
+    assert (
+        "nowhere: expected a folder holding run folders, found nothing" in capsys.readouterr().err
+    )
+    assert main(["runs", "clean", str(foreign / "img.jpg")]) == 2
+    assert "img.jpg: expected a folder holding run folders, found a file" in capsys.readouterr().err
+    # a folder given twice is looked at once
+    twice = tmp_path / "twice"
+    twice.mkdir()
+    again = _dead_pid_partial(twice, "again")
+    assert main(["runs", "clean", str(twice), str(twice) + "/", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert out.count(f"would remove {again}") == 1 and ", started " in out
+
+
+def test_runs_clean_without_a_runs_folder_has_nothing_to_do(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["runs", "clean"]) == 0
+    assert capsys.readouterr().out == "no runs folder here: nothing to clean\n"
 
 
 def test_a_reused_pid_is_not_a_live_owner(tmp_path):

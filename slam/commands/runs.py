@@ -12,6 +12,7 @@ readable owner record (:mod:`slam.io.runfolder`).
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from slam.commands._common import add_actions, add_command
@@ -46,18 +47,22 @@ def clean_command(args: argparse.Namespace) -> int:
     """Remove (or list) stale partial folders; print one line per folder and a summary."""
     from slam.io.runfolder import find_partials, folder_size, remove_owned_tree
 
-    dirs = args.dirs or [Path("runs")]
+    if not args.dirs and not Path("runs").exists():
+        print("no runs folder here: nothing to clean")
+        return 0
+    dirs = list(dict.fromkeys(Path(os.path.abspath(d)) for d in args.dirs or [Path("runs")]))
     for folder in dirs:
         if not folder.is_dir():
-            raise UsageError(f"{folder}: expected a folder holding run folders, found none")
+            found = "a file" if folder.exists() else "nothing"
+            raise UsageError(f"{folder}: expected a folder holding run folders, found {found}")
     removed = kept = 0
     freed = 0
     for folder in dirs:
         for partial in find_partials(folder):
             record = partial.record or {}
-            who = (
-                f"pid {record.get('pid')} on {record.get('host')}, started {record.get('started')}"
-            )
+            who = f"pid {record['pid']}" if record.get("pid") is not None else "no pid"
+            who += f" on {record['host']}" if record.get("host") else ""
+            who += f", started {record['started']}" if record.get("started") else ""
             if partial.stale:
                 size = folder_size(partial.path)
                 if args.dry_run:
