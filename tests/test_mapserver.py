@@ -111,7 +111,7 @@ def test_reader_applies_negate_scale_and_png(tmp_path):
         ("map_name: a\nimage: m.pgm\nmap_name: b\n", r"m\.yaml:3: map_name is given twice"),
         ("image: m.pgm\nimage: n.pgm\n", r"m\.yaml:2: image is given twice"),
         ("image: m.pgm\nresolution: 0.05\n", r"missing key\(s\) origin, negate"),
-        ("image: m.pgm\nnegate: 2\n", r"m\.yaml:2: negate: expected 0 or 1, found '2'"),
+        ("image: m.pgm\nnegate: 2\n", r"m\.yaml:2: negate: expected 0, 1, true or false, found '2'"),
         ("image: m.pgm\n  nested: 1\n", r"m\.yaml:2: expected a top-level 'key: value' line"),
         ("image: m.pgm\nmode: raw\n", r"m\.yaml:2: mode: expected one of trinary, scale"),
         ("image: m.pgm\nresolution: abc\n", r"m\.yaml:2: resolution: expected a number"),
@@ -341,3 +341,14 @@ def test_export_guards_the_run_and_names_a_damaged_map(tmp_path, capsys):
         np.savez(run / "map.npz", **fields)
         assert main(["export", str(run), "--format", "pgm", "--out", str(tmp_path / "y.pgm")]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_nav2_spellings_read_as_nav2_reads_them():
+    """Nav2's loadMapYaml takes negate as an int, else a bool, and yaml-cpp a quoted number."""
+    text = (
+        'image: m.pgm\nresolution: "0.05"\norigin: [0, 0, 0]\nnegate: false\n'
+        "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
+    values = parse_map_yaml(text, "m.yaml")
+    assert values["negate"] == 0 and values["resolution"] == 0.05
+    assert parse_map_yaml(text.replace("false", "true"), "m.yaml")["negate"] == 1

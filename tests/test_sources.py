@@ -104,6 +104,9 @@ def test_folder_with_none_or_several_datasets_is_one_clear_error(tmp_path):
     several = ece276a_folder(tmp_path / "all", numbers=("20", "21", "23"))
     with pytest.raises(DataError, match=r"all: expected the files of one ECE276A dataset .* found the files of 20, 21, 23; give a folder that holds one of them \(or name the folder ece276a and run dataset20 with --data-dir its parent\)$"):  # fmt: skip
         sources.resolve(str(several), tmp_path)
+    other = ece276a_folder(tmp_path / "mine", numbers=("05", "07"))  # no registry names
+    with pytest.raises(DataError, match=r"found the files of 05, 07; give a folder that holds one of them$"):  # fmt: skip
+        sources.resolve(str(other), tmp_path)
     course = ece276a_folder(tmp_path / "ece276a", numbers=("20", "21"))
     with pytest.raises(DataError, match=rf"found the files of 20, 21; name one: slam run dataset20 --data-dir {tmp_path}$"):  # fmt: skip
         sources.resolve(str(course), tmp_path)

@@ -213,7 +213,7 @@ def show_maze(args: argparse.Namespace) -> int:
     out = args.out or Path(f"{maze.name}-{'walls' if args.walls_only else args.robot}.png")
     if out.suffix.lower() != ".png":
         raise UsageError(f"--out {out}: expected a .png file name")
-    check_new_file(out, "--out", args.force)
+    check_new_file(out, "--out" if args.out else "the picture", args.force)
     result = None if args.walls_only else trial(maze, args.robot, **_options(args.set))
     write_png(out, render_trial(maze, result, args.cell))
     print(f"wrote {out}")

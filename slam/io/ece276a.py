@@ -540,7 +540,7 @@ def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStre
             f"{path}: key 'range_max': expected metres (at most {MAX_RANGE_M:g}), found "
             f"{file_max:g} (millimetres? the Hokuyo's is 30 m)"
         )
-    _check_range_unit(path, ranges_in, range_max)
+    _check_range_unit(path, ranges_in, file_max)
     no_return = range_max if lidar.no_return is None else float(lidar.no_return)
 
     ranges, invalid_beams = valid_ranges(np.ascontiguousarray(ranges_in.T), range_min)

@@ -126,8 +126,7 @@ def read_run_map(run_dir: Path) -> tuple[NDArray[np.float32], float, F64]:
     path = Path(run_dir) / "map.npz"
     if not path.is_file():
         raise DataError(
-            f"{path}: not found (expected a run folder of slam run or slam localize, which "
-            "write their map there)"
+            f"{path}: not found (expected a run folder of slam run, which writes its map there)"
         )
     return read_map_npz(path)
 

@@ -554,10 +554,11 @@ def _value(key: str, raw: str, where: str) -> Any:
         if len(parts) != 3:
             raise DataError(f"{where}: origin: expected 3 numbers [x, y, yaw], found {raw!r}")
         return [_number(key, p, where) for p in parts]
-    if key == "negate":
-        if raw not in ("0", "1"):
-            raise DataError(f"{where}: negate: expected 0 or 1, found {raw!r}")
-        return int(raw)
+    if key == "negate":  # Nav2 reads an int, else a bool
+        value = _string(raw).lower()
+        if value not in ("0", "1", "true", "false"):
+            raise DataError(f"{where}: negate: expected 0, 1, true or false, found {raw!r}")
+        return int(value in ("1", "true"))
     number = _number(key, raw, where)
     if key == "resolution" and not number > 0:
         raise DataError(f"{where}: resolution: expected a positive number of metres, found {raw}")
@@ -578,7 +579,7 @@ def _string(raw: str) -> str:
 
 def _number(key: str, raw: str, where: str) -> float:
     try:
-        value = float(raw)
+        value = float(_string(raw))  # yaml-cpp converts a quoted number too
     except ValueError:
         raise DataError(f"{where}: {key}: expected a number, found {raw!r}") from None
     if not math.isfinite(value):

@@ -251,6 +251,8 @@ def gyro_unit(log: Log, config: Config) -> str | None:
     ``Σ|Δθ|`` or more (judged once the wheels turned 2 rad); else ``None``."""
     if log.kind != "ece276a" or log.encoders is None or log.imu is None or len(log.imu) < 2:
         return None
+    if config.robot.yaw_source != "imu":  # the gyro is not read (the way around a bad one)
+        return None
     from slam.odometry import wheel_travel
 
     right, left = wheel_travel(log.encoders, config.robot)

@@ -303,12 +303,17 @@ def detect_path(name: str, path: Path, data_dir: Path) -> DatasetRef:
             )[:3]
             inside = f"; it holds {', '.join(logs)}: give that path" if logs and not numbers else ""
             if len(numbers) > 1:  # the course's layout: the registry reads <data dir>/ece276a
-                inside = (
-                    f"; name one: slam run dataset{numbers[0]} --data-dir {path.parent}"
-                    if path.name == "ece276a"
-                    else "; give a folder that holds one of them (or name the folder ece276a "
-                    f"and run dataset{numbers[0]} with --data-dir its parent)"
-                )
+                from slam.io.registry import load_registry
+
+                known = [f"dataset{n}" for n in numbers if f"dataset{n}" in load_registry()]
+                inside = "; give a folder that holds one of them"
+                if known and path.name == "ece276a":
+                    inside = f"; name one: slam run {known[0]} --data-dir {path.parent}"
+                elif known:
+                    inside += (
+                        f" (or name the folder ece276a and run {known[0]} with --data-dir its "
+                        "parent)"
+                    )
             raise DataError(
                 f"{path}: expected the files of one ECE276A dataset in the folder (EncodersNN.npz, "
                 f"ImuNN.npz, HokuyoNN.npz, KinectNN.npz) or a ROS 2 bag (metadata.yaml), found "

@@ -193,6 +193,13 @@ SURFACE_BYTES_PER_CELL = 14
 """Memory of :func:`wall_surface` per fine cell: the drawn mask (1 byte), OpenCV's labels and
 distances (4 + 4) and the field (4), the temporaries bounded by :data:`SURFACE_BLOCK_CELLS`."""
 
+WALL_POINT_BYTES_PER_CELL = 56
+"""... and per cell of the map: :func:`wall_points`' float64 and int64 arrays of the map's shape."""
+
+SAMPLE_BYTES = 80
+"""... and per sample drawn along the walls (its x, y, pixel and label, and their temporaries;
+measured: a 1000 × 1000 map of occupied cells peaks at 1.5 GB, estimated 1.7 GB)."""
+
 SURFACE_BLOCK_CELLS = 1 << 20
 """Fine cells whose distances :func:`wall_surface` computes at once."""
 
@@ -217,8 +224,11 @@ def wall_surface(
 
     h, w = occupied.shape
     f = int(subdivision)
+    samples = int(np.count_nonzero(occupied)) * 5 * 2 * f  # at most: 5 links per wall point
     check_memory(
-        SURFACE_BYTES_PER_CELL * h * f * w * f,
+        SURFACE_BYTES_PER_CELL * h * f * w * f
+        + WALL_POINT_BYTES_PER_CELL * h * w
+        + SAMPLE_BYTES * samples,
         f"the wall-surface field of a {w}×{h}-cell map at {f}× its resolution "
         f"({w * f}×{h * f} cells)",
         "use a smaller map (crop it to the building) or a lower localize.subdivision",
@@ -285,8 +295,8 @@ def load_map(path: Path | str) -> LikelihoodMap:
     if path.is_dir():
         npz = path / "map.npz"
         if not npz.is_file():
-            yamls = sorted(p.name for p in path.glob("*.y*ml"))
-            beside = f"; give the map_server file: --map {path / yamls[0]}" if yamls else ""
+            yaml = _map_yaml_beside(path, "map")
+            beside = f"; give the map_server file: --map {yaml}" if yaml else ""
             raise DataError(
                 f"{path}: no map.npz in this folder (expected a slam run folder){beside}"
             )
@@ -299,12 +309,36 @@ def load_map(path: Path | str) -> LikelihoodMap:
         return LikelihoodMap.from_grid(_read_npz(path), str(path))
     if path.suffix in (".yaml", ".yml"):
         return _from_map_yaml(path)
-    yamls = sorted(p.name for p in path.parent.glob("*.y*ml"))
-    beside = f"; the map_server file beside it: --map {path.parent / yamls[0]}" if yamls else ""
+    yaml = _map_yaml_beside(path.parent, path.stem)
+    beside = f"; the map_server file beside it: --map {yaml}" if yaml else ""
     raise DataError(
         f"{path}: unknown map format (expected a run folder, a .npz or a map_server .yaml "
         f"file){beside}"
     )
+
+
+def _map_yaml_beside(folder: Path, stem: str) -> Path | None:
+    """The map_server file in ``folder`` a user most likely meant: ``<stem>.yaml`` (the image's
+    own), else the only ``.yaml`` there whose ``image:`` line names a file beside it; ``None``
+    when there is no such file or several."""
+    for suffix in (".yaml", ".yml"):
+        if (folder / f"{stem}{suffix}").is_file():
+            return folder / f"{stem}{suffix}"
+    maps = [
+        p
+        for p in sorted(folder.glob("*.y*ml"))
+        if p.is_file() and any(line.lstrip().startswith("image:") for line in _head(p))
+    ]
+    return maps[0] if len(maps) == 1 else None
+
+
+def _head(path: Path, lines: int = 20) -> list[str]:
+    """The first ``lines`` lines of the text file ``path`` (none when unreadable)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return [f.readline() for _ in range(lines)]
+    except OSError:
+        return []
 
 
 def _from_map_yaml(path: Path) -> LikelihoodMap:

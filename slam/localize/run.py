@@ -95,16 +95,19 @@ own maps: 0.80–0.94; aces on intel's map 0.08), however localized its particle
 
 
 def map_doubt(metrics: dict[str, Any], map_path: Path | str) -> str | None:
-    """The warning of a run that localized on few of its scans (:data:`LOW_LOCALIZED_SHARE`) or
-    whose scans fit the map poorly (:data:`LOW_MATCH_QUALITY`), else ``None``."""
-    share, quality = metrics["localized_share"], metrics["mean_match_quality"]
+    """The warning of a run that never converged, that stayed localized on few of its scans
+    after it first converged (:data:`LOW_LOCALIZED_SHARE`; a global localization takes a while
+    to converge, which is no doubt) or whose scans fit the map poorly (:data:`LOW_MATCH_QUALITY`),
+    else ``None``."""
+    share, quality = metrics["localized_share_after_convergence"], metrics["mean_match_quality"]
     if share >= LOW_LOCALIZED_SHARE and quality is not None and quality >= LOW_MATCH_QUALITY:
         return None
     shown = "none" if quality is None else f"{quality:.2f}"
+    where = "after it first converged" if metrics["converged"] else "(it never converged)"
     return (
-        f"localized on {100 * share:.1f} % of the scans with a mean match quality of {shown} "
-        f"(on its own building's map a log scores 0.8–0.94): is {map_path} a map of this log's "
-        "building, and the start pose right?"
+        f"localized on {100 * share:.1f} % of the scans {where}, with a mean match quality of "
+        f"{shown} (on its own building's map a log scores 0.8–0.94): is {map_path} a map of this "
+        "log's building, and the start pose right?"
     )
 
 
@@ -254,6 +257,9 @@ def trace_metrics(trace: LocalizationTrace, odometry: F64) -> dict[str, Any]:
         else None,
         "distance_to_convergence_m": round(float(driven[first]), 3) if first >= 0 else None,
         "localized_share": round(float(trace.localized.mean()), 4) if n else 0.0,
+        "localized_share_after_convergence": (
+            round(float(trace.localized[first:].mean()), 4) if first >= 0 else 0.0
+        ),
         "localized_time_s": round(localized_time, 3),
         "mean_match_quality": round(float(quality.mean()), 4) if quality.size else None,
         "particles_mean": round(float(trace.particles[tracking].mean()), 1)

@@ -194,20 +194,21 @@ def recompute_run(
     ref = sources.resolve(name, data_dir, where=where, hint=hint)
     trajectory = read_tum(run_dir / "trajectory.tum")
     grid = read_map(run_dir / "map.npz", config)
-    log = sources.load(ref, config, need=("kinect",), progress=progress).log
-    if log.rgbd is None:
-        raise DataError(f"dataset {name}: no Kinect frames (KinectNN.npz)")
-    why = images_missing(log)
-    if why is not None:
-        raise DataError(f"dataset {name}: RGB-D image folders {why}")
     from slam.io.runfolder import get_kind, is_own_output
 
     if not is_own_output(run_dir, "run"):  # the texture files would replace a user's own
         raise DataError(
             f"{run_dir}: not a folder `slam run` made (no {get_kind('run').marker}): slam texture "
             "writes texture.npz, texture.png, texture_overlay.png and metrics.json into a run "
-            "folder and replaces nothing it did not make"
+            "folder and replaces nothing it did not make (a run folder of a version before the "
+            "marker: create an empty .slam-run in it)"
         )
+    log = sources.load(ref, config, need=("kinect",), progress=progress).log
+    if log.rgbd is None:
+        raise DataError(f"dataset {name}: no Kinect frames (KinectNN.npz)")
+    why = images_missing(log)
+    if why is not None:
+        raise DataError(f"dataset {name}: RGB-D image folders {why}")
     figures = texture_stage(log, trajectory, grid, config, run_dir, progress, require_frames=True)
     update_metrics(run_dir / "metrics.json", figures)
     return figures
