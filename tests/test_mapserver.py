@@ -294,7 +294,9 @@ def test_export_never_overwrites_without_force(tmp_path, capsys):
     assert main(["export", str(run), "--format", "pgm", "--out", str(target), "--force"]) == 0
     assert (tmp_path / "elsewhere" / "m.yaml").read_text().startswith("image: m.pgm\n")
     assert main(["export", str(tmp_path / "nope"), "--format", "tum"]) == 2
-    assert "run folder not found" in capsys.readouterr().err
+    assert "nope: expected a run folder, found nothing" in capsys.readouterr().err
+    assert main(["export", str(run / "map.npz"), "--format", "tum"]) == 2
+    assert "map.npz: expected a run folder, found a file" in capsys.readouterr().err
 
 
 def test_export_guards_the_run_and_names_a_damaged_map(tmp_path, capsys):

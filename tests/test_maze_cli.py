@@ -57,6 +57,15 @@ def test_bench_table_and_json(maze_dir, tmp_path, capsys):
     assert report["summary"]["finished"] == 1
     row = report["rows"][0]
     assert row["ratio"] == pytest.approx(row["score"] / row["bound"])
+    # an unreadable file is bad input: the table, then one error line and exit 2 (it was exit 0)
+    (maze_dir / "empty.txt").write_text("")
+    assert main(["maze", "bench", str(maze_dir), "--jobs", "1"]) == 2
+    captured = capsys.readouterr()
+    assert "4 mazes" in captured.out
+    assert captured.err.startswith(
+        "slam: error: 1 of the 4 maze files could not be read; the first: "
+    )
+    assert "empty.txt" in captured.err and captured.err.count("\n") == 1
 
 
 def test_show_writes_a_png(maze_dir, tmp_path, capsys):

@@ -290,3 +290,18 @@ def test_the_names_added_later_are_those_the_commands_write():
     rgb, disparity = (str(p) for p in rgbd_dirs(Path(""), "*"))
     rgb_name, disparity_name = (p.format("*") for p in rgbd_patterns("*"))
     assert {f"{rgb}/{rgb_name}", f"{disparity}/{disparity_name}", f"{rgb}/"} <= sim
+
+
+def test_a_cache_dir_that_is_a_file_is_named(tmp_path, monkeypatch):
+    """The bug: SLAM_CACHE_DIR pointing at a file ended in `slam: error: FILE: File exists`."""
+    from slam.errors import UsageError
+    from slam.io.datadir import resolve_cache_dir
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    monkeypatch.setenv("SLAM_CACHE_DIR", str(afile))
+    with pytest.raises(UsageError) as caught:
+        resolve_cache_dir(tmp_path)
+    assert str(caught.value) == (
+        f"$SLAM_CACHE_DIR = {afile}: expected a folder for the generated datasets, found a file"
+    )

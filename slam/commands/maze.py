@@ -32,7 +32,7 @@ from slam.commands._common import (
     data_dir_from,
     show_progress,
 )
-from slam.errors import ConfigError, UsageError
+from slam.errors import ConfigError, DataError, UsageError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -198,6 +198,12 @@ def bench_mazes(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(format_table(rows, summary, args.robot))
+    unreadable = [r for r in rows if r.status == "unreadable"]
+    if unreadable:  # bad input, not a robot's failure: the table is printed, then the error
+        raise DataError(
+            f"{len(unreadable)} of the {len(rows)} maze files could not be read; the first: "
+            f"{unreadable[0].error}"
+        )
     return 0 if summary["failures"] == 0 else 1
 
 

@@ -13,7 +13,7 @@ import os
 import stat
 from pathlib import Path
 
-from slam.errors import DataError
+from slam.errors import DataError, UsageError
 
 DATA_DIR_ENV = "SLAM_DATA_DIR"
 CACHE_DIR_ENV = "SLAM_CACHE_DIR"
@@ -48,7 +48,13 @@ def resolve_cache_dir(data_dir: Path) -> Path:
     """A writable folder for generated datasets (see the module docstring for the order)."""
     env = os.environ.get(CACHE_DIR_ENV)
     if env:
-        return Path(env).expanduser()
+        folder = Path(env).expanduser()
+        if folder.exists() and not folder.is_dir():
+            raise UsageError(
+                f"${CACHE_DIR_ENV} = {env}: expected a folder for the generated datasets, found "
+                "a file"
+            )
+        return folder
     candidate = Path(data_dir) / "cache"
     if _writable(candidate):
         return candidate

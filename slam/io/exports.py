@@ -204,7 +204,8 @@ def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = F
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"--format: expected one of {', '.join(EXPORT_FORMATS)}, found {fmt!r}")
     if not run_dir.is_dir():
-        raise DataError(f"{run_dir}: run folder not found")
+        found = "a file" if run_dir.exists() else "nothing"
+        raise DataError(f"{run_dir}: expected a run folder, found {found}")
     target = Path(out) if out is not None else run_dir / EXPORT_DIR / DEFAULT_NAMES[fmt]
     if target.is_dir():
         raise UsageError(f"--out {target}: expected a file path, found a folder")

@@ -147,7 +147,7 @@ def format_table(rows: Sequence[BenchRow], summary: dict[str, Any], robot: str) 
     lines.append("-" * len(head))
     lines.append(
         f"robot {robot}: {s['mazes']} mazes, {s['finished']} finished, {s['failures']} failures "
-        f"(over the step limit), {s['unsolvable']} unsolvable (no goal cell reachable from the start), "
+        f"(over the step limit), {s['unsolvable']} unsolvable (no goal cell, or none reachable from the start), "
         f"{s['unreadable']} unreadable"
     )
     if s["finished"]:
