@@ -135,11 +135,9 @@ MAP_KEYS = ("log_odds", "resolution", "origin")
 """The arrays of a run's ``map.npz``."""
 
 
-def read_map_npz(path: Path) -> tuple[NDArray[np.float32], float, F64]:
-    """``(log_odds, resolution, origin)`` of the ``map.npz`` at ``path``, every reader's one
-    reader: a 2-D, non-empty, finite ``log_odds``, one finite ``resolution`` > 0, two finite
-    numbers ``origin``; else one :class:`DataError` naming the file and the key (a damaged,
-    empty or foreign file too; never a pickle)."""
+def read_npz_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, NDArray[Any]]:
+    """Every array of the ``.npz`` archive ``path`` (no pickles); one :class:`DataError` naming
+    the file when it is no such archive (empty, foreign, damaged) or lacks one of ``keys``."""
     import zipfile
 
     path = Path(path)
@@ -153,15 +151,23 @@ def read_map_npz(path: Path) -> tuple[NDArray[np.float32], float, F64]:
         raise DataError(f"{path}: expected an .npz archive (a zip of arrays), found {found}")
     try:
         with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in MAP_KEYS if k not in data.files]
+            missing = [k for k in keys if k not in data.files]
             if missing:
                 raise DataError(
-                    f"{path}: expected keys {', '.join(MAP_KEYS)}; missing {', '.join(missing)} "
+                    f"{path}: expected keys {', '.join(keys)}; missing {', '.join(missing)} "
                     f"(found {', '.join(data.files) or 'none'})"
                 )
-            arrays = {k: np.asarray(data[k]) for k in MAP_KEYS}
+            return {k: np.asarray(data[k]) for k in data.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise DataError(f"{path}: not a readable .npz archive ({exc})") from None
+
+
+def read_map_npz(path: Path) -> tuple[NDArray[np.float32], float, F64]:
+    """``(log_odds, resolution, origin)`` of the ``map.npz`` at ``path``, every reader's one
+    reader: a 2-D, non-empty, finite ``log_odds``, one finite ``resolution`` > 0, two finite
+    numbers ``origin``; else one :class:`DataError` naming the file and the key (a damaged,
+    empty or foreign file too; never a pickle)."""
+    arrays = read_npz_arrays(path, MAP_KEYS)
     log_odds, resolution, origin = arrays["log_odds"], arrays["resolution"], arrays["origin"]
     if (
         log_odds.ndim != 2

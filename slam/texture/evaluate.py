@@ -53,21 +53,6 @@ class GroundTruth:
     """Lower-left corner of cell ``[0, 0]`` of ``occupancy`` (m)."""
 
 
-def load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, NDArray[Any]]:
-    """Every array of the npz archive ``path`` (no pickles); :class:`DataError` naming the file
-    when it is unreadable or lacks one of ``keys``."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in keys if k not in data.files]
-            if missing:
-                raise DataError(
-                    f"{path}: missing key(s) {', '.join(missing)}; found {', '.join(data.files)}"
-                )
-            return {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{path}: cannot read ({exc})") from None
-
-
 def load_ground_truth(folder: Path) -> GroundTruth | None:
     """The ground truth of a simulated dataset folder, or ``None`` when it has none.
 
@@ -75,6 +60,7 @@ def load_ground_truth(folder: Path) -> GroundTruth | None:
     optional ``floor``: without it every non-black texel is floor) and ``groundtruth_map.npz``
     (``occupancy``, ``resolution``, ``origin``).
     """
+    from slam.io.exports import read_npz_arrays
     from slam.io.tum import read_tum
 
     folder = Path(folder)
@@ -82,8 +68,8 @@ def load_ground_truth(folder: Path) -> GroundTruth | None:
     if not folder.is_dir() or not all((folder / n).is_file() for n in names):
         return None
     times, poses = read_tum(folder / names[0])
-    tex = load_npz(folder / names[1], ("rgb", "resolution", "origin"))
-    occ = load_npz(folder / names[2], ("occupancy", "resolution", "origin"))
+    tex = read_npz_arrays(folder / names[1], ("rgb", "resolution", "origin"))
+    occ = read_npz_arrays(folder / names[2], ("occupancy", "resolution", "origin"))
     rgb = np.asarray(tex["rgb"])
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise DataError(
