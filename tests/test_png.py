@@ -92,6 +92,7 @@ def test_other_kinds_and_broken_files_go_to_opencv(tmp_path) -> None:
     grey8 = np.arange(20, dtype=np.uint8).reshape(4, 5)
     cv2.imwrite(str(tmp_path / "g8.png"), grey8)
     assert read_unchanged(tmp_path / "g8.png").dtype == np.uint8  # as OpenCV gives it
+    assert read_rgb(tmp_path / "g8.png") is None  # grey is no colour frame (OpenCV: grey "RGB")
     rows = [bytes([0, 1, 2, 3])]
     gamma = _chunk(b"gAMA", (45455).to_bytes(4, "big"))
     (tmp_path / "gamma.png").write_bytes(_png(rows, 1, 1, 8, 2, gamma))

@@ -178,7 +178,9 @@ class RgbdIndex:
         path = self.rgb_path(k)
         image = read_rgb(path)
         if image is None:
-            raise DataError(f"{path}: missing or not a readable PNG (RGB frame {k + 1})")
+            raise DataError(
+                f"{path}: missing, not a readable PNG or a grey one (RGB frame {k + 1})"
+            )
         return image
 
     def load_disparity(self, k: int) -> NDArray[np.uint16]:

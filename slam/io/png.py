@@ -92,16 +92,32 @@ def _decode(path: Path, bit_depth: int, colour_type: int, channels: int) -> NDAr
 
 def read_rgb(path: Path) -> NDArray[np.uint8] | None:
     """The ``(H, W, 3)`` uint8 image of a colour PNG in **RGB** order (C-contiguous), or ``None``
-    when it is missing or unreadable (as OpenCV decides for the PNG kinds not decoded here)."""
+    when it is missing, unreadable (as OpenCV decides for the PNG kinds not decoded here) or a
+    grey image (colour type 0 or 4, which OpenCV would turn into a colour image of grey)."""
     rows = _decode(path, 8, 2, 3)
     if rows is not None:
         return rows.reshape(rows.shape[0], -1, 3)
+    if _colour_type(path) in (0, 4):
+        return None
     import cv2
 
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         return None
     return np.ascontiguousarray(image[:, :, ::-1])
+
+
+def _colour_type(path: Path) -> int | None:
+    """The PNG colour type of the file's IHDR (0 grey, 2 RGB, 3 palette, 4 grey + alpha, 6 RGBA),
+    ``None`` when it is no PNG or cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(26)
+    except OSError:
+        return None
+    if len(head) < 26 or not head.startswith(b"\x89PNG\r\n\x1a\n") or head[12:16] != b"IHDR":
+        return None
+    return head[25]
 
 
 def read_unchanged(path: Path) -> NDArray | None:
