@@ -218,9 +218,9 @@ class Slam:
         self._odometry: Any = None
         self._laser: Any = None
         self._live_map: OccupancyGrid | None = None
-        self._source: str | None = None
-        """Where the scans' odometry comes from: ``"given"`` (``odometry=``), ``"wheels"``
-        (the encoder + IMU integrator) or ``"laser"``; one source per run."""
+        self._given = False
+        """Whether the scans so far came with ``odometry=`` (encoder readings fed after them
+        would be a second odometry, in another frame)."""
         self._finished = False
         self._seconds: dict[str, float] = {"filter": 0.0}
 
@@ -298,18 +298,17 @@ class Slam:
                     "readings were fed: the two are odometries of different frames; give "
                     "odometry= for every scan, or feed the encoders and leave it out"
                 )
-            self._one_source("given", resolved)
             odometry = odometry_pose(resolved, odometry)
             self._check_jump(resolved, odometry)
         if imu is not None:
             self.add_imu(*imu)
         if encoders is not None:
             self.add_encoders(*encoders)
-        source = "given"
-        if odometry is None:
-            odometry, source = self._odometry_at(resolved)
+        given = odometry is not None
+        if not given:
+            odometry = self._odometry_at(resolved)
         k = self.scans.append(resolved, odometry)
-        self._source = source
+        self._given = given
         self._running_period.add(scan.time)
         start = time.perf_counter()
         if self._filter is None:
@@ -324,19 +323,24 @@ class Slam:
             self._notify(self._observer, outcome, estimate)
         return estimate
 
-    def _odometry_at(self, scan: Scan) -> tuple[F64, str]:
+    def _odometry_at(self, scan: Scan) -> F64:
         """The odometry at ``scan`` when :meth:`update` got none: the encoder + IMU integrator's
         where encoder readings were fed before the first scan, else laser odometry
         (:mod:`slam.laser_odometry`, turning with the gyro where IMU readings were fed) unless
         ``robot.odometry = "log"``; ``robot.odometry = "laser"`` leaves the encoders unread.
-        Returns the pose and its source (:meth:`_one_source`)."""
+        Encoder readings fed after scans given ``odometry=`` are a :class:`UsageError`."""
         readings = self._odometry
         wheels = readings is not None and readings.has_encoders
         if wheels and self.config.robot.odometry == "laser":
             wheels = False  # asked for laser odometry: the encoders are not read
         if self._laser is None and wheels:
-            self._one_source("wheels", scan)
-            return readings.pose_at(scan.time), "wheels"
+            if self._given:
+                raise UsageError(
+                    f"Slam.update: scan at t={scan.time:.6f}: encoder readings were fed after "
+                    "scans given odometry=: the two are odometries of different frames; give "
+                    "odometry= for every scan, or feed the encoders and leave it out"
+                )
+            return readings.pose_at(scan.time)
         if self._laser is None:
             from slam.laser_odometry import start_for_update
 
@@ -349,27 +353,7 @@ class Slam:
             from slam.laser_odometry import refuse_given
 
             raise refuse_given("Slam.update")
-        return self._laser.pose_at(scan), "laser"
-
-    _SOURCES = {
-        "given": "odometry= poses",
-        "wheels": "the encoder and IMU readings",
-        "laser": "laser odometry",
-    }
-
-    def _one_source(self, source: str, scan: Scan) -> None:
-        """Refuse a scan whose odometry would come from ``source`` where the earlier scans'
-        came from another (``odometry=`` poses after encoder readings, or the other way round:
-        the two frames differ, and the trajectory would jump between them)."""
-        if self._source is not None and source != self._source:
-            if source == "wheels" and self._source == "given":
-                why = "encoder readings were fed after scans given odometry="
-            else:
-                why = f"this scan's would come from {self._SOURCES[source]}"
-            raise UsageError(
-                f"Slam.update: scan at t={scan.time:.6f}: {why}; the earlier scans' odometry "
-                f"came from {self._SOURCES[self._source]}: one source for every scan of a run"
-            )
+        return self._laser.pose_at(scan)
 
     def _check_jump(self, scan: Scan, pose: F64) -> None:
         """Refuse an odometry pose that moves faster than ``checks.max_speed`` since the

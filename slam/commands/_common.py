@@ -9,13 +9,11 @@ A command with sub-commands adds them to the group :func:`add_actions` returns.
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from slam.errors import UsageError
 from slam.io.datadir import resolve_data_dir
 
 if TYPE_CHECKING:
@@ -87,21 +85,6 @@ def add_file_force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--force", action="store_true", help="replace an output file that exists already"
     )
-
-
-def check_new_file(path: Path, option: str, force: bool) -> Path:
-    """``path``, an output file a command is about to write: refused (:class:`UsageError`, one
-    line naming ``option``) when it is a folder, or when it exists and ``force`` is not given —
-    a run replaces no file it did not make, and a lone file carries no mark of who made it."""
-    path = Path(path)
-    if path.is_dir():
-        raise UsageError(f"{option} {path}: expected a file name, found a folder")
-    if os.path.lexists(path) and not force:
-        raise UsageError(
-            f"{option} {path}: exists; it was left alone (choose another name, or give --force "
-            "to replace it)"
-        )
-    return path
 
 
 def add_data_dir_argument(parser: argparse.ArgumentParser) -> None:

@@ -21,11 +21,11 @@ from slam.commands._common import (
     add_file_force_argument,
     add_quiet_argument,
     add_record_argument,
-    check_new_file,
     data_dir_from,
     show_progress,
 )
 from slam.errors import UsageError
+from slam.io.atomic import check_new_file
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -613,3 +613,18 @@ def atomic_dir(
         if staging is not None and _about_the_output(exc, staging.path):
             raise OSError(exc.errno, f"{exc.strerror}; nothing was written", str(path)) from None
         raise
+
+
+def check_new_file(path: Path, option: str, force: bool) -> Path:
+    """``path``, an output file a command is about to write: refused (:class:`UsageError`, one
+    line naming ``option``) when it is a folder, or when it exists and ``force`` is not given —
+    a run replaces no file it did not make, and a lone file carries no mark of who made it."""
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: expected a file name, found a folder")
+    if os.path.lexists(path) and not force:
+        raise UsageError(
+            f"{option} {path}: exists; it was left alone (choose another name, or give --force "
+            "to replace it)"
+        )
+    return path

@@ -16,7 +16,6 @@ unless asked to, each file atomically.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import DataError, UsageError
-from slam.io.atomic import atomic_path, write_npz, write_text
+from slam.io.atomic import atomic_path, check_new_file, write_npz, write_text
 from slam.io.log import count_non_monotonic
 from slam.io.tum import format_tum, read_tum
 from slam.trajectory import Trajectory
@@ -230,9 +229,8 @@ def export_run(run_dir: Path, fmt: str, out: Path | None = None, force: bool = F
                 f"--out {target}: {path.name} would be written into the run folder itself, "
                 f"beside the files export reads; write to {run_dir / EXPORT_DIR} or elsewhere"
             )
-    existing = [p for p in written if os.path.lexists(p)]
-    if existing and not force:
-        raise UsageError(f"{existing[0]}: exists; use --force to replace it")
+    for path in written:
+        check_new_file(path, "--out" if path == target else "--out's companion", force)
     if fmt in ("pgm", "png", "npz"):
         log_odds, resolution, origin = read_run_map(run_dir)
         if fmt == "pgm":
