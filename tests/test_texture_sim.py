@@ -114,6 +114,14 @@ def test_slam_texture_recomputes_a_finished_run(small, small_run, tmp_path, caps
     # The run was made from a folder: config.toml names "small", which the registry lacks.
     assert main(["texture", str(run), "--quiet"]) == 2
     assert "--dataset" in capsys.readouterr().err
+    # The default mode recomputes the run's own texture from trajectory.tum, whose micrometres
+    # move a few pixels across cell borders (docs/texture.md): the same cells, within 1/255.
+    assert main(["texture", str(run), "--dataset", str(small), "--quiet"]) == 0
+    capsys.readouterr()
+    with np.load(run / "texture.npz") as t:
+        np.testing.assert_array_equal(t["count"] > 0, count_mean > 0)
+        assert np.abs(t["count"] - count_mean).sum() <= 1e-4 * count_mean.sum()
+        assert np.abs(t["rgb"].astype(int) - rgb_mean).max() <= 1
     assert main(["texture", str(run), "--dataset", str(small), "--mode", "latest", "--quiet"]) == 0
     line = capsys.readouterr().out
     assert "texture" in line and "(latest)" in line and "colour error" in line
