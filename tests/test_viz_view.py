@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -42,6 +43,12 @@ def listeners(port: int) -> set[str]:
 
 
 LOOPBACK_HEX = "0100007F"
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time process ``pid`` has used so far (s)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def test_view_errors_are_one_line(tmp_path, capsys):
@@ -91,13 +98,33 @@ def test_view_web_serves_on_loopback_and_prints_the_url(recording):
     )
     try:
         line = process.stdout.readline()
-        assert line.startswith(f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A"), line
-        grpc_port = int(line.split("%3A")[-1].split("%2F")[0])
+        assert line.startswith(
+            f"web viewer: http://127.0.0.1:{port}/?url=http%3A%2F%2F127.0.0.1%3A"
+        )
+        assert line.rstrip().endswith("%2Frecording.rrd"), line
+        file_port = int(line.split("%3A")[-1].split("%2F")[0])
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as response:
             assert response.status == 200
             assert b"<html" in response.read().lower()
+        # the page fetches the recording from slam view itself, the viewer's origin allowed
+        url = f"http://127.0.0.1:{file_port}/recording.rrd"
+        origin = f"http://localhost:{port}"
+        request = urllib.request.Request(url, headers={"Origin": origin})
+        with urllib.request.urlopen(request, timeout=10) as response:
+            assert response.read() == (recording / "recording.rrd").read_bytes()
+            assert response.headers["Access-Control-Allow-Origin"] == origin
+        request = urllib.request.Request(url, headers={"Origin": "http://example.com"})
+        with urllib.request.urlopen(request, timeout=10) as response:
+            assert "Access-Control-Allow-Origin" not in response.headers  # no other site's
+        with pytest.raises(urllib.error.HTTPError, match="404"):
+            urllib.request.urlopen(f"http://127.0.0.1:{file_port}/config.toml", timeout=10)
         assert listeners(port) == {LOOPBACK_HEX}
-        assert listeners(grpc_port) == {LOOPBACK_HEX}
+        assert listeners(file_port) == {LOOPBACK_HEX}
+        # and the viewer idles: no gRPC server whose loop spins (it took a whole core, ~2 s)
+        (child,) = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
+        before = _cpu_seconds(int(child))
+        time.sleep(2.0)
+        assert _cpu_seconds(int(child)) - before < 0.5
     finally:
         process.send_signal(signal.SIGTERM)
         process.wait(timeout=20)

@@ -1,8 +1,10 @@
 """``slam view RUN_DIR``: open a run's recording in the rerun viewer.
 
 Open RUN_DIR/recording.rrd (or a .rrd file) in the rerun viewer: the native viewer, or with --web
-the web viewer served on 127.0.0.1 (its URL is printed; Ctrl-C stops it). Every server started
-listens on 127.0.0.1 only (rerun's own default is every interface). A port already taken is one
+the web viewer served on 127.0.0.1 (its URL is printed; Ctrl-C stops it), which fetches the
+recording from :class:`slam.viz.webserve.RecordingServer` (rerun's own gRPC server would keep a
+core busy while it idles). Every server started listens on 127.0.0.1 only (rerun's own default
+is every interface). A port already taken is one
 line and exit 2 before anything starts. The viewer process dies with
 ``slam view`` (Linux: ``PR_SET_PDEATHSIG``), even when ``slam view`` is killed with SIGKILL.
 """
@@ -15,8 +17,12 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from slam.errors import DataError, UsageError
+
+if TYPE_CHECKING:
+    from slam.viz.webserve import RecordingServer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,8 +94,6 @@ def view_command(args: argparse.Namespace) -> int:
         free_port,
         viewer_command,
         viewer_env,
-        wait_for_port,
-        web_url,
     )
 
     rrd = find_recording(args.run_dir)
@@ -108,9 +112,18 @@ def view_command(args: argparse.Namespace) -> int:
         return subprocess.run(
             cmd, env=viewer_env(), check=False, preexec_fn=die_with_parent()
         ).returncode
+    from slam.viz.webserve import RecordingServer
+
     web_port = args.port or 9090
-    grpc_port = free_port()
-    cmd = viewer_command(rrd, web=True, port=grpc_port, web_port=web_port)
+    with RecordingServer(rrd, viewer_port=web_port) as server:
+        return _serve_web(viewer_command(server.url, web=True, web_port=web_port), web_port, server)
+
+
+def _serve_web(cmd: list[str], web_port: int, server: RecordingServer) -> int:
+    """Run the web viewer ``cmd`` on ``web_port``, print its URL and wait until it ends or we are
+    stopped (Ctrl-C, SIGTERM); the viewer process goes with us."""
+    from slam.viz.stream import die_with_parent, viewer_env, wait_for_port, web_url
+
     process = subprocess.Popen(
         cmd, env=viewer_env(), stdout=subprocess.DEVNULL, preexec_fn=die_with_parent()
     )
@@ -125,7 +138,7 @@ def view_command(args: argparse.Namespace) -> int:
                 f"--web: the web viewer did not start on 127.0.0.1:{web_port} (is the port "
                 "taken? choose another with --port)"
             )
-        print(f"web viewer: {web_url(web_port, grpc_port)}", flush=True)
+        print(f"web viewer: {web_url(web_port, server.url)}", flush=True)
         print("serving on 127.0.0.1 only; press Ctrl-C to stop", file=sys.stderr, flush=True)
         return process.wait()
     except KeyboardInterrupt:

@@ -7,7 +7,8 @@
 * :func:`set_time` sets the two timelines of every recording: ``scan`` (a sequence) and ``time``
   (the log's timestamps: absolute when they look like Unix seconds, else a duration);
 * :func:`spawn_viewer` starts a native viewer listening on 127.0.0.1 only and returns the URL to
-  stream to; :func:`viewer_command` is the command line of ``slam view``;
+  stream to; :func:`viewer_command` is the command line of ``slam view`` (whose web viewer
+  fetches the recording from :mod:`slam.viz.webserve`);
 * :func:`summarize` reads a recording back with :class:`rerun.chunk.RrdReader`: entities, their
   timelines, row counts and archetype fields (what the tests check).
 
@@ -29,6 +30,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 import rerun as rr
@@ -316,21 +318,24 @@ def spawn_viewer(port: int | None = None, timeout_s: float = 20.0) -> tuple[subp
 
 
 def viewer_command(
-    recording: Path, web: bool = False, port: int | None = None, web_port: int | None = None
+    source: Path | str, web: bool = False, port: int | None = None, web_port: int | None = None
 ) -> list[str]:
-    """Command line of ``slam view``: the native viewer, or the web viewer served on 127.0.0.1."""
+    """Command line of ``slam view``: the native viewer on a recording file, or the web viewer
+    served on 127.0.0.1 for ``source``, the recording's ``http://`` URL
+    (:class:`slam.viz.webserve.RecordingServer`: the page fetches it, and no gRPC server is
+    started)."""
     cmd = [*rerun_executable(), "--bind", LOOPBACK]
     if web:
         cmd += ["--serve-web", "--web-viewer-port", str(web_port or 9090)]
     if port is not None:
         cmd += ["--port", str(port)]
-    return [*cmd, str(recording)]
+    return [*cmd, str(source)]
 
 
-def web_url(web_port: int, grpc_port: int) -> str:
-    """Address of the web viewer served by :func:`viewer_command` with ``web=True``."""
-    proxy = grpc_url(grpc_port).replace(":", "%3A").replace("/", "%2F").replace("+", "%2B")
-    return f"http://{LOOPBACK}:{web_port}/?url={proxy}"
+def web_url(web_port: int, source: str) -> str:
+    """Address of the web viewer served by :func:`viewer_command` with ``web=True``, opening
+    ``source`` (a recording's URL)."""
+    return f"http://{LOOPBACK}:{web_port}/?url={quote(source, safe='')}"
 
 
 @dataclass
