@@ -78,8 +78,13 @@ def test_ascii_reader_on_the_readme_example():
         ("2\n1,6,0\n1,12\n", "expected 2 comma-separated"),
         ("2\n1,16\n1,12\n", "0..15, found 16"),
         ("2\n1,a\n1,12\n", "found 'a'"),
-        ("2\n1,6\n1,4\n", "(0,1) and (1,1)"),  # east side of (0,1) open, west side of (1,1) not
-        ("2\n9,6\n1,12\n", "outer west wall of (0,0) is open"),
+        # east side of (0,1) open, west side of (1,1) not: both sides named where they are written
+        (
+            "2\n1,6\n\n1,4\n",
+            "(0,1) and (1,1) is open from the west cell (line 2, mask 2) but closed from the east "
+            "cell (line 4, mask 2)",
+        ),
+        ("2\n9,6\n1,12\n", "outer west wall of (0,0) is open (line 2, mask 1)"),
     ],
 )
 def test_udacity_reader_errors_name_the_problem(text, message):
@@ -104,8 +109,17 @@ def test_udacity_reader_errors_name_the_problem(text, message):
         (README_EXAMPLE.replace("| G |", "| S |", 1), "a second start cell"),
         (
             README_EXAMPLE.replace("| S |           |", "  S |           |", 1),
-            "outer west wall of (0,0)",
+            "outer west wall of (0,0) is open (line 8, column 1)",
         ),
+        (  # blank lines before the maze count in the line numbers
+            "\n\n" + README_EXAMPLE.replace("| S |           |", "  S |           |", 1),
+            "outer west wall of (0,0) is open (line 10, column 1)",
+        ),
+        (
+            "\n" + README_EXAMPLE.replace("o---o---o---o---o\n| G", "o---+---o---o---o\n| G", 1),
+            ":2:5: expected a post",
+        ),
+        (README_EXAMPLE.replace("| S |", "| S\t|", 1), "a.txt:8:4: a tab"),
         ("\n".join(README_EXAMPLE.splitlines()[:-1]) + "\n", "odd number of lines"),
         ("o--o\n|  |\no--o\n", "north border"),
     ],

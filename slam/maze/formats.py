@@ -19,7 +19,7 @@ indices 0..3 (north, east, south, west), so a +90° (clockwise) rotation adds on
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,26 +81,38 @@ class Maze:
         )
 
 
-def wall_errors(open_mask: NDArray[np.uint8]) -> list[str]:
-    """Human-readable wall problems: sides that disagree between neighbours, open outer border."""
+Locate = Callable[[int, int, int], str]
+"""Where side ``(x, y, heading)`` of a cell is written in the file: ``"line L, ..."``."""
+
+
+def wall_errors(open_mask: NDArray[np.uint8], locate: Locate | None = None) -> list[str]:
+    """Human-readable wall problems: sides that disagree between neighbours, open outer border;
+    each side named where the file writes it when ``locate`` is given."""
     mask = np.asarray(open_mask, dtype=np.uint8)
     width, height = mask.shape
+
+    def at(x: int, y: int, side: int) -> str:
+        return f" ({locate(x, y, side)})" if locate is not None else ""
+
+    def state(bit: int) -> str:
+        return "open" if bit else "closed"
+
     problems: list[str] = []
     east = (mask[:-1, :] >> EAST) & 1
     west = (mask[1:, :] >> WEST) & 1
     for x, y in np.argwhere(east != west):
         problems.append(
-            f"wall between ({x},{y}) and ({x + 1},{y}) is "
-            f"{'open' if east[x, y] else 'closed'} from the west cell but "
-            f"{'open' if west[x, y] else 'closed'} from the east cell"
+            f"wall between ({x},{y}) and ({x + 1},{y}) is {state(east[x, y])} from the west "
+            f"cell{at(x, y, EAST)} but {state(west[x, y])} from the east cell"
+            f"{at(x + 1, y, WEST)}"
         )
     north = (mask[:, :-1] >> NORTH) & 1
     south = (mask[:, 1:] >> SOUTH) & 1
     for x, y in np.argwhere(north != south):
         problems.append(
-            f"wall between ({x},{y}) and ({x},{y + 1}) is "
-            f"{'open' if north[x, y] else 'closed'} from the south cell but "
-            f"{'open' if south[x, y] else 'closed'} from the north cell"
+            f"wall between ({x},{y}) and ({x},{y + 1}) is {state(north[x, y])} from the south "
+            f"cell{at(x, y, NORTH)} but {state(south[x, y])} from the north cell"
+            f"{at(x, y + 1, SOUTH)}"
         )
     for side, cells in (
         (WEST, [(0, y) for y in range(height)]),
@@ -110,13 +122,16 @@ def wall_errors(open_mask: NDArray[np.uint8]) -> list[str]:
     ):
         for x, y in cells:
             if mask[x, y] >> side & 1:
-                problems.append(f"outer {HEADING_NAMES[side]} wall of ({x},{y}) is open")
+                problems.append(
+                    f"outer {HEADING_NAMES[side]} wall of ({x},{y}) is open{at(x, y, side)}"
+                )
     return problems
 
 
-def validate_maze(maze: Maze, source: str = "maze") -> Maze:
-    """Check wall consistency, the closed border, and that start and goal cells lie inside."""
-    problems = wall_errors(maze.open_mask)
+def validate_maze(maze: Maze, source: str = "maze", locate: Locate | None = None) -> Maze:
+    """Check wall consistency, the closed border, and that start and goal cells lie inside
+    (``locate``: where the file writes each cell's sides, for the messages)."""
+    problems = wall_errors(maze.open_mask, locate)
     if problems:
         more = f" (and {len(problems) - 3} more)" if len(problems) > 3 else ""
         raise DataError(f"{source}: inconsistent walls: {'; '.join(problems[:3])}{more}")
@@ -184,7 +199,7 @@ def parse_udacity(text: str, source: str = "<text>", name: str = "") -> Maze:
             mask[x, y] = value
     a, b = n // 2 - 1, n // 2
     maze = Maze(mask, goal=((a, a), (a, b), (b, a), (b, b)), start=(0, 0), name=name)
-    return validate_maze(maze, source)
+    return validate_maze(maze, source, lambda x, y, side: f"line {rows[x][0]}, mask {y + 1}")
 
 
 def format_udacity(maze: Maze) -> str:
@@ -275,14 +290,17 @@ def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
     raw = [line.rstrip("\r\n").rstrip() for line in text.splitlines()]
     while raw and not raw[-1]:
         raw.pop()
+    skipped = 0  # blank lines before the maze: line numbers count them
     while raw and not raw[0]:
         raw.pop(0)
+        skipped += 1
     if not raw:
         raise DataError(f"{source}: empty maze file")
     top = raw[0]
     if len(top) < 5 or (len(top) - 1) % 4 or not top.startswith("o"):
         raise DataError(
-            f"{source}:1: expected the north border 'o---o---...o' (4*width+1 characters), "
+            f"{source}:{skipped + 1}: expected the north border 'o---o---...o' (4*width+1 "
+            "characters), "
             f"found {top[:40]!r}"
         )
     width = (len(top) - 1) // 4
@@ -290,7 +308,12 @@ def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
         raise DataError(f"{source}: expected an odd number of lines (2*height+1), found {len(raw)}")
     height = (len(raw) - 1) // 2
     lines = []
-    for lineno, line in enumerate(raw, start=1):
+    for lineno, line in enumerate(raw, start=skipped + 1):
+        if "\t" in line:
+            raise DataError(
+                f"{source}:{lineno}:{line.index(chr(9)) + 1}: a tab; the ASCII format places "
+                "walls by column: write spaces"
+            )
         if len(line) > 4 * width + 1:
             raise DataError(
                 f"{source}:{lineno}: line is {len(line)} characters long, expected at most "
@@ -308,10 +331,12 @@ def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
     goal: list[Cell] = []
     for k, line in enumerate(lines):
         if k % 2 == 0:  # horizontal line k is the south side of row height - k // 2
-            _read_wall_line(f"{source}:{k + 1}", line, width, h_open[:, height - k // 2])
+            where = f"{source}:{skipped + k + 1}"
+            _read_wall_line(where, line, width, h_open[:, height - k // 2])
         else:
             y = height - 1 - k // 2
-            start = _read_cell_line(f"{source}:{k + 1}", line, width, y, v_open, goal, start)
+            where = f"{source}:{skipped + k + 1}"
+            start = _read_cell_line(where, line, width, y, v_open, goal, start)
 
     mask = np.zeros((width, height), dtype=np.uint8)
     mask |= h_open[:, 1:].astype(np.uint8) << NORTH
@@ -319,7 +344,14 @@ def parse_ascii(text: str, source: str = "<text>", name: str = "") -> Maze:
     mask |= h_open[:, :-1].astype(np.uint8) << SOUTH
     mask |= v_open[:-1, :].astype(np.uint8) << WEST
     maze = Maze(mask, goal=tuple(sorted(goal)), start=start or (0, 0), name=name)
-    return validate_maze(maze, source)
+
+    def locate(x: int, y: int, side: int) -> str:
+        row = skipped + 2 * (height - 1 - y) + 2  # the cell's own line (1-based)
+        line = row + (-1 if side == NORTH else 1 if side == SOUTH else 0)
+        column = 4 * x + (5 if side == EAST else 1 if side == WEST else 2)
+        return f"line {line}, column {column}"
+
+    return validate_maze(maze, source, locate)
 
 
 def format_ascii(maze: Maze) -> str:
