@@ -105,6 +105,10 @@ def test_ground_truth_files(runs):
     t, poses = read_tum(folder / "groundtruth.tum")
     np.testing.assert_array_equal(poses[0], 0.0)  # starts at the world origin, heading 0
     assert np.median(np.diff(t)) <= 0.01 + 1e-6  # at least 100 Hz
+    # one line per time as written (times a fraction of a microsecond apart were two lines
+    # with the same stamp, which evo's check refuses)
+    stamps = [line.split()[0] for line in (folder / "groundtruth.tum").read_text().splitlines()[1:]]
+    assert len(set(stamps)) == len(stamps) == t.size
     with np.load(folder / "Encoders20.npz") as f:
         enc_t = f["time_stamps"]
     nearest = np.abs(t[np.clip(np.searchsorted(t, enc_t), 0, t.size - 1)] - enc_t)

@@ -319,7 +319,8 @@ def _write_ground_truth(log: SimulatedLog, folder: Path) -> None:
     parts = [grid, log.encoder_time, log.lidar_time]
     if log.disparity_time is not None:
         parts += [log.disparity_time, log.rgb_time]
-    times = np.unique(np.concatenate(parts))
+    # rounded as the file writes them (microseconds), so that no two lines share a time
+    times = np.unique(np.round(np.concatenate(parts), 6))
     (folder / "groundtruth.tum").write_text(format_tum(Trajectory(times, traj.pose_at(times))))
     save_npz(folder / "groundtruth_map.npz", map_arrays(world))
     save_npz(
