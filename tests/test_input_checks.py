@@ -384,7 +384,10 @@ def test_eval_no_overlap_names_the_trajectory_file(tmp_path, capsys):
     write_tum(reference, Trajectory(np.arange(10.0), np.zeros((10, 3))))
     assert main(["eval", str(run), "--reference", str(reference)]) == 2
     line = one_line_error(capsys)
-    assert f"{run / 'trajectory.tum'}: no pose lies within the time span of {reference}" in line
+    assert (
+        f"{run / 'trajectory.tum'}: none of its poses lies within the time span of {reference}"
+        in line
+    )
     relations = tmp_path / "r.relations"
     relations.write_text("1.0 2.0 0.1 0 0 0 0 0\n")
     assert main(["eval", str(run), "--relations", str(relations)]) == 2

@@ -281,7 +281,7 @@ def _reference(trajectory: Trajectory, path: Path, args: argparse.Namespace) -> 
 
     return evaluate_against_reference(
         trajectory,
-        read_tum(path),
+        read_tum(path, distinct_times=True),
         alignment=Alignment(args.align),
         delta=args.delta,
         unit=DeltaUnit(args.delta_unit),

@@ -84,8 +84,7 @@ def format_table(result: dict[str, Any]) -> str:
             ("reference", str(result.get("reference", ""))),
             (
                 "  matched",
-                f"{result['matched']} poses ({result['excluded']} outside the reference's "
-                "time range)",
+                _matched(result),
             ),
             (
                 "  alignment",
@@ -114,3 +113,13 @@ def format_table(result: dict[str, Any]) -> str:
         rows += format_quality(result["quality"])
     width = max(len(label) for label, _ in rows)
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows) + "\n"
+
+
+def _matched(result: dict[str, Any]) -> str:
+    """The association line: how many pairs, at whose times, how many poses left out."""
+    at = result.get("matched_at", "estimate")
+    other = "reference" if at == "estimate" else "estimate"
+    return (
+        f"{result['matched']} poses at the {at}'s times ({result['excluded']} outside the "
+        f"{other}'s time range or in a gap of it)"
+    )

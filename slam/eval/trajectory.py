@@ -1,9 +1,13 @@
 """Trajectory-to-reference metrics: SE(2) alignment, ATE and RPE (pure maths, no I/O).
 
 Association
-    The reference is sorted by time and interpolated (:func:`slam.geometry.interpolate_poses`)
-    at each estimate time. Estimate poses whose time lies outside the reference's time range are
-    excluded and counted, never extrapolated.
+    Both trajectories are sorted by time; the pairs are formed at the times of the one with
+    fewer poses where the two overlap (the estimate on a tie: a ground truth is usually the
+    denser), and the other is interpolated there (:func:`slam.geometry.interpolate_poses`), as
+    evo pairs a sparse reference at its own stamps. A time outside the other trajectory's range
+    is excluded and counted, never extrapolated; so is a time inside a gap of the other longer
+    than :data:`GAP_PERIODS` of its median periods (a reference with a minute missing, or one
+    pose at each end, is not filled in with a straight line).
 
 Alignment
     :func:`align_se2` is the closed-form least-squares rigid alignment in the plane (Horn /
@@ -69,38 +73,73 @@ class Alignment(Enum):
     """Compare as is (both trajectories already share a frame)."""
 
 
+GAP_PERIODS = 10.0
+"""The denser trajectory is interpolated only across gaps of at most this many of its median
+periods: a pose in a longer gap (a stretch the trajectory does not hold) is not evaluated."""
+
+SAME_TIME_S = 1e-6
+"""Times this close are the same time (TUM files keep microseconds)."""
+
+
 @dataclass(frozen=True)
 class Association:
-    """Estimate poses paired with the reference interpolated at their times (time-sorted)."""
+    """The two trajectories paired at the times of the sparser one (time-sorted), the denser
+    interpolated there."""
 
     time: F64
-    """``(M,)`` times of the associated estimate poses, non-decreasing."""
+    """``(M,)`` times of the pairs, non-decreasing."""
     estimate: F64
-    """``(M, 3)`` estimate poses."""
+    """``(M, 3)`` estimate poses at ``time``."""
     reference: F64
-    """``(M, 3)`` reference poses interpolated at ``time``."""
+    """``(M, 3)`` reference poses at ``time``."""
     excluded: int
-    """Estimate poses outside the reference's time range (not evaluated)."""
+    """Poses of the sparser trajectory not evaluated: outside the other's time range, or in a
+    gap of it longer than :data:`GAP_PERIODS` of its periods."""
+    at: str = "estimate"
+    """Whose times the pairs are at: ``"estimate"`` or ``"reference"`` (the sparser)."""
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
 
 
 def associate(estimate: Trajectory, reference: Trajectory) -> Association:
-    """Pair each estimate pose with the reference interpolated at its time."""
-    est_times, est_poses = _checked(estimate, "estimate")
-    ref_times, ref_poses = _checked(reference.sorted_by_time(), "reference")
-    inside = (est_times >= ref_times[0]) & (est_times <= ref_times[-1])
-    est_order = np.argsort(est_times[inside], kind="stable")
-    time = est_times[inside][est_order]
-    estimate = est_poses[inside][est_order]
-    reference = interpolate_poses(ref_times, ref_poses, time) if time.size else np.empty((0, 3))
+    """Pair the trajectories at the times of the one with fewer poses where they overlap (the
+    estimate's on a tie), the other interpolated there (module docstring)."""
+    est = Trajectory(*_checked(estimate, "estimate")).sorted_by_time()
+    ref = Trajectory(*_checked(reference, "reference")).sorted_by_time()
+    lo, hi = max(est.times[0], ref.times[0]), min(est.times[-1], ref.times[-1])
+    in_est = np.count_nonzero((est.times >= lo) & (est.times <= hi))
+    in_ref = np.count_nonzero((ref.times >= lo) & (ref.times <= hi))
+    at_reference = in_ref < in_est
+    sparse, dense = (ref, est) if at_reference else (est, ref)
+    keep = _covered(dense.times, sparse.times)
+    time = sparse.times[keep]
+    own = sparse.poses[keep]
+    other = interpolate_poses(dense.times, dense.poses, time) if time.size else np.empty((0, 3))
     return Association(
         time=time,
-        estimate=estimate,
-        reference=reference,
-        excluded=int(np.count_nonzero(~inside)),
+        estimate=other if at_reference else own,
+        reference=own if at_reference else other,
+        excluded=int(np.count_nonzero(~keep)),
+        at="reference" if at_reference else "estimate",
     )
+
+
+def _covered(dense: F64, query: F64) -> NDArray[np.bool_]:
+    """Which ``query`` times the sorted ``dense`` times hold: within their range, and at one of
+    them or between two at most :data:`GAP_PERIODS` median periods apart."""
+    if query.size == 0:
+        return np.zeros(0, dtype=bool)
+    inside = (query >= dense[0] - SAME_TIME_S) & (query <= dense[-1] + SAME_TIME_S)
+    steps = np.diff(dense)
+    steps = steps[steps > SAME_TIME_S]
+    max_gap = GAP_PERIODS * float(np.median(steps)) if steps.size else 0.0
+    right = np.clip(np.searchsorted(dense, query, side="left"), 0, dense.size - 1)
+    left = np.clip(right - 1, 0, dense.size - 1)
+    at_one = (np.abs(dense[right] - query) <= SAME_TIME_S) | (
+        np.abs(dense[left] - query) <= SAME_TIME_S
+    )
+    return inside & (at_one | (dense[right] - dense[left] <= max_gap))
 
 
 def _checked(trajectory: Trajectory, what: str) -> tuple[F64, F64]:
@@ -255,7 +294,11 @@ def evaluate_against_reference(
     association = associate(estimate, reference)
     _require_matches(association, estimate.times, reference.times, estimate_name, reference_name)
     ate_result = ate(association, alignment)
-    out: dict[str, Any] = {"matched": len(association), "excluded": association.excluded}
+    out: dict[str, Any] = {
+        "matched": len(association),
+        "excluded": association.excluded,
+        "matched_at": association.at,
+    }
     out.update(ate_result.summary())
     rpe_result = rpe(association, delta, unit)
     if rpe_result.trans.size == 0:
@@ -270,6 +313,20 @@ def evaluate_against_reference(
     out["alignment_y"] = float(ate_result.transform[1])
     out["alignment_yaw_deg"] = float(np.rad2deg(ate_result.transform[2]))
     return out
+
+
+def _unit_hint(est: F64, ref: F64, estimate_name: str, reference_name: str) -> str:
+    """'X's times look like nanoseconds …' when one trajectory's times are about 1e3, 1e6 or 1e9
+    times the other's, else ''."""
+    a, b = float(np.median(np.abs(est))), float(np.median(np.abs(ref)))
+    if min(a, b) <= 0:
+        return ""
+    big, small = (estimate_name, reference_name) if a > b else (reference_name, estimate_name)
+    power = math.log10(max(a, b) / min(a, b)) / 3
+    unit = {1: "milliseconds", 2: "microseconds", 3: "nanoseconds"}.get(round(power))
+    if unit is None or abs(power - round(power)) > 0.1:
+        return ""
+    return f"{big}'s times look like {unit} where {small}'s are seconds"
 
 
 def _require_matches(
@@ -290,9 +347,15 @@ def _require_matches(
         f"{estimate_name} {est.min():.6f}..{est.max():.6f} s with {est.size}"
     )
     if len(association) == 0:
+        sparse, dense = (
+            (reference_name, estimate_name)
+            if association.at == "reference"
+            else (estimate_name, reference_name)
+        )
         raise DataError(
-            f"{estimate_name}: no pose lies within the time span of {reference_name} ({spans}): "
-            "is it the same log?"
+            f"{sparse}: none of its poses lies within the time span of {dense} or between two of "
+            f"its poses at most {GAP_PERIODS:g} of its periods apart ({spans}): "
+            f"{_unit_hint(est, ref, estimate_name, reference_name) or 'is it the same log?'}"
         )
     raise DataError(
         f"{estimate_name}: only {distinct} pose time(s) match {reference_name} ({spans}); ATE "

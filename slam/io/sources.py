@@ -418,5 +418,9 @@ def load(
         memory_share=config.checks.max_memory_share,
     )
     reference = ref.reference
-    truth = read_tum(reference) if reference is not None and reference.is_file() else None
+    truth = (
+        read_tum(reference, distinct_times=True)
+        if reference is not None and reference.is_file()
+        else None
+    )
     return Source(log, truth)  # the demo's folder: metrics.json's log_source

@@ -39,9 +39,14 @@ def write_tum(path: Path, trajectory: Trajectory) -> None:
     write_text(Path(path), format_tum(trajectory))
 
 
-def read_tum(path: Path) -> Trajectory:
+def read_tum(path: Path, distinct_times: bool = False) -> Trajectory:
     """Read a TUM file: the trajectory, with yaw from the quaternion (it unpacks as
-    ``times, poses``)."""
+    ``times, poses``); z, roll and pitch are not read (planar poses).
+
+    ``distinct_times`` (a reference trajectory): a time written twice with the same pose (within
+    :data:`SAME_POSE_M` and :data:`SAME_POSE_RAD`) is read once; with another pose it is an error
+    naming both lines (which pose holds there is not for the reader to guess).
+    """
     path = Path(path)
     raw = read_input(path, "trajectory file not found", None, "cannot read trajectory")
     text = decode_utf8(path, raw)
@@ -78,4 +83,35 @@ def read_tum(path: Path) -> Trajectory:
             f"expected a unit quaternion (norm 1 ± {QUATERNION_TOLERANCE:g})"
         )
     poses = np.stack([data[:, 1], data[:, 2], quaternion_to_yaw(data[:, 4:8])], axis=-1)
+    if distinct_times:
+        keep = _first_of_each_time(path, data[:, 0], poses, linenos)
+        return Trajectory(data[keep, 0], poses[keep])
     return Trajectory(data[:, 0], poses)
+
+
+SAME_POSE_M = 1e-5
+"""Two poses of one time this close (m) are the same pose written twice."""
+SAME_POSE_RAD = 1e-5
+"""... and this close in heading (rad)."""
+
+
+def _first_of_each_time(
+    path: Path, times: np.ndarray, poses: np.ndarray, linenos: list[int]
+) -> np.ndarray:
+    """Indices of the first pose of each time, in file order; :class:`DataError` naming both
+    lines when a time comes again with another pose."""
+    _, first, inverse = np.unique(times, return_index=True, return_inverse=True)
+    again = np.flatnonzero(first[inverse] != np.arange(times.size))
+    if again.size:
+        ref = first[inverse[again]]
+        step = np.hypot(*(poses[again, :2] - poses[ref, :2]).T)
+        turn = np.abs(np.angle(np.exp(1j * (poses[again, 2] - poses[ref, 2]))))
+        other = np.flatnonzero((step > SAME_POSE_M) | (turn > SAME_POSE_RAD))
+        if other.size:
+            k = int(other[0])
+            raise DataError(
+                f"{path}:{linenos[again[k]]}: time {times[again[k]]:.6f} again (first at line "
+                f"{linenos[ref[k]]}) with another pose ({step[k]:.6g} m, "
+                f"{np.rad2deg(turn[k]):.4g}° away); a reference holds one pose per time"
+            )
+    return np.sort(first)

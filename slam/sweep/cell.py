@@ -129,7 +129,9 @@ def evaluate_run_folder(
         elif ref.reference is not None and ref.reference.is_file():
             from slam.eval.trajectory import evaluate_against_reference
 
-            out["ate"] = evaluate_against_reference(trajectory, read_tum(ref.reference))
+            out["ate"] = evaluate_against_reference(
+                trajectory, read_tum(ref.reference, distinct_times=True)
+            )
         else:
             raise DataError(f"{log}: evaluation 'ate' asked for, but the log has no ground truth")
         out["error"] = float(out["ate"]["ate_rmse"])
