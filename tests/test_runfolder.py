@@ -301,7 +301,21 @@ def test_a_cache_dir_that_is_a_file_is_named(tmp_path, monkeypatch):
     afile.write_text("x")
     monkeypatch.setenv("SLAM_CACHE_DIR", str(afile))
     with pytest.raises(UsageError) as caught:
-        resolve_cache_dir(tmp_path)
+        resolve_cache_dir()
     assert str(caught.value) == (
         f"$SLAM_CACHE_DIR = {afile}: expected a folder for the generated datasets, found a file"
     )
+
+
+def test_generated_data_never_goes_into_the_data_directory(tmp_path, monkeypatch):
+    """The bug: without SLAM_CACHE_DIR the demo (171 MB) went to `<data dir>/cache` whenever the
+    data directory was writable, `./data/cache` on a fresh checkout."""
+    from slam.io.datadir import resolve_cache_dir
+
+    monkeypatch.delenv("SLAM_CACHE_DIR", raising=False)
+    monkeypatch.setenv("SLAM_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert resolve_cache_dir() == tmp_path / "xdg" / "slam"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert resolve_cache_dir() == tmp_path / "home" / ".cache" / "slam"

@@ -347,7 +347,7 @@ def relations_file(ref: Any, progress: bool = False) -> Path | None:
         return None
     if not ref.relations_retime:
         return ref.relations
-    folder = resolve_cache_dir(ref.data_dir) / "relations"
+    folder = resolve_cache_dir() / "relations"
     out, report_path = folder / f"{ref.name}.retimed.relations", folder / f"{ref.name}.retimed.json"
     log_path = _log_file(ref)
     stamp = {

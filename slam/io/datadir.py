@@ -1,9 +1,9 @@
 """Locating the data directory (user datasets) and a writable cache (generated datasets).
 
 The data directory is ``--data-dir`` if given, else ``$SLAM_DATA_DIR``, else ``./data``. It may be
-read-only (CI points it at a shared folder), so generated data such as the simulator's demo goes to
-the cache: ``$SLAM_CACHE_DIR`` if set, else ``<data dir>/cache`` when that is writable, else
-``~/.cache/slam``.
+read-only (CI points it at a shared folder), and it holds the user's data only: generated data
+such as the simulator's demo goes to the cache, ``$SLAM_CACHE_DIR`` if set, else
+``$XDG_CACHE_HOME/slam``, else ``~/.cache/slam`` — never into the data directory.
 """
 
 from __future__ import annotations
@@ -29,22 +29,7 @@ def resolve_data_dir(cli_value: str | Path | None = None) -> Path:
     return Path("data")
 
 
-def _writable(folder: Path) -> bool:
-    """Whether ``folder`` (or its first existing ancestor) is meant to be written to.
-
-    Besides ``os.access`` (which says yes to root for anything), the folder's permission bits
-    must grant someone write access: a data directory shared read-only (``r-xr-xr-x``) is left
-    alone even by root.
-    """
-    probe = folder
-    while not probe.exists():
-        if probe.parent == probe:
-            return False
-        probe = probe.parent
-    return os.access(probe, os.W_OK) and bool(probe.stat().st_mode & 0o222)
-
-
-def resolve_cache_dir(data_dir: Path) -> Path:
+def resolve_cache_dir() -> Path:
     """A writable folder for generated datasets (see the module docstring for the order)."""
     env = os.environ.get(CACHE_DIR_ENV)
     if env:
@@ -55,9 +40,6 @@ def resolve_cache_dir(data_dir: Path) -> Path:
                 "a file"
             )
         return folder
-    candidate = Path(data_dir) / "cache"
-    if _writable(candidate):
-        return candidate
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "slam"
 

@@ -217,7 +217,7 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
         from slam.io.datadir import resolve_cache_dir
         from slam.sim.demo import DEMO_NUMBER, demo_dir
 
-        folder = demo_dir(resolve_cache_dir(data_dir))
+        folder = demo_dir(resolve_cache_dir())
         return DatasetRef(
             name, Kind.DEMO, folder, "demo", "demo", "ece276a", data_dir, str(DEMO_NUMBER)
         )
@@ -238,7 +238,7 @@ def resolve(name: str, data_dir: Path, *, where: str = "dataset", hint: str = ""
             relations_retime=entry.relations_times == "retime",
         )
     path = Path(name)
-    if name and path.exists():
+    if name and (path.exists() or path.is_symlink()):  # a broken link is named as such
         return detect_path(name, path, data_dir)
     tail = f"; {hint}" if hint else ""
     if looks_like_path(name):
