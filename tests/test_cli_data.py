@@ -231,3 +231,31 @@ def test_console_entry_point(data_dir):
     )
     assert proc.returncode == 0, proc.stderr
     assert _rows(proc.stdout)["dataset20"][1] == "partial"
+
+
+@pytest.mark.parametrize(
+    ("make", "found"),
+    [
+        (lambda p: p.mkdir(), "expected a file, found a folder"),
+        (lambda p: os.mkfifo(p), "expected a file, found a named pipe"),
+        (lambda p: p.symlink_to("/nonexistent"), "is a symbolic link to '/nonexistent', which"),
+    ],
+)
+def test_something_else_where_a_log_should_be_is_named(capsys, tmp_path, make, found):
+    """The bugs: `slam data verify` called a folder, a pipe or a broken link where aces' log
+    should be 'missing' and exited 0; given as a path, `slam data inspect` (and `slam run`)
+    waited for ever on the pipe, and a broken link was 'no such file or folder'."""
+    log = tmp_path / "carmen" / "aces.clf.gz"
+    log.parent.mkdir()
+    make(log)
+    code, _, err = _run(capsys, "data", "verify", "aces", "--data-dir", str(tmp_path))
+    assert code == 2 and err == f"slam: error: {log}: {err.split(f'{log}: ', 1)[1]}"
+    assert found in err and err.count("\n") == 1
+    if not log.is_dir():
+        for argv in (
+            ["data", "inspect", str(log)],
+            ["run", str(log), "--out", str(tmp_path / "r")],
+        ):
+            code, _, err = _run(capsys, *argv)
+            assert code == 2 and found in err and err.count("\n") == 1
+        assert not (tmp_path / "r").exists()

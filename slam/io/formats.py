@@ -60,6 +60,11 @@ def detect_format(path: Path) -> str:
     try:
         if path.is_dir():
             return _folder_format(path)
+        if not path.is_file():
+            from slam.io.datadir import is_present
+
+            if not is_present(path):  # a pipe, a socket, a broken link: one error naming it
+                raise FileNotFoundError
         with open(path, "rb") as fh:
             head = fh.read(_PEEK)
     except FileNotFoundError:

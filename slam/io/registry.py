@@ -310,11 +310,13 @@ def _exists(entry: DataFile, data_dir: Path, strict: bool = True) -> bool:
     return is_present(entry.location(data_dir), folder=entry.is_dir, strict=strict)
 
 
-def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
+def dataset_status(dataset: Dataset, data_dir: Path, strict: bool = False) -> DatasetStatus:
     """Which of ``dataset``'s files are under ``data_dir``: present, partial or absent.
 
     A missing data directory or dataset folder makes the dataset absent; one that exists but
-    cannot be read raises :class:`DataError` naming it.
+    cannot be read raises :class:`DataError` naming it. Something else where a file should be (a
+    folder, a pipe, a link to nothing) counts as missing in a listing, and is a
+    :class:`DataError` naming it and what it is with ``strict`` (``slam data verify``).
     """
     data_dir = Path(data_dir)
     present: list[str] = []
@@ -326,7 +328,7 @@ def dataset_status(dataset: Dataset, data_dir: Path) -> DatasetStatus:
             parent = entry.location(data_dir).parent
             if parent != data_dir / dataset.folder:
                 check_readable_dir(parent, f"folder of {entry.path}")
-            (present if _exists(entry, data_dir, strict=False) else missing).append(entry.path)
+            (present if _exists(entry, data_dir, strict=strict) else missing).append(entry.path)
     else:
         missing = [f.path for f in dataset.files]
     if not missing:
@@ -482,7 +484,7 @@ def verify_dataset(
     """
     dataset = get_dataset(name, registry)
     data_dir = Path(data_dir)
-    status = dataset_status(dataset, data_dir)
+    status = dataset_status(dataset, data_dir, strict=True)
     if status.state == "absent":
         raise DataError(
             f"{name}: none of its files is under {data_dir} (expected "
