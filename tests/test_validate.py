@@ -250,12 +250,34 @@ def test_huge_random_grid_world_is_refused_up_front(tmp_path, capsys):
     assert "--sizes 3,100000: a 100000×100000 world" in one_line_error(capsys)
 
 
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["--duration", "0.02"],
+            "--duration: expected a number of seconds in [1, 3600], found 0.02",
+        ),
+        (
+            ["--duration", "10", "--rgbd-rate", "0.05"],
+            "--rgbd-rate 0.05 over 10 s gives fewer than 2 Kinect frames",
+        ),
+        (["--rgbd-rate", "0.01"], "--rgbd-rate 0.01 over 45 s gives fewer than 2 Kinect frames"),
+    ],
+)
+def test_sim_writes_no_dataset_a_run_cannot_read(tmp_path, capsys, argv, message):
+    """The bugs: a log of 0.001–0.06 s (0–2 scans) or one without a Kinect frame was written
+    (exit 0), and `slam run` on it failed on an empty 'time_stamps' key."""
+    assert main(["sim", "small", "--out", str(tmp_path / "s"), *argv]) == 2
+    assert message in one_line_error(capsys)
+    assert not (tmp_path / "s").exists()
+
+
 def test_sim_duration_is_bounded(tmp_path, capsys):
     """Item 10: `slam sim small --duration 1e9`. On main: the simulator starts allocating 10^12
     trajectory steps."""
     assert main(["sim", "small", "--duration", "1e9", "--out", str(tmp_path / "s")]) == 2
     assert one_line_error(capsys) == (
-        "slam: error: --duration: expected a number of seconds in (0, 3600], found 1e+09"
+        "slam: error: --duration: expected a number of seconds in [1, 3600], found 1e+09"
     )
     from slam.budget import check_memory
     from slam.sim.dataset import SIM_BYTES_PER_SECOND

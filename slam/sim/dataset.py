@@ -72,6 +72,9 @@ if hasattr(cv2, "IMWRITE_PNG_FILTER"):
 
 MAX_DURATION_S = 3600.0
 """Longest log ``slam sim`` writes (s): one hour, 29 times the demo."""
+MIN_DURATION_S = 1.0
+"""Shortest log ``slam sim`` writes (s): 40 scans, enough for ``slam run`` and its ground-truth
+figures (a few hundredths of a second gave a dataset with no scan, which no run can read)."""
 SIM_BYTES_PER_SECOND = 3 << 20
 """Memory the simulation holds per simulated second (measured 2.3 MiB/s with ``/usr/bin/time``
 on ``slam sim small --duration 180 --no-rgbd``: the 1 kHz trajectory and the scans), rounded up."""
@@ -108,10 +111,20 @@ class SimOptions:
             raise UsageError(f"--number: expected 0..99, found {self.number}")
         if not 0 < self.rgbd_rate <= 30:
             raise UsageError(f"--rgbd-rate: expected a rate in (0, 30] Hz, found {self.rgbd_rate}")
-        if self.duration is not None and not 0 < self.duration <= MAX_DURATION_S:
+        if self.duration is not None and not MIN_DURATION_S <= self.duration <= MAX_DURATION_S:
             raise UsageError(
-                f"--duration: expected a number of seconds in (0, {MAX_DURATION_S:g}], "
-                f"found {self.duration:g}"
+                f"--duration: expected a number of seconds in [{MIN_DURATION_S:g}, "
+                f"{MAX_DURATION_S:g}], found {self.duration:g}"
+            )
+        seconds = self.duration
+        if seconds is None:
+            from slam.sim.scenarios import get_scenario
+
+            seconds = get_scenario(self.scenario).duration
+        if self.rgbd and seconds * self.rgbd_rate < 2:
+            raise UsageError(
+                f"--rgbd-rate {self.rgbd_rate:g} over {seconds:g} s gives fewer than 2 Kinect "
+                "frames; raise the rate or --duration, or leave the frames out with --no-rgbd"
             )
         if self.duration is not None:
             check_memory(
