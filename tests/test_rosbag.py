@@ -63,6 +63,18 @@ def test_detect_format_rejects_what_it_cannot_read(tmp_path):
     binary.write_bytes(b"\x00\x01\x02binary")
     with pytest.raises(DataError, match=r"x\.clf: unknown format: found binary data"):
         detect_format(binary)
+    # text in another encoding, or with a byte-order mark, is named as such (both were 'binary
+    # data' or an unknown message type '\ufeff#')
+    latin = tmp_path / "latin.clf"
+    latin.write_bytes(b"# caf\xe9 log\nODOM 0 0 0 0 0 0 1 h 1\n")
+    with pytest.raises(
+        DataError, match=r"latin\.clf: line 1: non-UTF-8 byte 0xe9 \(byte offset 5\)"
+    ):
+        detect_format(latin)
+    bom = tmp_path / "bom.clf"
+    bom.write_bytes(b"\xef\xbb\xbf# log\nODOM 0 0 0 0 0 0 1 h 1\n")
+    with pytest.raises(DataError, match=r"bom\.clf:1: a UTF-8 byte-order mark"):
+        detect_format(bom)
     db = tmp_path / "bag_0.db3"
     db.write_bytes(b"SQLite format 3\x00" + bytes(100))
     with pytest.raises(DataError, match="SQLite database"):

@@ -101,8 +101,15 @@ def detect_format(path: Path) -> str:
         return "carmen"
     if not head:
         raise DataError(f"{path}: empty file (expected {_ACCEPTED})")
+    if head.startswith(b"\xef\xbb\xbf"):
+        raise DataError(
+            f"{path}:1: a UTF-8 byte-order mark before the first line; a CARMEN log is plain "
+            "text: save it without the mark"
+        )
     if _looks_like_text(head):
         return "carmen"
+    if _looks_like_text(head.decode("latin-1").encode("utf-8")):  # text, but not UTF-8
+        raise DataError(f"{path}: {_first_non_utf8(head)}; a CARMEN log is UTF-8 (ASCII) text")
     kind = "a zip archive (.npz?)" if head.startswith(ZIP_MAGIC) else "binary data"
     raise DataError(
         f"{path}: unknown format: found {kind} starting with {head[:8]!r}; expected {_ACCEPTED}"
@@ -132,6 +139,16 @@ def _gunzip_head(head: bytes) -> bytes | None:
         return zlib.decompressobj(wbits=31).decompress(head, _PEEK)
     except zlib.error:
         return None
+
+
+def _first_non_utf8(data: bytes) -> str:
+    """``"line L: non-UTF-8 byte 0xNN (byte offset K)"`` of the first such byte in ``data``."""
+    try:
+        data.decode("utf-8")
+        return "no non-UTF-8 byte"
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        return f"line {line}: non-UTF-8 byte 0x{data[exc.start]:02x} (byte offset {exc.start})"
 
 
 def _looks_like_text(data: bytes) -> bool:
