@@ -256,6 +256,25 @@ def test_ten_km_jump_names_the_line(tmp_path, capsys):
     assert f"{log}:22: scan odometry moves 1e+04 m from line 21" in one_line_error(capsys)
 
 
+def test_a_jump_in_the_odom_messages_names_the_line(tmp_path, capsys):
+    """The bug: the ODOM messages (which robot.odometry_sync = "auto" may pick for the run's
+    odometry) were never checked: one with x + 50 m ended in an online 'Slam.update: ...
+    moves 15.4 m' naming no file, x = 1e9 in a memory estimate of 813 TiB."""
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    from synthetic_logs import ray_cast
+
+    poses = path(40)
+    lines = []
+    for k, p in enumerate(poses):
+        lines.append(flaser_line(ray_cast(p, angles), p, 100.0 + 0.1 * k))
+        x = p[0] + (50.0 if k == 20 else 0.0)
+        lines.append(f"ODOM {x} {p[1]} {p[2]} 0 0 0 {100.05 + 0.1 * k} h {100.05 + 0.1 * k}")
+    log = write_carmen(tmp_path, lines)
+    assert main(["run", str(log), "--out", str(tmp_path / "r"), *RUN]) == 2
+    assert f"{log}:43: ODOM moves 50.05 m from line 41 in 0.1 s" in one_line_error(capsys)
+    assert not (tmp_path / "r").exists()
+
+
 @pytest.mark.parametrize(
     "name", ["intel", "aces", "fr079", "fr-clinic", "mit-csail", "mit-killian", "dataset20"]
 )

@@ -720,4 +720,5 @@ def _parse_odom(path: Path, lines: _Lines) -> OdometryStream:
         time=values[:, 6].copy(),
         poses=values[:, 0:3].copy(),
         velocities=values[:, 3:5].copy(),
+        lines=np.asarray(lines.lineno, dtype=np.int64),
     )

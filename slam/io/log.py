@@ -136,6 +136,8 @@ class OdometryStream:
     """``(N, 3)`` odometry poses."""
     velocities: F64
     """``(N, 2)`` translational (m/s) and rotational (rad/s) velocity."""
+    lines: NDArray[np.int64] | None = None
+    """``(N,)`` 1-based line of each message in its file (``None``: not from a text log)."""
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
