@@ -446,3 +446,18 @@ def test_a_diverging_map_is_refused_before_it_is_allocated():
     maps = ParticleMaps(30, 0.05, 0.3)
     with pytest.raises(UsageError, match=r"30 particle-map tables of .* would need about"):
         maps.ensure_contains(-1e7, -1e7, 1e7, 1e7)
+
+
+def test_a_beam_count_that_changes_is_shown(tmp_path, capsys):
+    """The bug: a log whose scans change from 180 to 90 beams was summarised as '180 beams' by
+    `slam data inspect` (and fr-clinic's 180/181 as '181 beams')."""
+    from synthetic_logs import ray_cast
+
+    poses = path(30)
+    lines = []
+    for k, p in enumerate(poses):
+        angles = np.linspace(-np.pi / 2, np.pi / 2, 180 if k < 20 else 90)
+        lines.append(flaser_line(ray_cast(p, angles), p, 100.0 + 0.1 * k))
+    log = write_carmen(tmp_path, lines)
+    assert main(["data", "inspect", str(log)]) == 0
+    assert ", beams 180 (20 scans), 90 (10 scans)" in capsys.readouterr().out

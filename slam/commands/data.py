@@ -168,7 +168,9 @@ def _fmt_stream(name: str, info: dict[str, Any]) -> str:
     )
     extras = []
     if "beams" in info:
-        extras.append(f"{info['beams']} beams")
+        from slam.io.log import beams_text
+
+        extras.append(beams_text(info))
         extras.append(f"invalid beams {info['invalid_beams']}")
         extras.append(f"no-return beams {info['no_return_beams']}")
         extras.append(f"non-monotonic {info['non_monotonic']}")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from slam.io.formats import BAG_FORMATS, detect_format, run_config_name
+from slam.io.log import beams_text
 from slam.io.rosbag import BagOptions
 
 FORMAT_NAMES = {
@@ -127,7 +128,7 @@ def format_inspection(report: dict[str, Any]) -> str:
     else:
         lines.append("streams:")
         for stream, info in report["streams"].items():
-            extra = f", {info['beams']} beams" if "beams" in info else ""
+            extra = f", {beams_text(info)}" if "beams" in info else ""
             if info.get("count"):
                 lines.append(
                     f"  {stream:<10} {info['count']:>7} readings  {info['duration_s']:9.2f} s  "

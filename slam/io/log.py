@@ -235,12 +235,27 @@ class Log:
             info = _time_summary(stream.time)
             if isinstance(stream, ScanStream):
                 info["beams"] = stream.num_beams
+                widths, scans = np.unique(stream.readings(), return_counts=True)
+                if widths.size > 1:  # beam counts that change within the log
+                    info["beam_counts"] = {
+                        str(w): int(c) for w, c in zip(widths, scans, strict=True)
+                    }
                 info["invalid_beams"] = stream.invalid_beams
                 info["no_return_beams"] = int(np.count_nonzero(stream.ranges >= stream.no_return))
                 info["non_monotonic"] = stream.non_monotonic
             out[name] = info
         out.update({k: v for k, v in self.meta.items() if isinstance(v, int | float | str)})
         return out
+
+
+def beams_text(info: dict[str, Any]) -> str:
+    """``"180 beams"``, or ``"beams 180 (7372 scans), 90 (3 scans)"`` where they vary, of a
+    stream summary (:meth:`Log.summary`)."""
+    counts = info.get("beam_counts")
+    if not counts:
+        return f"{info['beams']} beams"
+    ranked = sorted(counts.items(), key=lambda kv: (-kv[1], -int(kv[0])))
+    return "beams " + ", ".join(f"{w} ({c} scan{'s' if c > 1 else ''})" for w, c in ranked)
 
 
 def valid_ranges(ranges: NDArray[Any], range_min: float) -> tuple[F32, int]:
