@@ -461,3 +461,23 @@ def test_a_beam_count_that_changes_is_shown(tmp_path, capsys):
     log = write_carmen(tmp_path, lines)
     assert main(["data", "inspect", str(log)]) == 0
     assert ", beams 180 (20 scans), 90 (10 scans)" in capsys.readouterr().out
+
+
+def test_a_clock_that_leaps_a_day_is_an_error(tmp_path, capsys):
+    """The bug: 1e12 s added to the scans' times from the middle of a log ran to the end and
+    reported '1083151406246.2x real time'; `slam data inspect` showed 0.00 Hz."""
+    from synthetic_logs import ray_cast
+
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    poses = path(40)
+    lines = [
+        flaser_line(ray_cast(p, angles), p, 100.0 + 0.1 * k + (1e12 if k >= 20 else 0.0))
+        for k, p in enumerate(poses)
+    ]
+    log = write_carmen(tmp_path, lines)
+    assert main(["run", str(log), "--out", str(tmp_path / "r"), *RUN]) == 2
+    assert (
+        f"{log}: scan timestamps: the clock steps 1e+12 s forward between readings 19 and 20"
+        in one_line_error(capsys)
+    )
+    assert not (tmp_path / "r").exists()

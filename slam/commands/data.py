@@ -166,6 +166,8 @@ def _fmt_stream(name: str, info: dict[str, Any]) -> str:
         f"{info['rate_hz']:7.2f} Hz  median dt {info['median_dt_s'] * 1000:6.2f} ms  "
         f"max gap {info['max_gap_s']:.3f} s"
     )
+    if info.get("backward_steps") and "non_monotonic" not in info:  # scans: said below
+        text += f", {info['backward_steps']} steps backwards"
     extras = []
     if "beams" in info:
         from slam.io.log import beams_text

@@ -303,5 +303,6 @@ def _time_summary(time: F64) -> dict[str, Any]:
         "duration_s": duration,
         "rate_hz": float((n - 1) / duration) if duration > 0 else 0.0,
         "median_dt_s": float(np.median(positive)) if positive.size else 0.0,
-        "max_gap_s": float(dt.max()) if dt.size else 0.0,
+        "max_gap_s": float(positive.max()) if positive.size else 0.0,
+        "backward_steps": int(np.count_nonzero(dt < 0)),
     }

@@ -99,6 +99,11 @@ _PAIRS: tuple[tuple[str, str, str], ...] = (
 """(stream, partner, why): the stream's readings must lie within the partner's time span."""
 
 
+MAX_CLOCK_STEP_S = 86400.0
+"""A stream's clock stepping forward by more than this (s, a day) is a corrupt timestamp: no
+log here pauses for longer than minutes (fr-clinic's 163 s before its second scan)."""
+
+
 def time_base_problems(
     log: Log, checks: ChecksConfig, kinect: bool = True
 ) -> tuple[list[str], list[str]]:
@@ -118,7 +123,15 @@ def time_base_problems(
                 "times that increase"
             )
             continue
-        backward = int(np.count_nonzero(np.diff(s.time) < 0))
+        step = np.diff(s.time)
+        leap = int(np.argmax(step))
+        if step[leap] > MAX_CLOCK_STEP_S:
+            errors.append(
+                f"{s.label}: the clock steps {step[leap]:.6g} s forward between readings "
+                f"{leap} and {leap + 1} (t = {s.time[leap]:.6f} → {s.time[leap + 1]:.6f} s), more "
+                f"than {MAX_CLOCK_STEP_S / 86400:g} day: a corrupt timestamp?"
+            )
+        backward = int(np.count_nonzero(step < 0))
         share = backward / steps
         if share > checks.max_backward_share:
             errors.append(
