@@ -259,3 +259,14 @@ def test_something_else_where_a_log_should_be_is_named(capsys, tmp_path, make, f
             code, _, err = _run(capsys, *argv)
             assert code == 2 and found in err and err.count("\n") == 1
         assert not (tmp_path / "r").exists()
+
+
+def test_inspect_says_a_registry_name_is_not_a_path(capsys, tmp_path, monkeypatch):
+    """The bug: `slam data inspect intel` said 'intel: not found'."""
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _run(capsys, "data", "inspect", "intel")
+    assert code == 2
+    assert err == (
+        "slam: error: slam data inspect: 'intel' is a registry dataset, not a path: "
+        "`slam data verify intel` summarises it, or give its file\n"
+    )

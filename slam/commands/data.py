@@ -246,8 +246,16 @@ def _print_verify(report: dict[str, Any], data_dir: Path) -> None:
 
 def run_inspect(args: argparse.Namespace) -> int:
     """``slam data inspect FILE``."""
+    from slam.errors import UsageError
     from slam.io.inspect import format_inspection, inspect_path
+    from slam.io.registry import load_registry
 
+    name = str(args.path)
+    if not args.path.exists() and not args.path.is_symlink() and name in load_registry():
+        raise UsageError(
+            f"slam data inspect: {name!r} is a registry dataset, not a path: "
+            f"`slam data verify {name}` summarises it, or give its file"
+        )
     report = inspect_path(args.path, bag_options_from(args))
     print(json.dumps(report, indent=2) if args.json else format_inspection(report), end="")
     return 0
