@@ -481,3 +481,16 @@ def test_a_clock_that_leaps_a_day_is_an_error(tmp_path, capsys):
         in one_line_error(capsys)
     )
     assert not (tmp_path / "r").exists()
+
+
+def test_calibrate_refuses_what_run_refuses(tmp_path, capsys):
+    """The bug: `slam data calibrate` on a log whose timestamps all run backwards recommended an
+    odometry, exit 0, where `slam run` refuses the log."""
+    from synthetic_logs import ray_cast
+
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 180)
+    poses = path(40)
+    lines = [flaser_line(ray_cast(p, angles), p, 200.0 - 0.1 * k) for k, p in enumerate(poses)]
+    log = write_carmen(tmp_path, lines)
+    assert main(["data", "calibrate", str(log)]) == 2
+    assert "39 of 39 timestamp steps go backwards" in one_line_error(capsys)

@@ -277,10 +277,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
     source = load_source(args.name, data_dir, config, bag=bag_options_from(args))
     config = source.configured(config)  # the beam step measured when it loaded, if applied
     log = source.log
+    from slam.io.plausibility import check_plausibility
+
+    doubts = check_plausibility(log, config)  # what `slam run` refuses, refused here too
     with warnings.catch_warnings(record=True) as caught:  # said as `slam run` says them
         warnings.simplefilter("always")
         scans = LogScans.from_log(log, config)
-    for message in sorted({str(w.message) for w in caught}):
+    for message in sorted({*doubts, *(str(w.message) for w in caught)}):
         print(f"slam: warning: {message}", file=sys.stderr, flush=True)
     sync = scans.odometry_sync
     laser = scans.odometry_source == "laser"
