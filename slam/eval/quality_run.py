@@ -204,7 +204,7 @@ def score_scans(
     if not inside.all():
         rays = Rays(rays.ex[inside], rays.ey[inside], rays.kind[inside], rays.laser_xy)
         scan_times = scan_times[inside]
-    return map_quality(scan_times, poses, rays, config.quality, config.map)
+    return map_quality(scan_times, poses, rays, config.quality, config.map, own_rays=True)
 
 
 def evaluate_run(
