@@ -393,10 +393,8 @@ def map_quality(
     """Score the map the poses ``(N, 3)`` (robot, one per scan) build from ``rays``.
 
     ``map_config`` supplies the log-odds of a hit and a miss and the occupied threshold, so
-    "occupied" means what it means in the run's map. See the module docstring for the
-    definition and docs/evaluation.md for the parameters. ``own_rays``: the rays were made for
-    this call alone, and are cut at ``quality.max_range_m`` in place instead of in a copy (a
-    copy of 1081-beam scans is 10 bytes a reading).
+    "occupied" means what it means in the run's map (definition: module docstring; parameters:
+    docs/evaluation.md). ``own_rays``: made for this call alone, cut in place, not in a copy.
     """
     config = config or QualityConfig()
     map_config = map_config or MapConfig()
@@ -411,10 +409,9 @@ def map_quality(
     rays = within_range(rays, config.max_range_m, in_place=own_rays)
     res = float(config.resolution)
     origin, shape = _grid_frame(poses, rays, res)
-    ex, ey = (  # no copy of the rays scan_rays made (0 where no ray), one of NaN-holding ones
-        np.ascontiguousarray(np.nan_to_num(e, nan=0.0) if np.isnan(e).any() else e)
-        for e in (rays.ex, rays.ey)
-    )
+    # no copy of scan_rays' rays (0 where no ray); one of rays that hold NaN there
+    ex, ey = (np.nan_to_num(e, nan=0.0) if np.isnan(e).any() else e for e in (rays.ex, rays.ey))
+    ex, ey = np.ascontiguousarray(ex), np.ascontiguousarray(ey)
     kind = np.ascontiguousarray(rays.kind)
     lx, ly = rays.laser_xy
     ox, oy = float(origin[0]), float(origin[1])
