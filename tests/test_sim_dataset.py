@@ -167,6 +167,10 @@ def test_cli_errors_are_one_line_and_exit_2(tmp_path, capsys):
     assert "--duration" in capsys.readouterr().err
     assert main(["sim", "small", "--out", str(tmp_path / "y"), "--seed", "-1"]) == 2
     assert capsys.readouterr().err == "slam: error: --seed: expected an integer ≥ 0, found -1\n"
+    assert main(["sim", "small", "--out", str(tmp_path / "y"), "--seed", str(2**64)]) == 2
+    assert capsys.readouterr().err == (
+        f"slam: error: --seed: expected an integer below 2**63, found {2**64}\n"
+    )  # it said '≥ 0'
     assert not (tmp_path / "y").exists()
     (tmp_path / "z").mkdir()
     (tmp_path / "z" / "keep.txt").write_text("mine")

@@ -79,7 +79,8 @@ class StudyConfig:
         if not 0.0 < self.threshold <= 1.0:
             raise UsageError(f"--threshold: expected (0, 1], found {self.threshold:g}")
         if not 0 <= self.seed < 2**63:
-            raise UsageError(f"--seed: expected an integer ≥ 0, found {self.seed}")
+            bound = "≥ 0" if self.seed < 0 else "below 2**63"
+            raise UsageError(f"--seed: expected an integer {bound}, found {self.seed}")
 
 
 @dataclass(frozen=True)

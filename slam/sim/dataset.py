@@ -106,7 +106,8 @@ class SimOptions:
 
     def __post_init__(self) -> None:
         if self.seed is not None and not 0 <= self.seed < 2**63:
-            raise UsageError(f"--seed: expected an integer ≥ 0, found {self.seed}")
+            bound = "≥ 0" if self.seed < 0 else "below 2**63"
+            raise UsageError(f"--seed: expected an integer {bound}, found {self.seed}")
         if not 0 <= self.number <= 99:
             raise UsageError(f"--number: expected 0..99, found {self.number}")
         if not 0 < self.rgbd_rate <= 30:
