@@ -224,3 +224,18 @@ def test_readings_pad_the_scans_to_one_width_with_nan():
     r, a = seq.readings([0], width=5)
     assert r.shape == (1, 5) and np.isnan(r[0, 3:]).all() and np.isnan(a[0, 3:]).all()
     assert seq.readings([], width=4)[0].shape == (0, 4)
+
+
+def test_the_scans_of_one_laser_share_one_angle_array():
+    """A driver's angles (a writable array, as np.linspace gives) are copied into each Scan; the
+    sequence keeps one array for a run of equal ones: 8 bytes a reading otherwise (415 MB over
+    a 20-minute log of 1081-beam scans)."""
+    angles = np.linspace(-2.0, 2.0, 1081)
+    seq = ScanSequence()
+    for k in range(3):
+        seq.append(Scan(0.1 * k, np.full(1081, 2.0), angles).resolved(LidarConfig()), np.zeros(3))
+    seq.append(Scan(0.3, np.full(1081, 2.0), angles + 0.01).resolved(LidarConfig()), np.zeros(3))
+    first = seq.scan(0).angles
+    assert seq.scan(1).angles is first and seq.scan(2).angles is first
+    assert seq.scan(3).angles is not first  # other beams keep their own
+    np.testing.assert_array_equal(seq.scan(1).angles, angles)
