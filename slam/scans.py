@@ -556,16 +556,28 @@ class ScanSequence:
         """Rays of scan ``k`` for an occupancy update (:meth:`Scan.rays`)."""
         return self._scans[k].rays(free_range_no_return, stride)
 
-    def readings(self, steps: ArrayLike, width: int = 0) -> tuple[F64, F64]:
+    def readings(
+        self, steps: ArrayLike, width: int = 0, beams: ArrayLike | None = None
+    ) -> tuple[F64, F64]:
         """The ranges and beam angles of scans ``steps`` as ``(S, W)`` float64 rows, ``W`` the
-        widest of them (at least ``width``), NaN where a scan has no beam."""
+        widest of them (at least ``width``), NaN where a scan has no beam; with ``beams``, only
+        those columns of the rows (``(S, len(beams))``, never the whole width)."""
         scans = [self._scans[int(k)] for k in np.asarray(steps, dtype=np.int64)]
         width = max(width, max((scan.num_beams for scan in scans), default=0))
-        r = np.full((len(scans), width), np.nan)
-        a = np.full((len(scans), width), np.nan)
+        if beams is None:
+            r = np.full((len(scans), width), np.nan)
+            a = np.full((len(scans), width), np.nan)
+            for i, scan in enumerate(scans):
+                r[i, : scan.num_beams] = scan.ranges
+                a[i, : scan.num_beams] = scan.angles
+            return r, a
+        cols = np.asarray(beams, dtype=np.int64)
+        r = np.full((len(scans), cols.size), np.nan)
+        a = np.full((len(scans), cols.size), np.nan)
         for i, scan in enumerate(scans):
-            r[i, : scan.num_beams] = scan.ranges
-            a[i, : scan.num_beams] = scan.angles
+            there = cols < scan.num_beams
+            r[i, there] = scan.ranges[cols[there]]
+            a[i, there] = scan.angles[cols[there]]
         return r, a
 
     def endpoint_table(self, steps: ArrayLike) -> tuple[F32, F32]:

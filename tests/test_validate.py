@@ -20,6 +20,7 @@ import sys
 import typing
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
@@ -146,7 +147,10 @@ def test_run_memory_estimate_refuses_before_allocating(carmen_dir, tmp_path, cap
                  "--no-record"])  # fmt: skip
     assert code == 2
     line = one_line_error(capsys)
-    said = "intel (its odometry spans 0.0 m × 0.0 m): rbpf with 100000 particles (scans 42.2 KiB"
+    said = (
+        "intel (its odometry spans 0.0 m × 0.0 m; with maps of their smallest size): rbpf with "
+        "100000 particles (scans 70.3 KiB"
+    )
     assert said in line
     assert "checks.max_memory_share); use fewer particles (--particles)" in line
 
@@ -157,7 +161,7 @@ def test_run_memory_estimate_figures():
     from slam.budget import check_memory, run_memory
 
     parts = run_memory(Config(), 13631, 180, 40.0, 30.0, 27.0)
-    assert parts["scans"] == 13631 * 180 * 12
+    assert parts["scans"] == 13631 * 180 * 20
     side_x, side_y = 40 + 2 * (27 + 10 + 1), 30 + 2 * (27 + 10 + 1)
     assert parts["occupancy grid"] == pytest.approx(side_x / 0.05 * side_y / 0.05 * 16)
     tiles = (side_x / 0.8 + 1) * (side_y / 0.8 + 1)
@@ -503,3 +507,39 @@ def test_a_spacing_too_fine_to_lay_out_is_refused(key):
     NumPy) is refused when the configuration is built, with the key named."""
     with pytest.raises(ConfigError, match=key.split(".")[1]):
         load_config("", overrides=[f"{key}=1e-323"])
+
+
+def test_maps_over_a_drifting_odometry_warn_instead_of_refusing(monkeypatch):
+    """The bug: the estimate sized the maps by the odometry's bounding box, which drift
+    inflates: mit-killian's 599 × 521 m gave 4.4 GiB for a run that peaks at 0.7 GiB, refused on
+    a machine of 8.5 GB. Now only what maps of their smallest size cannot fit is refused; the
+    rest is a warning, and the maps' growth is checked as they grow."""
+    import warnings
+
+    import slam.budget
+    from slam.io.plausibility import DataWarning
+    from slam.pipeline import _check_memory
+
+    config = Config()
+    drifted = np.array([[0.0, 0.0, 0.0], [600.0, 520.0, 0.0]])
+    small = run_memory_total(config, np.zeros((2, 3)))
+    large = run_memory_total(config, drifted)
+    monkeypatch.setattr(slam.budget, "memory_limit", lambda share=0.5: int((small + large) / 2))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _check_memory("bldg", 1000, 361, drifted, 80.0, config)
+    (warning,) = caught
+    assert warning.category is DataWarning
+    assert str(warning.message).startswith("bldg (its odometry spans 600.0 m × 520.0 m): maps over")
+    assert "going on" in str(warning.message)
+    monkeypatch.setattr(slam.budget, "memory_limit", lambda share=0.5: int(small / 2))
+    with pytest.raises(UsageError, match=r"with maps of their smallest size\): rbpf with 30"):
+        _check_memory("bldg", 1000, 361, drifted, 80.0, config)
+
+
+def run_memory_total(config: Config, poses: np.ndarray) -> float:
+    """The whole estimate of a 1000-scan, 361-beam run over ``poses``' extent, 80 m of reach."""
+    from slam.budget import run_memory
+
+    span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
+    return sum(run_memory(config, 1000, 361, float(span[0]), float(span[1]), 80.0).values())

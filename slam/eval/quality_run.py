@@ -50,13 +50,16 @@ def rays_of(scans: ScanStream, config: Config) -> tuple[F64, Rays]:
     """Times and rays of the scans a run with ``config`` processed (``filter.every``,
     ``filter.max_scans``; the lidar's range semantics as :class:`ScanSequence` resolves them)."""
     idx = select_scans(len(scans), config.filter.every, config.filter.max_scans)
+    # the same scans as a slice: a view of the log's ranges (scan_rays reads them a block at a
+    # time), not a copy of them
+    rows = slice(0, int(idx[-1]) + 1 if idx.size else 0, max(int(config.filter.every), 1))
     lidar = config.lidar
     range_max = lidar.range_max if lidar.range_max is not None else scans.range_max
     no_return = lidar.no_return if lidar.no_return is not None else scans.no_return
     range_min = lidar.range_min if lidar.range_min is not None else scans.range_min
-    angles = scans.angles if scans.angles.ndim == 1 else scans.angles[idx]
+    angles = scans.angles if scans.angles.ndim == 1 else scans.angles[rows]
     rays = scan_rays(
-        scans.ranges[idx], angles, scans.laser_offset, range_min, range_max, no_return,
+        scans.ranges[rows], angles, scans.laser_offset, range_min, range_max, no_return,
         config.map.free_range_no_return,
     )  # fmt: skip
     return np.asarray(scans.time[idx], dtype=np.float64), rays

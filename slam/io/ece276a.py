@@ -543,7 +543,7 @@ def _load_scans(path: Path, lidar: LidarConfig, memory_share: float) -> ScanStre
     _check_range_unit(path, ranges_in, file_max)
     no_return = range_max if lidar.no_return is None else float(lidar.no_return)
 
-    ranges, invalid_beams = valid_ranges(np.ascontiguousarray(ranges_in.T), range_min)
+    ranges, invalid_beams = valid_ranges(ranges_in.T, range_min)  # (N, beams), read in blocks
     angles = angle_min + increment * np.arange(beams, dtype=np.float64)
     return ScanStream(
         time=time,

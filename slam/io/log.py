@@ -265,11 +265,23 @@ def valid_ranges(ranges: NDArray[Any], range_min: float) -> tuple[F32, int]:
     Readings are judged in their own precision before the cast, so an absurd value (1e308)
     becomes NaN instead of overflowing (and warning) on the way to float32.
     """
-    with np.errstate(invalid="ignore"):
-        invalid = ~np.isfinite(ranges) | (ranges < range_min) | (ranges < 0.0)
-        invalid |= ranges > MAX_VALID_RANGE_M
-    out = np.where(invalid, np.nan, ranges).astype(np.float32)
-    return out, int(np.count_nonzero(invalid))
+    ranges = np.atleast_1d(np.asarray(ranges))
+    out = np.empty(ranges.shape, dtype=np.float32)
+    count = 0
+    # a block of rows at a time (a transposed view is read as it is): the masks and the
+    # full-precision intermediate of a block, not of a whole log
+    for first in range(0, ranges.shape[0], VALID_ROWS):
+        block = ranges[first : first + VALID_ROWS]
+        with np.errstate(invalid="ignore"):
+            invalid = ~np.isfinite(block) | (block < range_min) | (block < 0.0)
+            invalid |= block > MAX_VALID_RANGE_M
+        out[first : first + VALID_ROWS] = np.where(invalid, np.nan, block)
+        count += int(np.count_nonzero(invalid))
+    return out, count
+
+
+VALID_ROWS = 4096
+"""Rows (scans) :func:`valid_ranges` judges at a time."""
 
 
 def laser_offset_meta(source: str, offset: F64) -> dict[str, str | float]:
