@@ -252,3 +252,16 @@ def test_a_reference_time_written_twice(tmp_path):
     (tmp_path / "other.tum").write_text(other)
     with pytest.raises(DataError, match=r"other\.tum:4: time 2\.000000 again \(first at line 3\)"):
         read_tum(tmp_path / "other.tum", distinct_times=True)
+
+
+def test_a_reference_in_bursts_is_not_all_gaps():
+    """Poses that come in bursts (five 1 ms apart every 0.1 s, as intel's odometry messages do)
+    have a median step of 1 ms: gaps measured in median steps would leave every estimate time
+    between bursts unevaluated. The period is the larger of the median and the mean step."""
+    bursts = (np.arange(0.0, 20.0, 0.1)[:, None] + 0.001 * np.arange(5)[None, :]).ravel()
+    truth = np.column_stack([bursts, np.zeros_like(bursts), np.zeros_like(bursts)])
+    times = np.arange(0.05, 19.9, 0.1)  # between the bursts, 100 Hz ... 10 Hz
+    estimate = np.column_stack([times, np.zeros_like(times), np.zeros_like(times)])
+    association = associate(Trajectory(times, estimate), Trajectory(bursts, truth))
+    assert association.at == "estimate" and association.excluded == 0
+    assert len(association) == times.size

@@ -6,7 +6,7 @@ Association
     denser), and the other is interpolated there (:func:`slam.geometry.interpolate_poses`), as
     evo pairs a sparse reference at its own stamps. A time outside the other trajectory's range
     is excluded and counted, never extrapolated; so is a time inside a gap of the other longer
-    than :data:`GAP_PERIODS` of its median periods (a reference with a minute missing, or one
+    than :data:`GAP_PERIODS` of its periods (a reference with a minute missing, or one
     pose at each end, is not filled in with a straight line).
 
 Alignment
@@ -74,8 +74,9 @@ class Alignment(Enum):
 
 
 GAP_PERIODS = 10.0
-"""The denser trajectory is interpolated only across gaps of at most this many of its median
-periods: a pose in a longer gap (a stretch the trajectory does not hold) is not evaluated."""
+"""The denser trajectory is interpolated only across gaps of at most this many of its periods
+(the larger of its median and mean step): a pose in a longer gap (a stretch the trajectory does
+not hold) is not evaluated."""
 
 SAME_TIME_S = 1e-6
 """Times this close are the same time (TUM files keep microseconds)."""
@@ -127,13 +128,15 @@ def associate(estimate: Trajectory, reference: Trajectory) -> Association:
 
 def _covered(dense: F64, query: F64) -> NDArray[np.bool_]:
     """Which ``query`` times the sorted ``dense`` times hold: within their range, and at one of
-    them or between two at most :data:`GAP_PERIODS` median periods apart."""
+    them or between two at most :data:`GAP_PERIODS` periods apart."""
     if query.size == 0:
         return np.zeros(0, dtype=bool)
     inside = (query >= dense[0] - SAME_TIME_S) & (query <= dense[-1] + SAME_TIME_S)
     steps = np.diff(dense)
     steps = steps[steps > SAME_TIME_S]
-    max_gap = GAP_PERIODS * float(np.median(steps)) if steps.size else 0.0
+    # a period: the median step, or the mean where the poses come in bursts (intel's odometry:
+    # a median step of 3 ms, a mean of 0.1 s)
+    max_gap = GAP_PERIODS * max(float(np.median(steps)), float(steps.mean())) if steps.size else 0.0
     right = np.clip(np.searchsorted(dense, query, side="left"), 0, dense.size - 1)
     left = np.clip(right - 1, 0, dense.size - 1)
     at_one = (np.abs(dense[right] - query) <= SAME_TIME_S) | (
