@@ -139,7 +139,7 @@ def test_a_gap_in_the_reference_is_not_filled_in():
     assert result["matched"] == 400 and result["excluded"] == 601  # 20.0 .. 80.0 s
     assert result["ate_rmse"] < 1e-4
     ends = Trajectory(dense[[0, -1]], truth[[0, -1]])
-    with pytest.raises(DataError, match="only 2 pose time"):
+    with pytest.raises(DataError, match="reference: only 2 of its stamps lie within estimate's"):
         evaluate_against_reference(Trajectory(times, loop), ends)
 
 
@@ -265,3 +265,25 @@ def test_a_reference_in_bursts_is_not_all_gaps():
     association = associate(Trajectory(times, estimate), Trajectory(bursts, truth))
     assert association.at == "estimate" and association.excluded == 0
     assert len(association) == times.size
+
+
+def test_a_noisy_estimate_does_not_score_better_against_a_sparser_reference():
+    """Review: pairing at a sparser reference's stamps with the estimate interpolated there
+    averaged its noise away (ATE 0.0230 m against a 39 Hz reference, 0.0281 m against 40 Hz).
+    The estimate's own nearest poses are paired instead."""
+    rng = np.random.default_rng(1)
+
+    def circle(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([5 * np.cos(t / 10), 5 * np.sin(t / 10), t / 10 + np.pi / 2])
+
+    times = np.arange(0, 100, 1 / 40) + rng.uniform(-0.005, 0.005, 4000)
+    noisy = circle(times)
+    noisy[:, :2] += 0.02 * rng.standard_normal((4000, 2))
+    ate_at = {}
+    for hz in (39.0, 40.0):
+        stamps = np.arange(0, 100, 1 / hz)
+        result = evaluate_against_reference(
+            Trajectory(times, noisy), Trajectory(stamps, circle(stamps))
+        )
+        ate_at[hz] = result["ate_rmse"]
+    assert ate_at[39.0] == pytest.approx(ate_at[40.0], rel=0.02)

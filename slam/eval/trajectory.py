@@ -1,13 +1,16 @@
 """Trajectory-to-reference metrics: SE(2) alignment, ATE and RPE (pure maths, no I/O).
 
 Association
-    Both trajectories are sorted by time; the pairs are formed at the times of the one with
-    fewer poses where the two overlap (the estimate on a tie: a ground truth is usually the
-    denser), and the other is interpolated there (:func:`slam.geometry.interpolate_poses`), as
-    evo pairs a sparse reference at its own stamps. A time outside the other trajectory's range
-    is excluded and counted, never extrapolated; so is a time inside a gap of the other longer
-    than :data:`GAP_PERIODS` of its periods (a reference with a minute missing, or one
-    pose at each end, is not filled in with a straight line).
+    Both trajectories are sorted by time. The pairs are the estimate's poses, each with the
+    reference interpolated at its time (:func:`slam.geometry.interpolate_poses`). Where the
+    reference has fewer poses than the estimate in their overlap (a pose a second, another
+    tool's keyframes), only the estimate pose nearest to each of its stamps is paired, as evo
+    pairs a sparse reference: the reference is not drawn as straight chords between its stamps,
+    and the estimate is never interpolated (an interpolated estimate averages its own noise
+    away). A time outside the other trajectory's range is excluded and counted, never
+    extrapolated; so is a time inside a gap of the other longer than :data:`GAP_PERIODS` of its
+    periods (a reference with a minute missing, or one pose at each end, is not filled in with
+    a straight line).
 
 Alignment
     :func:`align_se2` is the closed-form least-squares rigid alignment in the plane (Horn /
@@ -84,8 +87,7 @@ SAME_TIME_S = 1e-6
 
 @dataclass(frozen=True)
 class Association:
-    """The two trajectories paired at the times of the sparser one (time-sorted), the denser
-    interpolated there."""
+    """Estimate poses paired with the reference interpolated at their times (time-sorted)."""
 
     time: F64
     """``(M,)`` times of the pairs, non-decreasing."""
@@ -94,35 +96,52 @@ class Association:
     reference: F64
     """``(M, 3)`` reference poses at ``time``."""
     excluded: int
-    """Poses of the sparser trajectory not evaluated: outside the other's time range, or in a
-    gap of it longer than :data:`GAP_PERIODS` of its periods."""
+    """Poses not evaluated (the estimate's; the reference's stamps where it is the sparser):
+    outside the other's time range, or in a gap of it longer than :data:`GAP_PERIODS` of its
+    periods."""
     at: str = "estimate"
-    """Whose times the pairs are at: ``"estimate"`` or ``"reference"`` (the sparser)."""
+    """``"reference"`` where the pairs are the estimate poses nearest to a sparser reference's
+    stamps, else ``"estimate"`` (every estimate pose)."""
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
 
 
 def associate(estimate: Trajectory, reference: Trajectory) -> Association:
-    """Pair the trajectories at the times of the one with fewer poses where they overlap (the
-    estimate's on a tie), the other interpolated there (module docstring)."""
+    """Pair the trajectories (module docstring): at the estimate's times, the reference
+    interpolated there; where the reference has fewer poses in their overlap, at the estimate
+    poses nearest to its stamps instead (the estimate's own poses, never interpolated)."""
     est = Trajectory(*_checked(estimate, "estimate")).sorted_by_time()
     ref = Trajectory(*_checked(reference, "reference")).sorted_by_time()
     lo, hi = max(est.times[0], ref.times[0]), min(est.times[-1], ref.times[-1])
-    in_est = np.count_nonzero((est.times >= lo) & (est.times <= hi))
-    in_ref = np.count_nonzero((ref.times >= lo) & (ref.times <= hi))
-    at_reference = in_ref < in_est
-    sparse, dense = (ref, est) if at_reference else (est, ref)
-    keep = _covered(dense.times, sparse.times)
-    time = sparse.times[keep]
-    own = sparse.poses[keep]
-    other = interpolate_poses(dense.times, dense.poses, time) if time.size else np.empty((0, 3))
+    in_est = np.unique(est.times[(est.times >= lo) & (est.times <= hi)]).size  # distinct times
+    in_ref = np.unique(ref.times[(ref.times >= lo) & (ref.times <= hi)]).size
+    if in_ref < in_est:  # a sparse reference: one estimate pose per stamp the estimate holds
+        stamps = ref.times[_covered(est.times, ref.times)]
+        right = np.clip(np.searchsorted(est.times, stamps), 0, est.times.size - 1)
+        left = np.clip(right - 1, 0, est.times.size - 1)
+        nearest = np.where(
+            np.abs(est.times[left] - stamps) <= np.abs(est.times[right] - stamps), left, right
+        )
+        rows = np.unique(nearest)
+        rows = rows[_covered(ref.times, est.times[rows])]
+        time = est.times[rows]
+        reference_poses = interpolate_poses(ref.times, ref.poses, time)
+        return Association(
+            time=time,
+            estimate=est.poses[rows],
+            reference=reference_poses if time.size else np.empty((0, 3)),
+            excluded=int(ref.times.size - time.size),
+            at="reference",
+        )
+    keep = _covered(ref.times, est.times)
+    time = est.times[keep]
+    other = interpolate_poses(ref.times, ref.poses, time) if time.size else np.empty((0, 3))
     return Association(
         time=time,
-        estimate=other if at_reference else own,
-        reference=own if at_reference else other,
+        estimate=est.poses[keep],
+        reference=other,
         excluded=int(np.count_nonzero(~keep)),
-        at="reference" if at_reference else "estimate",
     )
 
 
@@ -359,6 +378,12 @@ def _require_matches(
             f"{sparse}: none of its poses lies within the time span of {dense} or between two of "
             f"its poses at most {GAP_PERIODS:g} of its periods apart ({spans}): "
             f"{_unit_hint(est, ref, estimate_name, reference_name) or 'is it the same log?'}"
+        )
+    if association.at == "reference":  # paired at the sparse reference's stamps
+        raise DataError(
+            f"{reference_name}: only {distinct} of its stamps lie within {estimate_name}'s poses "
+            f"({spans}); ATE and RPE need at least {MIN_MATCHED_POSES} matched poses at "
+            "distinct times"
         )
     raise DataError(
         f"{estimate_name}: only {distinct} pose time(s) match {reference_name} ({spans}); ATE "
