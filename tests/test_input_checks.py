@@ -271,8 +271,15 @@ def test_a_jump_in_the_odom_messages_names_the_line(tmp_path, capsys):
         lines.append(f"ODOM {x} {p[1]} {p[2]} 0 0 0 {100.05 + 0.1 * k} h {100.05 + 0.1 * k}")
     log = write_carmen(tmp_path, lines)
     assert main(["run", str(log), "--out", str(tmp_path / "r"), *RUN]) == 2
-    assert f"{log}:43: ODOM moves 50.05 m from line 41 in 0.1 s" in one_line_error(capsys)
+    line = one_line_error(capsys)
+    assert f"{log}:43: ODOM moves 50.05 m from line 41 in 0.1 s" in line
+    assert line.endswith(
+        'robot.odometry_sync = "scan" reads the poses written with the scans instead of these messages'
+    )
     assert not (tmp_path / "r").exists()
+    # a run that does not read the messages is not refused for them (review)
+    scan_poses = ["--set", 'robot.odometry_sync="scan"']
+    assert main(["run", str(log), "--out", str(tmp_path / "r"), *RUN, *scan_poses]) == 0
 
 
 @pytest.mark.parametrize(

@@ -198,7 +198,9 @@ def odometry_jump(log: Log, config: Config) -> str | None:
     if scans is not None and scans.odometry is not None:
         found = first_jump(scans.time, scans.odometry[:, :2], max_speed)
         if found is None:
-            return _message_jump(log, advice, max_speed)
+            if config.robot.odometry == "laser" or config.robot.odometry_sync == "scan":
+                return None  # the run reads the poses written with the scans, or no odometry
+            return _message_jump(log, advice + _SCAN_POSES_HINT, max_speed)
         k, dist, dt = found
         source = log.source or Path(log.name)
         if scans.lines is not None:
@@ -220,8 +222,8 @@ def odometry_jump(log: Log, config: Config) -> str | None:
             f"{dist:.4g} m from the reading before in {dt:.3g} s "
             f"({dist / max(dt, 1e-9):.3g} m/s), {advice}"
         )
-    if log.kind == "carmen":  # raw scans without poses: the ODOM messages are the odometry
-        return _message_jump(log, advice, max_speed)
+    if log.kind == "carmen" and config.robot.odometry != "laser":  # raw scans without poses:
+        return _message_jump(log, advice, max_speed)  # the ODOM messages are the odometry
     if log.encoders is not None:
         from slam.odometry import wheel_travel
 
@@ -237,6 +239,12 @@ def odometry_jump(log: Log, config: Config) -> str | None:
             f"{dist:.4g} m in {dt:.3g} s ({dist / max(dt, 1e-9):.3g} m/s), {advice}"
         )
     return None
+
+
+_SCAN_POSES_HINT = (
+    '; robot.odometry_sync = "scan" reads the poses written with the scans instead of these '
+    "messages"
+)
 
 
 def _message_jump(log: Log, advice: str, max_speed: float) -> str | None:
