@@ -470,10 +470,17 @@ def _check_memory(
 
     Maps over the whole of the odometry's extent may not fit where the run would: a drifting
     odometry spans more than the map will (mit-killian's 599 × 521 m for a 275 × 216 m map,
-    4.4 GiB estimated where the run peaks at 0.7 GiB). That is one :class:`DataWarning`, and
-    the run goes on: the maps grow as the trajectory needs, and a growth past the limit is an
-    error then (:func:`slam.mapping._check_growth`)."""
-    from slam.budget import check_run_memory, format_bytes, memory_limit, run_memory
+    4.4 GiB estimated where the run peaks at 0.7 GiB). At the default share or above that is one
+    :class:`DataWarning`, and the run goes on: the maps grow as the trajectory needs, and a
+    growth past the default share is an error then (:func:`slam.mapping._check_growth`); a
+    smaller ``checks.max_memory_share``, which those checks do not read, refuses it as before."""
+    from slam.budget import (
+        DEFAULT_MEMORY_SHARE,
+        check_run_memory,
+        format_bytes,
+        memory_limit,
+        run_memory,
+    )
     from slam.io.plausibility import DataWarning
 
     span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
@@ -484,16 +491,19 @@ def _check_memory(
             "; laser odometry that fits no scan for a while can run away: "
             'docs/slam.md, "A robot without odometry"'
         )
-    total, limit = sum(components.values()), memory_limit(config.checks.max_memory_share)
+    share = config.checks.max_memory_share
+    total, limit = sum(components.values()), memory_limit(share)
     if total <= limit:
         return
+    if share < DEFAULT_MEMORY_SHARE:  # the maps' growth is checked at the default share only
+        check_run_memory(extent + ")", components, config)
     smallest = run_memory(config, scans, beams, 0.0, 0.0, range_max)
     check_run_memory(f"{extent}; with maps of their smallest size)", smallest, config)
     warnings.warn(
         f"{extent}): maps over all of it would need about {format_bytes(total)}, more than the "
         f"limit of {format_bytes(limit)} (checks.max_memory_share); going on: the maps grow only "
-        "as far as the trajectory needs (a drifting odometry spans more), and a growth past the "
-        "limit stops the run",
+        "as far as the trajectory needs (a drifting odometry spans more), and a map whose growth "
+        f"alone would pass {DEFAULT_MEMORY_SHARE:g} of this machine's memory stops the run",
         DataWarning,
         stacklevel=2,
     )

@@ -532,6 +532,12 @@ def test_maps_over_a_drifting_odometry_warn_instead_of_refusing(monkeypatch):
     assert warning.category is DataWarning
     assert str(warning.message).startswith("bldg (its odometry spans 600.0 m × 520.0 m): maps over")
     assert "going on" in str(warning.message)
+    # a smaller share than the default, which the maps' growth checks do not read: refused
+    lower = dataclasses.replace(
+        config, checks=dataclasses.replace(config.checks, max_memory_share=0.2)
+    )
+    with pytest.raises(UsageError, match=r"^bldg \(its odometry spans 600.0 m × 520.0 m\): rbpf"):
+        _check_memory("bldg", 1000, 361, drifted, 80.0, lower)
     monkeypatch.setattr(slam.budget, "memory_limit", lambda share=0.5: int(small / 2))
     with pytest.raises(UsageError, match=r"with maps of their smallest size\): rbpf with 30"):
         _check_memory("bldg", 1000, 361, drifted, 80.0, config)
