@@ -471,7 +471,9 @@ class ScanSequence:
             and scan.angles.shape == last.shape
             and np.array_equal(scan.angles, last, equal_nan=True)
         ):  # one array for a laser's scans: a driver's angles, copied into each Scan, would
-            # cost 8 bytes a reading for the whole run (415 MB over 48,000 1081-beam scans)
+            # cost 8 bytes a reading for the whole run (415 MB over 48,000 1081-beam scans);
+            # read-only, so that writing into one scan's angles cannot change another's
+            last.flags.writeable = False
             object.__setattr__(scan, "angles", last)
         if k == self._times.shape[0]:
             self._times = np.concatenate([self._times, np.empty(k)])

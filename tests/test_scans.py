@@ -239,3 +239,5 @@ def test_the_scans_of_one_laser_share_one_angle_array():
     assert seq.scan(1).angles is first and seq.scan(2).angles is first
     assert seq.scan(3).angles is not first  # other beams keep their own
     np.testing.assert_array_equal(seq.scan(1).angles, angles)
+    with pytest.raises(ValueError, match="read-only"):  # (review) no write reaches another scan
+        seq.scan(2).angles[0] = 0.5
