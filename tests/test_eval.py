@@ -287,3 +287,14 @@ def test_a_noisy_estimate_does_not_score_better_against_a_sparser_reference():
         )
         ate_at[hz] = result["ate_rmse"]
     assert ate_at[39.0] == pytest.approx(ate_at[40.0], rel=0.02)
+
+
+def test_another_epoch_is_not_called_another_unit():
+    """Review: times from 0 against Unix seconds (t and t + 1.7e9) were called microseconds."""
+    times = np.arange(0.0, 1800.0, 1.0)
+    poses = np.zeros((times.size, 3))
+    with pytest.raises(DataError) as info:
+        evaluate_against_reference(
+            Trajectory(times, poses), Trajectory(times + 1.7e9, poses), reference_name="gt.tum"
+        )
+    assert "look like" not in str(info.value) and "is it the same log?" in str(info.value)

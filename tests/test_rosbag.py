@@ -75,6 +75,13 @@ def test_detect_format_rejects_what_it_cannot_read(tmp_path):
     bom.write_bytes(b"\xef\xbb\xbf# log\nODOM 0 0 0 0 0 0 1 h 1\n")
     with pytest.raises(DataError, match=r"bom\.clf:1: a UTF-8 byte-order mark"):
         detect_format(bom)
+    import gzip  # (review) inside a gzip too, as every benchmark log is
+
+    for name, raw, said in (("latin", latin, "non-UTF-8 byte 0xe9"), ("bom", bom, "order mark")):
+        packed = tmp_path / f"{name}.clf.gz"
+        packed.write_bytes(gzip.compress(raw.read_bytes()))
+        with pytest.raises(DataError, match=f"{said}.* \\(inside the gzip\\)"):
+            detect_format(packed)
     db = tmp_path / "bag_0.db3"
     db.write_bytes(b"SQLite format 3\x00" + bytes(100))
     with pytest.raises(DataError, match="SQLite database"):

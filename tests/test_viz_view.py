@@ -118,6 +118,9 @@ def test_view_web_serves_on_loopback_and_prints_the_url(recording):
             assert "Access-Control-Allow-Origin" not in response.headers  # no other site's
         with pytest.raises(urllib.error.HTTPError, match="404"):
             urllib.request.urlopen(f"http://127.0.0.1:{file_port}/config.toml", timeout=10)
+        rebound = urllib.request.Request(url, headers={"Host": f"attacker.example:{file_port}"})
+        with pytest.raises(urllib.error.HTTPError, match="403"):  # (review) DNS rebinding
+            urllib.request.urlopen(rebound, timeout=10)
         assert listeners(port) == {LOOPBACK_HEX}
         assert listeners(file_port) == {LOOPBACK_HEX}
         # and the viewer idles: no gRPC server whose loop spins (it took a whole core, ~2 s)

@@ -341,8 +341,11 @@ def _unit_hint(est: F64, ref: F64, estimate_name: str, reference_name: str) -> s
     """'X's times look like nanoseconds …' when one trajectory's times are about 1e3, 1e6 or 1e9
     times the other's, else ''."""
     a, b = float(np.median(np.abs(est))), float(np.median(np.abs(ref)))
-    if min(a, b) <= 0:
+    span_a, span_b = float(np.ptp(est)), float(np.ptp(ref))
+    if min(a, b, span_a, span_b) <= 0:
         return ""
+    if abs(math.log10((span_a / span_b) / (a / b))) > 0.3:
+        return ""  # another unit stretches the spans too; another epoch (t and t + 1.7e9) not
     big, small = (estimate_name, reference_name) if a > b else (reference_name, estimate_name)
     power = math.log10(max(a, b) / min(a, b)) / 3
     unit = {1: "milliseconds", 2: "microseconds", 3: "nanoseconds"}.get(round(power))

@@ -94,6 +94,9 @@ def detect_format(path: Path) -> str:
         raise DataError(f"{path}: an SQLite database (a ROS 2 bag's storage file?); {hint}")
     if head.startswith(GZIP_MAGIC):
         inner = _gunzip_head(head)
+        problem = None if inner is None else _text_problem(path, inner, " (inside the gzip)")
+        if problem is not None:
+            raise DataError(problem)
         if inner is None or not _looks_like_text(inner):
             raise DataError(
                 f"{path}: a gzip file whose content is not text; expected a gzipped CARMEN log"
@@ -101,15 +104,11 @@ def detect_format(path: Path) -> str:
         return "carmen"
     if not head:
         raise DataError(f"{path}: empty file (expected {_ACCEPTED})")
-    if head.startswith(b"\xef\xbb\xbf"):
-        raise DataError(
-            f"{path}:1: a UTF-8 byte-order mark before the first line; a CARMEN log is plain "
-            "text: save it without the mark"
-        )
+    problem = _text_problem(path, head)
+    if problem is not None:
+        raise DataError(problem)
     if _looks_like_text(head):
         return "carmen"
-    if _looks_like_text(head.decode("latin-1").encode("utf-8")):  # text, but not UTF-8
-        raise DataError(f"{path}: {_first_non_utf8(head)}; a CARMEN log is UTF-8 (ASCII) text")
     kind = "a zip archive (.npz?)" if head.startswith(ZIP_MAGIC) else "binary data"
     raise DataError(
         f"{path}: unknown format: found {kind} starting with {head[:8]!r}; expected {_ACCEPTED}"
@@ -139,6 +138,19 @@ def _gunzip_head(head: bytes) -> bytes | None:
         return zlib.decompressobj(wbits=31).decompress(head, _PEEK)
     except zlib.error:
         return None
+
+
+def _text_problem(path: Path, data: bytes, where: str = "") -> str | None:
+    """What keeps text that is almost a CARMEN log from being one (a UTF-8 byte-order mark,
+    another encoding than UTF-8), as a message, else ``None``."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        return (
+            f"{path}:1: a UTF-8 byte-order mark before the first line{where}; a CARMEN log is "
+            "plain text: save it without the mark"
+        )
+    if not _looks_like_text(data) and _looks_like_text(data.decode("latin-1").encode("utf-8")):
+        return f"{path}: {_first_non_utf8(data)}{where}; a CARMEN log is UTF-8 (ASCII) text"
+    return None
 
 
 def _first_non_utf8(data: bytes) -> str:

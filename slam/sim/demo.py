@@ -1,7 +1,7 @@
 """The demo dataset: a simulated dataset20-scale log generated once into the cache.
 
 ``slam run demo`` calls :func:`ensure_demo` with the cache folder (``$SLAM_CACHE_DIR``, else
-``<data dir>/cache``, else ``~/.cache/slam``). The first call generates the dataset (≈124 s of
+``$XDG_CACHE_HOME/slam``, else ``~/.cache/slam``; never the data directory). The first call generates the dataset (≈124 s of
 encoders, IMU, 4960 lidar scans, Kinect frames, plus ground truth) and renames it into place when
 complete; later calls return the existing folder. The folder name carries the generator version,
 seed and Kinect rate, so a new generator never reuses an old cache.

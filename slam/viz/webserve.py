@@ -7,7 +7,9 @@ recording itself and no gRPC server is started, so ``slam view --web`` serves th
 passes its URL. :class:`RecordingServer` answers ``GET``/``HEAD`` of that one path (anything else
 is 404), in a daemon thread, on 127.0.0.1 only; a request from one of the web viewer's own pages
 (``Origin`` ``http://127.0.0.1:PORT`` or ``http://localhost:PORT``) gets the CORS header that
-lets the page read the answer, other origins get none.
+lets the page read the answer, other origins get none; a request whose ``Host`` is not
+``127.0.0.1:PORT`` or ``localhost:PORT`` is refused (403), so that a page that made another name
+resolve to 127.0.0.1 (DNS rebinding) cannot read the recording either.
 """
 
 from __future__ import annotations
@@ -69,6 +71,10 @@ def _handler(recording: Path, path: str, origins: frozenset[str]) -> type[BaseHT
             self._answer(body=False)
 
         def _answer(self, body: bool) -> None:
+            port = self.server.server_address[1]
+            if self.headers.get("Host") not in (f"{LOOPBACK}:{port}", f"localhost:{port}"):
+                self.send_error(HTTPStatus.FORBIDDEN)  # another name for 127.0.0.1: rebinding
+                return
             if self.path.split("?", 1)[0] != path:
                 self.send_error(HTTPStatus.NOT_FOUND)
                 return
