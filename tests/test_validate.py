@@ -147,10 +147,7 @@ def test_run_memory_estimate_refuses_before_allocating(carmen_dir, tmp_path, cap
                  "--no-record"])  # fmt: skip
     assert code == 2
     line = one_line_error(capsys)
-    said = (
-        "intel (its odometry spans 0.0 m × 0.0 m; with maps of their smallest size): rbpf with "
-        "100000 particles (scans 70.3 KiB"
-    )
+    said = "intel (its odometry spans 0.0 m × 0.0 m): rbpf with 100000 particles (scans 70.3 KiB"
     assert said in line
     assert "checks.max_memory_share); use fewer particles (--particles)" in line
 
