@@ -14,10 +14,13 @@ overhead of the interpreter and libraries is not part of them.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import ctypes
 import ctypes.util
 import functools
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,6 +31,27 @@ if TYPE_CHECKING:
 
 DEFAULT_MEMORY_SHARE = 0.5
 """Share of the physical memory one command may plan to use (``checks.max_memory_share``)."""
+
+_GROWTH_SHARE: contextvars.ContextVar[float] = contextvars.ContextVar(
+    "growth_share", default=DEFAULT_MEMORY_SHARE
+)
+
+
+@contextlib.contextmanager
+def growth_share(share: float) -> Iterator[None]:
+    """Within the block, a map's growth is checked against ``share`` of the machine's memory
+    (the run's ``checks.max_memory_share``; :func:`growth_limit_share` outside any block)."""
+    token = _GROWTH_SHARE.set(float(share))
+    try:
+        yield
+    finally:
+        _GROWTH_SHARE.reset(token)
+
+
+def growth_limit_share() -> float:
+    """The share a map's growth is checked against here (:func:`growth_share`)."""
+    return _GROWTH_SHARE.get()
+
 
 _CGROUP_LIMITS = (
     Path("/sys/fs/cgroup/memory.max"),

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.budget import check_memory
+from slam.budget import check_memory, growth_limit_share
 from slam.config import MapConfig
 from slam.grid_geometry import GridGeometry
 from slam.io.atomic import write_npz
@@ -47,15 +47,19 @@ F64 = NDArray[np.float64]
 
 
 def _check_growth(nbytes: float, what: str, width_m: float, height_m: float) -> None:
-    """Refuse a map allocation larger than the memory budget (:mod:`slam.budget`): the run's
-    up-front estimate covers maps around the odometry, so only a trajectory that left that area
-    (a diverged filter, corrupt odometry) gets here."""
+    """Refuse a map allocation larger than the memory budget (:mod:`slam.budget`: the run's
+    ``checks.max_memory_share`` within :func:`slam.budget.growth_share`): the run's up-front
+    estimate covers maps around the odometry, so only a trajectory that left that area (a
+    diverged filter, corrupt odometry) or a drifting odometry's run that was let go on gets
+    here."""
     check_memory(
         nbytes,
         f"{what} of {width_m:.0f} m × {height_m:.0f} m",
         "the trajectory left the area the odometry covers (a diverged filter or corrupt "
         "odometry), or scans reach that far (ranges in millimetres, not metres? set range_max "
         "or lidar.range_max for a laser's longest reading); check the configuration",
+        share=growth_limit_share(),
+        setting="checks.max_memory_share",
     )
 
 

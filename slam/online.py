@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from slam.budget import growth_share
 from slam.config import Config, config_for
 from slam.errors import ConfigError, DataError, UsageError
 from slam.geometry import compose, transform_points
@@ -311,12 +312,14 @@ class Slam:
         self._given = given
         self._running_period.add(scan.time)
         start = time.perf_counter()
-        if self._filter is None:
-            self._filter = make_filter(self.scans, self.config, self._rng)
-            outcome = self._filter.first
-        else:
-            period = self._scan_period
-            outcome = self._filter.step(k, self._running_period.value if period is None else period)
+        with growth_share(self.config.checks.max_memory_share):
+            if self._filter is None:
+                self._filter = make_filter(self.scans, self.config, self._rng)
+                outcome = self._filter.first
+            else:
+                period = self._scan_period
+                running = self._running_period.value if period is None else period
+                outcome = self._filter.step(k, running)
         self._seconds["filter"] += time.perf_counter() - start
         estimate = self._estimate(outcome)
         if self._observer is not None:
@@ -463,13 +466,15 @@ class Slam:
             raise UsageError("Slam.finish: no scan was processed (call update() first)")
         self._finished = True
         start = time.perf_counter()
-        output = self._filter.finish()
+        with growth_share(self.config.checks.max_memory_share):
+            output = self._filter.finish()
         # the particles' maps are not needed after the filter: the stages build their own
         self._filter = None
         if self._observer is not None:
             self._observer.on_filter_end()
         self._seconds["filter"] += time.perf_counter() - start
-        output = run_stages(output, self.stages, self.config, self._seconds)
+        with growth_share(self.config.checks.max_memory_share):
+            output = run_stages(output, self.stages, self.config, self._seconds)
         if output.poses is None:
             raise UsageError("Slam.finish: the stages placed no scan (keep BetweenUpdates)")
         stats = dict(output.stats)

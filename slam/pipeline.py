@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import slam.jit_background as jit_background
-from slam.budget import release_free_memory
+from slam.budget import growth_share, release_free_memory
 from slam.config import Config, Override, dumps, load_config, override_list, seed_value
 from slam.errors import UsageError
 from slam.io import sources
@@ -470,17 +470,10 @@ def _check_memory(
 
     Maps over the whole of the odometry's extent may not fit where the run would: a drifting
     odometry spans more than the map will (mit-killian's 599 × 521 m for a 275 × 216 m map,
-    4.4 GiB estimated where the run peaks at 0.7 GiB). At the default share or above that is one
-    :class:`DataWarning`, and the run goes on: the maps grow as the trajectory needs, and a
-    growth past the default share is an error then (:func:`slam.mapping._check_growth`); a
-    smaller ``checks.max_memory_share``, which those checks do not read, refuses it as before."""
-    from slam.budget import (
-        DEFAULT_MEMORY_SHARE,
-        check_run_memory,
-        format_bytes,
-        memory_limit,
-        run_memory,
-    )
+    4.4 GiB estimated where the run peaks at 0.7 GiB). That is one :class:`DataWarning`, and
+    the run goes on: the maps grow as the trajectory needs, and a growth past the same limit is
+    an error then (:func:`slam.mapping._check_growth`, within :func:`slam.budget.growth_share`)."""
+    from slam.budget import check_run_memory, format_bytes, memory_limit, run_memory
     from slam.io.plausibility import DataWarning
 
     span = poses[:, :2].max(axis=0) - poses[:, :2].min(axis=0)
@@ -495,15 +488,13 @@ def _check_memory(
     total, limit = sum(components.values()), memory_limit(share)
     if total <= limit:
         return
-    if share < DEFAULT_MEMORY_SHARE:  # the maps' growth is checked at the default share only
-        check_run_memory(extent + ")", components, config)
     smallest = run_memory(config, scans, beams, 0.0, 0.0, range_max)
     check_run_memory(f"{extent}; with maps of their smallest size)", smallest, config)
     warnings.warn(
         f"{extent}): maps over all of it would need about {format_bytes(total)}, more than the "
         f"limit of {format_bytes(limit)} (checks.max_memory_share); going on: the maps grow only "
         "as far as the trajectory needs (a drifting odometry spans more), and a map whose growth "
-        f"alone would pass {DEFAULT_MEMORY_SHARE:g} of this machine's memory stops the run",
+        "alone would pass the limit stops the run",
         DataWarning,
         stacklevel=2,
     )
@@ -547,7 +538,8 @@ def _dead_reckoning(log: Log, config: Config, base: dict[str, Any]) -> Result:
             trajectory = _up_to_scan(trajectory, log, int(seq.indices[-1]))
         reach = float(seq.scan(0).range_max)  # type: ignore[arg-type]
         _check_memory(log.name, len(seq), seq.num_beams, seq.odometry, reach, config)
-        grid = build_map(seq, seq.odometry, np.arange(len(seq)), config)
+        with growth_share(config.checks.max_memory_share):  # as Slam's maps are checked
+            grid = build_map(seq, seq.odometry, np.arange(len(seq)), config)
     wall = time.perf_counter() - start
     base.update(
         poses=len(trajectory),

@@ -147,7 +147,10 @@ def test_run_memory_estimate_refuses_before_allocating(carmen_dir, tmp_path, cap
                  "--no-record"])  # fmt: skip
     assert code == 2
     line = one_line_error(capsys)
-    said = "intel (its odometry spans 0.0 m × 0.0 m): rbpf with 100000 particles (scans 70.3 KiB"
+    said = (
+        "intel (its odometry spans 0.0 m × 0.0 m; with maps of their smallest size): rbpf with "
+        "100000 particles (scans 70.3 KiB"
+    )
     assert said in line
     assert "checks.max_memory_share); use fewer particles (--particles)" in line
 
@@ -529,12 +532,15 @@ def test_maps_over_a_drifting_odometry_warn_instead_of_refusing(monkeypatch):
     assert warning.category is DataWarning
     assert str(warning.message).startswith("bldg (its odometry spans 600.0 m × 520.0 m): maps over")
     assert "going on" in str(warning.message)
-    # a smaller share than the default, which the maps' growth checks do not read: refused
-    lower = dataclasses.replace(
-        config, checks=dataclasses.replace(config.checks, max_memory_share=0.2)
-    )
-    with pytest.raises(UsageError, match=r"^bldg \(its odometry spans 600.0 m × 520.0 m\): rbpf"):
-        _check_memory("bldg", 1000, 361, drifted, 80.0, lower)
+    # the maps' growth is then checked against the run's own share (review: it read 0.5)
+    from slam.budget import growth_share
+    from slam.mapping import OccupancyGrid
+
+    grid = OccupancyGrid(config.map)
+    monkeypatch.setattr(slam.budget, "memory_limit", lambda share=0.5: int(share * 2**30))
+    with growth_share(0.01), pytest.raises(UsageError, match=r"checks\.max_memory_share\)"):
+        grid.ensure_contains(-200.0, -200.0, 200.0, 200.0)  # 8000 × 8000 cells, 256 MB
+    grid.ensure_contains(-200.0, -200.0, 200.0, 200.0)  # within 0.5 of the same machine: grows
     monkeypatch.setattr(slam.budget, "memory_limit", lambda share=0.5: int(small / 2))
     with pytest.raises(UsageError, match=r"with maps of their smallest size\): rbpf with 30"):
         _check_memory("bldg", 1000, 361, drifted, 80.0, config)
