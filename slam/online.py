@@ -466,14 +466,13 @@ class Slam:
             raise UsageError("Slam.finish: no scan was processed (call update() first)")
         self._finished = True
         start = time.perf_counter()
-        with growth_share(self.config.checks.max_memory_share):
+        with growth_share(self.config.checks.max_memory_share):  # the maps' growth checks
             output = self._filter.finish()
-        # the particles' maps are not needed after the filter: the stages build their own
-        self._filter = None
-        if self._observer is not None:
-            self._observer.on_filter_end()
-        self._seconds["filter"] += time.perf_counter() - start
-        with growth_share(self.config.checks.max_memory_share):
+            # the particles' maps are not needed after the filter: the stages build their own
+            self._filter = None
+            if self._observer is not None:
+                self._observer.on_filter_end()
+            self._seconds["filter"] += time.perf_counter() - start
             output = run_stages(output, self.stages, self.config, self._seconds)
         if output.poses is None:
             raise UsageError("Slam.finish: the stages placed no scan (keep BetweenUpdates)")

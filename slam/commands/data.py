@@ -266,6 +266,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from slam.calibration import calibrate_mount, measure_beam_step
     from slam.commands.run import overrides_from
     from slam.config import load_config
+    from slam.io.plausibility import check_plausibility
     from slam.io.sources import resolve
     from slam.pipeline import load_source
     from slam.scans import LogScans
@@ -277,8 +278,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
     source = load_source(args.name, data_dir, config, bag=bag_options_from(args))
     config = source.configured(config)  # the beam step measured when it loaded, if applied
     log = source.log
-    from slam.io.plausibility import check_plausibility
-
     doubts = check_plausibility(log, config)  # what `slam run` refuses, refused here too
     with warnings.catch_warnings(record=True) as caught:  # said as `slam run` says them
         warnings.simplefilter("always")

@@ -126,21 +126,19 @@ def associate(estimate: Trajectory, reference: Trajectory) -> Association:
         rows = np.unique(nearest)
         rows = rows[_covered(ref.times, est.times[rows])]
         time = est.times[rows]
-        reference_poses = interpolate_poses(ref.times, ref.poses, time)
         return Association(
             time=time,
             estimate=est.poses[rows],
-            reference=reference_poses if time.size else np.empty((0, 3)),
+            reference=interpolate_poses(ref.times, ref.poses, time),
             excluded=int(ref.times.size - time.size),
             at="reference",
         )
     keep = _covered(ref.times, est.times)
     time = est.times[keep]
-    other = interpolate_poses(ref.times, ref.poses, time) if time.size else np.empty((0, 3))
     return Association(
         time=time,
         estimate=est.poses[keep],
-        reference=other,
+        reference=interpolate_poses(ref.times, ref.poses, time),
         excluded=int(np.count_nonzero(~keep)),
     )
 
