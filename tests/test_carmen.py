@@ -238,6 +238,45 @@ def test_robotlaser1_carries_its_geometry(tmp_path):
     assert log.meta["robotlaser_scans"] == 2
 
 
+def test_robotlaser1_angles_are_one_row_unless_the_lines_differ(tmp_path):
+    """Lines that declare the same start and resolution share one angle row (a long log would
+    otherwise hold an angle per reading); lines that differ keep an angle row per scan."""
+    same = [robotlaser([1.0, 2.0, 3.0], t=t) for t in (1.0, 2.0, 3.0)]
+    assert load_carmen(write(tmp_path, same)).scans.angles.shape == (3,)
+    differ = [*same, robotlaser([1.0, 2.0, 3.0], start=-0.5, t=4.0)]
+    angles = load_carmen(write(tmp_path, differ)).scans.angles
+    assert angles.shape == (4, 3)
+    np.testing.assert_allclose(angles[0], [-1.0, -0.5, 0.0])
+    np.testing.assert_allclose(angles[3], [-0.5, 0.0, 0.5])
+
+
+@pytest.mark.parametrize("kind", ["ROBOTLASER1", "FLASER"])
+def test_a_long_log_loads_in_a_few_bytes_a_reading(tmp_path, kind):
+    """The loader lets the text, its lines and each layout's table go as soon as the next step
+    holds what it needs, and converts and judges the readings (and FLASER's no-echo code) a
+    block at a time: traced at its peak, a load costs 18 (ROBOTLASER1) and 17 (FLASER) bytes a
+    reading here, the lines' text while their numbers are read into the table. It cost 49 when
+    the whole text, the lines, the parser's growing buffer, a padded float64 copy, its masks and
+    (ROBOTLASER1) an angle per reading were held at once."""
+    import tracemalloc
+
+    rng = np.random.default_rng(0)
+    scans, beams = 16_000, 181
+    values = np.round(rng.uniform(0.1, 30.0, (scans, beams)), 3)
+    values[:, ::50] = 81.83  # FLASER: a no-echo code for the histogram to find
+    make = robotlaser if kind == "ROBOTLASER1" else flaser
+    path = write(tmp_path, [make(row.tolist(), t=1.0 + 0.025 * k) for k, row in enumerate(values)])
+    tracemalloc.start()
+    try:
+        log = load_carmen(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    readings = scans * beams
+    assert log.scans.ranges.shape == (scans, beams)
+    assert peak / readings < 24.0, f"{peak / readings:.1f} bytes a reading"
+
+
 def rawlaser(ranges, remissions=(), start=-1.0, res=0.5, max_range=40.0, t=1.0) -> str:
     fields = ["RAWLASER1", "0", str(start), str(res * (len(ranges) - 1)), str(res)]
     fields += [str(max_range), "0.01", "0", str(len(ranges)), *map(str, ranges)]
@@ -574,6 +613,35 @@ def test_no_return_code_is_the_pile_at_the_top_of_the_histogram():
     assert no_return_code(np.r_[genuine, 85.0]) is None  # one long reading is not a code
     assert no_return_code(np.full(10, np.nan)) is None
     assert no_return_code(np.full(500, 30.0)) is None  # nothing below the pile
+
+
+def test_no_return_code_reads_a_log_in_blocks_as_one_array(monkeypatch):
+    """Several arrays (a log's layout groups, 2-D) judged a few hundred readings at a time give
+    the code the whole log gives at once: the pile found in a block of its own, the longest
+    reading below it in another block or in the band."""
+    import slam.io.carmen as carmen
+
+    rng = np.random.default_rng(1)
+    genuine = rng.uniform(0.2, 26.37, 6_000)
+    genuine[0] = 26.37
+    clinic = np.r_[rng.uniform(0.5, 81.82, 6_000), 81.82, np.full(60, 81.83), np.full(900, 81.91)]
+    aces = np.r_[rng.uniform(0.3, 49.91, 6_000), 49.91, np.full(100, 50.0)]
+    cases = {
+        "far code": np.r_[genuine, np.full(300, 81.83)],
+        "code in the band": clinic,
+        "code above the band's floor": aces,
+        "no pile": np.r_[genuine, 85.0],
+    }
+    whole = {name: carmen.no_return_code(r) for name, r in cases.items()}
+    assert whole["far code"] == pytest.approx(54.1)
+    assert whole["code in the band"] == pytest.approx(81.825)
+    assert whole["code above the band's floor"] == pytest.approx(49.955)
+    assert whole["no pile"] is None
+    monkeypatch.setattr(carmen, "NO_RETURN_BLOCK", 256)
+    for name, r in cases.items():
+        cut = r.size // 3 // 7 * 7
+        parts = [r[:cut].reshape(-1, 7), r[cut:]]
+        assert carmen.no_return_code(parts) == whole[name], name
 
 
 @pytest.mark.parametrize(
