@@ -270,3 +270,19 @@ def test_inspect_says_a_registry_name_is_not_a_path(capsys, tmp_path, monkeypatc
         "slam: error: slam data inspect: 'intel' is a registry dataset, not a path: "
         "`slam data verify intel` summarises it, or give its file\n"
     )
+
+
+def test_verify_says_a_path_is_not_a_registry_name(capsys, tmp_path, monkeypatch):
+    """The bug: `slam data verify run.bag` said "unknown dataset 'run.bag'; known datasets: …",
+    as if the file were a misspelt name; a name that is neither stays that error."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "run.bag").write_bytes(b"")
+    code, _, err = _run(capsys, "data", "verify", "run.bag")
+    assert code == 2
+    assert err == (
+        "slam: error: slam data verify: 'run.bag' is a path, not a registry dataset: "
+        "`slam data inspect run.bag` summarises a log file, `slam data list` names the "
+        "datasets verify checks\n"
+    )
+    code, _, err = _run(capsys, "data", "verify", "nosuch")
+    assert code == 2 and "unknown dataset 'nosuch'; known datasets: " in err

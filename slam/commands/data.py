@@ -185,6 +185,7 @@ def run_verify(args: argparse.Namespace) -> int:
     from slam.io.registry import verify_dataset
 
     data_dir = data_dir_from(args)
+    _refuse_a_path(args.name)
     report = verify_dataset(args.name, data_dir)
     if args.json:
         print(json.dumps(report, indent=2))
@@ -196,6 +197,21 @@ def run_verify(args: argparse.Namespace) -> int:
             + "; ".join(report["problems"])
         )
     return 0
+
+
+def _refuse_a_path(name: str) -> None:
+    """A file or folder given to ``slam data verify``, which takes a registry name: say which
+    command reads a path (the mirror of ``slam data inspect`` given a name)."""
+    from slam.errors import UsageError
+    from slam.io.registry import load_registry
+
+    path = Path(name)
+    if name not in load_registry() and (path.exists() or path.is_symlink()):
+        raise UsageError(
+            f"slam data verify: {name!r} is a path, not a registry dataset: "
+            f"`slam data inspect {name}` summarises a log file, `slam data list` names the "
+            "datasets verify checks"
+        )
 
 
 def _print_verify(report: dict[str, Any], data_dir: Path) -> None:
