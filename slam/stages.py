@@ -481,6 +481,8 @@ class Recovery:
         result = other if kept == 1 else output
         stats = {
             **result.stats,
+            # what the repair did ran either way: the record of it stays with either result
+            **{k: v for k, v in output.stats.items() if k in _REPAIR_STATS},
             "recovery_scores": [round(v, 4) if np.isfinite(v) else None for v in scores],
             "recovered": kept == 1,
         }
@@ -499,6 +501,9 @@ _FILTER_STATS = frozenset(
      "shift_probes", "gross_shifts", "peak_tiles", "peak_particle_map_mb"}
 )  # fmt: skip
 """The filter's own counters, which a result started from dead reckoning keeps."""
+
+_REPAIR_STATS = frozenset({"repair_stretches", "repair_scores", "repair_broke", "repaired"})
+"""What :class:`Repair` records, which :class:`Recovery` keeps whichever result it keeps."""
 
 
 def _redone(stage: Stage) -> bool:

@@ -416,9 +416,15 @@ def test_a_lost_filter_is_recovered_from_dead_reckoning(long_room):
     steps[:, 2] += np.radians(1.0)
     lost = accumulate(steps, truth[0])
     assert np.hypot(*(lost[:, :2] - truth[:, :2]).T).max() > 1.0
+    repaired = _output(seq, lost)  # as the repair leaves a result it ran again and did not keep
+    record = {"repair_stretches": 2, "repair_scores": [0.41, 0.43], "repair_broke": []}
+    repaired.stats.update(record, repaired=False)
     with pytest.warns(UserWarning, match="the filter lost track .* keeps that trajectory"):
-        out = stages.Recovery().run(_output(seq, lost), config)
+        out = stages.Recovery().run(repaired, config)
     assert out.stats["recovered"] is True
+    # the repair's record stays (it was dropped with the filter's result: a run that spent its
+    # time on a repair showed none in metrics.json)
+    assert {k: out.stats[k] for k in record} == record and out.stats["repaired"] is False
     before, after = out.stats["recovery_scores"]
     assert before < config.rbpf.recover_below < after
     assert after - before > 0.3
