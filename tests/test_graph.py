@@ -107,6 +107,33 @@ def test_a_wrong_loop_edge_is_down_weighted():
     assert np.abs(plain - poses)[:, :2].max() > np.abs(out - poses)[:, :2].max()
 
 
+@pytest.mark.parametrize("stride, radius", [(1, 3.0), (5, 3.0), (3, 0.7), (2, 12.0)])
+def test_loop_candidates_from_nearby_cells_are_those_of_every_earlier_node(stride, radius):
+    """The local loop candidates found by looking only at the cells around each node are those of
+    comparing it with every earlier node far enough behind (the rule written out below): a
+    random walk that comes back often, on a lattice so that equal distances (ties) occur."""
+    from slam.geometry import path_along
+    from slam.graph import _candidates
+
+    rng = np.random.default_rng(stride)
+    steps = rng.integers(-1, 2, (4000, 2)) * 0.5
+    poses = np.zeros((4001, 3))
+    poses[1:, :2] = np.cumsum(steps, axis=0)
+    poses[:, 2] = rng.uniform(-np.pi, np.pi, 4001)
+    path = path_along(poses)
+    lc = LoopConfig(stride=stride, radius=radius, min_path=10.0)
+    expected = []
+    for i in range(0, poses.shape[0], lc.stride):
+        earlier = np.flatnonzero(path[i] - path[: i + 1] >= lc.min_path)
+        if earlier.size:
+            dist = np.hypot(*(poses[earlier, :2] - poses[i, :2]).T)
+            k = int(np.argmin(dist))
+            if dist[k] <= lc.radius:
+                expected.append((int(earlier[k]), i))
+    assert len(expected) > 100
+    assert _candidates(poses, path, lc) == expected
+
+
 def test_chain_graph_is_the_chain_then_the_loops():
     poses = accumulate(np.tile([0.5, 0.0, 0.1], (3, 1)))  # 4 poses
     info = np.diag([1.0, 2.0, 3.0])
