@@ -113,6 +113,8 @@ def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
     that grows with the nodes nearby instead of all of them (17,000 nodes along mit-killian's
     path: 1.03 → 0.07 s a call, a call a round).
     """
+    if not (np.isfinite(poses[:, :2]).all() and np.isfinite(path).all()):
+        return candidates_every_node(poses, path, lc)  # no cell for a pose that is not a number
     cell = lc.radius * 1.01  # wider than the radius, whatever the rounding of the division
     grid: dict[tuple[int, int], list[int]] = {}
     behind = 0  # nodes [0, behind) are at least min_path behind node i along the path
@@ -136,6 +138,21 @@ def _candidates(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
         if not near:
             continue
         earlier = np.array(sorted(near))
+        dist = np.hypot(*(poses[earlier, :2] - poses[i, :2]).T)
+        k = int(np.argmin(dist))
+        if dist[k] <= lc.radius:
+            out.append((int(earlier[k]), i))
+    return out
+
+
+def candidates_every_node(poses: F64, path: F64, lc: LoopConfig) -> list[tuple[int, int]]:
+    """:func:`_candidates` by comparing each keyframe with every earlier node: the rule itself,
+    for poses that are not all finite (no cell holds them) and for the tests."""
+    out = []
+    for i in range(0, poses.shape[0], lc.stride):
+        earlier = np.flatnonzero(path[i] - path[: i + 1] >= lc.min_path)
+        if earlier.size == 0:
+            continue
         dist = np.hypot(*(poses[earlier, :2] - poses[i, :2]).T)
         k = int(np.argmin(dist))
         if dist[k] <= lc.radius:

@@ -250,6 +250,24 @@ def test_robotlaser1_angles_are_one_row_unless_the_lines_differ(tmp_path):
     np.testing.assert_allclose(angles[3], [-0.5, 0.0, 0.5])
 
 
+def test_a_negative_zero_start_keeps_its_sign_and_scans_come_before_odom_errors(tmp_path):
+    """Lines share one angle row only when their start and step have the same bits: a start
+    written ``-0.000000`` keeps its negative zero in the angles (as when every line had its own
+    row). And the scans' errors (here the lidar limits) are named before a bad ODOM line, in the
+    order the loader always checked them."""
+    lines = [flaser([1.0], t=1.0), robotlaser([1.0, 2.0], start=0.0, res=-0.01, t=2.0)]
+    lines.append(
+        robotlaser([1.0, 2.0], start=-0.0, res=-0.01, t=3.0).replace(" -0.0 ", " -0.000000 ", 1)
+    )
+    angles = load_carmen(write(tmp_path, lines), lidar=LidarConfig(fov_deg=180.0)).scans.angles
+    assert np.signbit(angles[2, 0]) and not np.signbit(angles[1, 0])
+    bad = write(tmp_path, [robotlaser([1.0, 2.0], max_range=30.0), "ODOM 1 2"], "bad.clf")
+    with pytest.raises(DataError, match=r"bad\.clf:2: ODOM line: expected 10 fields"):
+        load_carmen(bad)
+    with pytest.raises(ConfigError, match=r"lidar: expected range_min < range_max"):
+        load_carmen(bad, lidar=LidarConfig(range_min=40.0))
+
+
 @pytest.mark.parametrize("kind", ["ROBOTLASER1", "FLASER"])
 def test_a_long_log_loads_in_a_few_bytes_a_reading(tmp_path, kind):
     """The loader lets the text, its lines and each layout's table go as soon as the next step

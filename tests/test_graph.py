@@ -110,10 +110,11 @@ def test_a_wrong_loop_edge_is_down_weighted():
 @pytest.mark.parametrize("stride, radius", [(1, 3.0), (5, 3.0), (3, 0.7), (2, 12.0)])
 def test_loop_candidates_from_nearby_cells_are_those_of_every_earlier_node(stride, radius):
     """The local loop candidates found by looking only at the cells around each node are those of
-    comparing it with every earlier node far enough behind (the rule written out below): a
-    random walk that comes back often, on a lattice so that equal distances (ties) occur."""
+    comparing it with every earlier node far enough behind (``candidates_every_node``, the rule
+    as it was written before): a random walk that comes back often, on a lattice so that equal
+    distances (ties) occur."""
     from slam.geometry import path_along
-    from slam.graph import _candidates
+    from slam.graph import _candidates, candidates_every_node
 
     rng = np.random.default_rng(stride)
     steps = rng.integers(-1, 2, (4000, 2)) * 0.5
@@ -122,16 +123,16 @@ def test_loop_candidates_from_nearby_cells_are_those_of_every_earlier_node(strid
     poses[:, 2] = rng.uniform(-np.pi, np.pi, 4001)
     path = path_along(poses)
     lc = LoopConfig(stride=stride, radius=radius, min_path=10.0)
-    expected = []
-    for i in range(0, poses.shape[0], lc.stride):
-        earlier = np.flatnonzero(path[i] - path[: i + 1] >= lc.min_path)
-        if earlier.size:
-            dist = np.hypot(*(poses[earlier, :2] - poses[i, :2]).T)
-            k = int(np.argmin(dist))
-            if dist[k] <= lc.radius:
-                expected.append((int(earlier[k]), i))
+    expected = candidates_every_node(poses, path, lc)
     assert len(expected) > 100
     assert _candidates(poses, path, lc) == expected
+    # a pose that is not a number has no cell: the rule itself answers, as before (no crash)
+    for bad in (np.nan, np.inf):
+        odd = poses.copy()
+        odd[2000, 0] = bad
+        with np.errstate(invalid="ignore"):  # inf − inf along the path
+            odd_path = path_along(odd)
+            assert _candidates(odd, odd_path, lc) == candidates_every_node(odd, odd_path, lc)
 
 
 def test_chain_graph_is_the_chain_then_the_loops():

@@ -25,6 +25,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import sys
 import warnings
 from pathlib import Path
@@ -209,7 +210,8 @@ def _refuse_a_path(name: str) -> None:
     if name not in load_registry() and (path.exists() or path.is_symlink()):
         raise UsageError(
             f"slam data verify: {name!r} is a path, not a registry dataset: "
-            f"`slam data inspect {name}` summarises a log file, `slam data list` names the "
+            f"`slam data inspect {shlex.quote(name)}` summarises a log file, `slam data list` "
+            "names the "
             "datasets verify checks"
         )
 

@@ -38,8 +38,10 @@ exactly; on mit-csail the ``logger_timestamp`` counts from the start of logging 
 
 Parsing is vectorised: the text is split into lines once, each line is classified by its first
 token, scan lines are grouped by their layout (beam count) and each group's numeric fields are
-converted by one :func:`numpy.loadtxt` call. Only when that call fails does a bisection over the
-group find the first bad line so the error can name it.
+converted by one :func:`numpy.loadtxt` call per :data:`PARSE_ROWS` lines into one table. Only
+when a call fails does a bisection over the group find the first bad line so the error can name
+it. Each step lets go of what the next no longer needs (the text once split, a group's lines once
+its table is read), so a load holds about two copies of the log's text at its peak.
 """
 
 from __future__ import annotations
@@ -225,9 +227,9 @@ def load_carmen(
     groups = [_parse_flaser(path, n, flaser.pop(n), lidar) for n in list(flaser)]
     groups += [_parse_robotlaser(path, *key, robotlaser.pop(key)) for key in list(robotlaser)]
     groups += [_parse_rawlaser(path, *key, rawlaser.pop(key)) for key in list(rawlaser)]
-    odometry = _parse_odom(path, odom) if odom.text else None
-    del odom
     scans, offset_source = _assemble_scans(path, groups, lidar, memory_share)
+    del groups
+    odometry = _parse_odom(path, odom) if odom.text else None
 
     meta: dict[str, Any] = {
         "comments": comments,
@@ -579,9 +581,16 @@ def _parse_robotlaser(path: Path, n: int, nrem: int, lines: _Lines) -> _ScanGrou
 def _beam_angles(start: F64, res: F64, n: int) -> F64:
     """The beam angles of lines declaring ``start`` and ``res``: one ``(n,)`` row when every line
     declares the same (8 bytes a reading fewer on a long log), else ``(L, n)``; the same values."""
-    if start.size and np.all(start == start[0]) and np.all(res == res[0]):
+    same = start.size and _same_bits(start) and _same_bits(res)  # -0.0 is not 0.0 here
+    if same:
         return start[0] + res[0] * np.arange(n)
     return start[:, None] + res[:, None] * np.arange(n)[None, :]
+
+
+def _same_bits(values: F64) -> bool:
+    """Whether every value of ``values`` has the first one's bits."""
+    bits = values.view(np.int64)
+    return bool(np.all(bits == bits[0]))
 
 
 def no_return_code(ranges: F64 | Sequence[F64]) -> float | None:
