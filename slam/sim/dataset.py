@@ -75,9 +75,11 @@ MAX_DURATION_S = 3600.0
 MIN_DURATION_S = 1.0
 """Shortest log ``slam sim`` writes (s): 40 scans, enough for ``slam run`` and its ground-truth
 figures (a few hundredths of a second gave a dataset with no scan, which no run can read)."""
-SIM_BYTES_PER_SECOND = 3 << 20
-"""Memory the simulation holds per simulated second (measured 2.3 MiB/s with ``/usr/bin/time``
-on ``slam sim small --duration 180 --no-rgbd``: the 1 kHz trajectory and the scans), rounded up."""
+SIM_BYTES_PER_SECOND = 1 << 20
+"""Memory the simulation holds per simulated second (measured 0.58 MiB/s with ``/usr/bin/time``,
+``slam sim small --no-rgbd`` at 600 and 1200 s: mostly the scans, 13 bytes a reading while they
+are measured, :func:`slam.sim.sensors.simulate_lidar`; 2.3 MiB/s when they were measured in one
+whole-log pass), rounded up."""
 
 _NOISE_TABLE = 1 << 21
 _HOLE_TABLE = 1 << 20
