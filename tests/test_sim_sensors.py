@@ -249,6 +249,12 @@ def test_the_lidar_measured_in_blocks_is_the_whole_log_measured_at_once(small_sc
     for rows in (1, 7, 256):
         blocked, after_blocked = scans(rows)
         assert blocked.tobytes() == whole.tobytes() and after_blocked == after
+    # a dropout's code is a reading like any other: never beyond range_max, however short
+    short = sensors.measure_ranges(
+        np.array([[np.inf, 3.0]]), np.array([0.0, 1.0]), np.random.default_rng(0),
+        NoiseConfig(lidar_dropout=1.0), LidarSpec(range_max=0.01),
+    )  # fmt: skip
+    assert short.max() <= np.float32(0.01)
     monkeypatch.setattr(sensors, "LIDAR_ROWS", 256)
     tracemalloc.start()
     try:

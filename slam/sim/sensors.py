@@ -226,8 +226,10 @@ def measure_ranges(
     noise: NoiseConfig,
     lidar: LidarSpec = LidarSpec(),
 ) -> NDArray[np.float32]:
-    """What the Hokuyo reports for true ``ranges`` (inf: no obstacle within range): penetration,
+    """What the Hokuyo reports for true ``ranges`` ``(N, B)`` (inf: no obstacle within range)
+    at their incidences ``incidence`` (``|cos|``, broadcast to the ranges' shape): penetration,
     range noise, dropouts, no return as ``range_max``; float32 metres."""
+    incidence = np.broadcast_to(incidence, ranges.shape)
     return _measure(lambda rows: (ranges[rows], incidence[rows]), ranges.shape, rng, noise, lidar)
 
 
@@ -280,8 +282,7 @@ def _measure(
             chance[rows] = (
                 noise.lidar_dropout + noise.lidar_grazing_dropout * (1.0 - incidence) ** 4 * hit
             )
-        # float32(min(r, max)) is min(float32(r), float32(max)): rounding keeps the order
-        out[rows] = np.minimum(ranges, lidar.range_max)
+        out[rows] = np.minimum(ranges, lidar.range_max)  # a dropout may replace it below
     if chance is None:
         return out
     drop = np.empty(shape, dtype=bool)
@@ -289,8 +290,8 @@ def _measure(
         drop[rows] = rng.uniform(size=out[rows].shape) < chance[rows]
     del chance
     for rows in blocks:
-        error_codes = rng.integers(1, 20, size=out[rows].shape) / 1000.0  # below range_max
-        out[rows] = np.where(drop[rows], error_codes, out[rows])
+        error_codes = rng.integers(1, 20, size=out[rows].shape) / 1000.0
+        out[rows] = np.where(drop[rows], np.minimum(error_codes, lidar.range_max), out[rows])
     return out
 
 
