@@ -439,7 +439,7 @@ def consistent(edges: list, x: F64, path: F64, config: Config) -> list:
     Only closures whose keyframes lie within ``backend.agree_path`` of each other along the path
     can agree, so each closure is compared with those (found by the keyframes' path, sorted)
     instead of every other: the same closures kept, in time that grows with the closures
-    nearby (mit-killian read three times over: 0.43 → 0.08 s a round)."""
+    nearby (900 closures along 10 km of path: 0.42 → 0.07 s)."""
     bc = config.backend
     if len(edges) < 2:
         return []

@@ -211,8 +211,7 @@ def _refuse_a_path(name: str) -> None:
         raise UsageError(
             f"slam data verify: {name!r} is a path, not a registry dataset: "
             f"`slam data inspect {shlex.quote(name)}` summarises a log file, `slam data list` "
-            "names the "
-            "datasets verify checks"
+            "names the datasets verify checks"
         )
 
 
