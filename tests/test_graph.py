@@ -6,7 +6,7 @@ import pytest
 from slam.config import LoopConfig
 from slam.geometry import accumulate, compose, relative
 from slam.graph import chain_graph, optimize
-from slam.kernels.graph import _jacobians, edge_error, linearize, solve_system
+from slam.kernels.graph import _jacobians, _matvec, edge_error, linearize, solve_system
 
 
 def test_edge_error_is_zero_for_a_consistent_edge_and_known_otherwise():
@@ -70,6 +70,45 @@ def test_preconditioned_solver_matches_a_dense_solve():
     x, iterations = solve_system(diag, band, far, ei, ej, -grad, 200, 1e-12)
     np.testing.assert_allclose(x, expected, rtol=1e-6, atol=1e-8)
     assert iterations < 20  # the chain preconditioner leaves only the 3 loop edges to iterate on
+
+
+def test_the_default_solves_a_long_loopy_graph_to_its_tolerance():
+    """Four laps of a 400-keyframe loop with closures between the laps (as mit-killian's 1,640
+    keyframes): the chain-preconditioned solve needs over 400 iterations, which the old cap of
+    300 cut short by more than a metre; the default cap lets it reach ``solver_tolerance``."""
+    rng = np.random.default_rng(2)
+    lap, n = 400, 1600
+    step = np.tile([2 * np.pi * 20 / lap, 0.0, 2 * np.pi / lap], (n - 1, 1))
+    truth = accumulate(step)
+    drifted = accumulate(step + rng.normal(scale=[0.01, 0.01, 0.003], size=step.shape))
+    loops = [(k, k + lap * m) for k in range(0, n, 7) for m in (1, 2, 3) if k + lap * m < n]
+    ei = np.concatenate([np.arange(n - 1), [a for a, _ in loops]]).astype(np.int64)
+    ej = np.concatenate([np.arange(1, n), [b for _, b in loops]]).astype(np.int64)
+    z = np.ascontiguousarray(relative(truth[ei], truth[ej]))
+    info = np.tile(np.diag([400.0, 400.0, 4000.0]), (ei.size, 1, 1))
+    diag, band, far, grad = (
+        np.zeros((n, 3, 3)),
+        np.zeros((n - 1, 3, 3)),
+        np.zeros((ei.size, 3, 3)),
+        np.zeros((n, 3)),
+    )
+    linearize(drifted, ei, ej, z, info, np.zeros(ei.size), diag, band, far, grad)
+    diag[0] += np.eye(3) * 1e9
+    lc = LoopConfig()
+
+    def residual(x: np.ndarray) -> float:
+        return float(
+            np.linalg.norm(_matvec(diag, band, far, ei, ej, x) + grad) / np.linalg.norm(grad)
+        )
+
+    x, used = solve_system(
+        diag, band, far, ei, ej, -grad, lc.solver_iterations, lc.solver_tolerance
+    )
+    assert 300 < used < lc.solver_iterations
+    assert residual(x) <= lc.solver_tolerance
+    cut, _ = solve_system(diag, band, far, ei, ej, -grad, 300, lc.solver_tolerance)
+    assert residual(cut) > 1e-4
+    assert np.abs(cut - x).max() > 0.5
 
 
 def test_optimize_closes_a_drifted_square_loop():
