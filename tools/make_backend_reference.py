@@ -161,7 +161,7 @@ def main() -> int:
     parser.add_argument("cases", nargs="*", default=sorted(CASES))
     args = parser.parse_args()
     data_dir = resolve_data_dir()
-    cache = args.filter_output or resolve_cache_dir(data_dir) / "backend"
+    cache = args.filter_output or resolve_cache_dir() / "backend"
     REFERENCE_DIR.mkdir(parents=True, exist_ok=True)
     for name in args.cases:
         log, seed, stretches, *source = CASES[name]

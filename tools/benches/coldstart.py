@@ -32,14 +32,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from benches._util import data_dir
-
 
 def _ensure_demo() -> None:
     from slam.io.datadir import resolve_cache_dir
     from slam.sim.demo import ensure_demo
 
-    ensure_demo(resolve_cache_dir(data_dir()))
+    ensure_demo(resolve_cache_dir())
 
 
 TOP_KERNELS = 15

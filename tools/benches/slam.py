@@ -92,9 +92,7 @@ def _true_length() -> float:
     from slam.io.tum import read_tum
     from slam.sim.demo import ensure_demo
 
-    return round(
-        read_tum(ensure_demo(resolve_cache_dir(data_dir())) / "groundtruth.tum").path_length(), 2
-    )
+    return round(read_tum(ensure_demo(resolve_cache_dir()) / "groundtruth.tum").path_length(), 2)
 
 
 def _accuracy(name: str, method: str = "rbpf", extra: list[str] | None = None) -> dict:
@@ -229,7 +227,7 @@ def sweep_accuracy(name: str, extra: tuple[str, ...] = ()) -> dict:
     log_path = data_dir() / get_dataset(name).log_file().path
     if not log_path.is_file():
         return skip(f"{log_path} is absent")
-    folder = resolve_cache_dir(data_dir()) / "bench-sweep" / name
+    folder = resolve_cache_dir() / "bench-sweep" / name
     cmd = [
         sys.executable,
         "-m",

@@ -34,7 +34,7 @@ def _demo_log():
     from slam.io.ece276a import load_ece276a
     from slam.sim.demo import DEMO_NUMBER, ensure_demo
 
-    folder = ensure_demo(resolve_cache_dir(data_dir()))
+    folder = ensure_demo(resolve_cache_dir())
     return folder, load_ece276a(folder, DEMO_NUMBER, need=("kinect",), name="demo")
 
 
