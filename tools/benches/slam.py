@@ -11,7 +11,10 @@ resident memory, ATE RMSE against the simulator's ground truth.
 
 Accuracy (``intel``, ``aces``, ``fr079``, ``mit-csail``, ``fr-clinic``, ``mit-killian``): the
 sweep spec ``tools/sweeps/slam_bench.toml`` run by ``slam sweep`` one log at a time into
-``$SLAM_CACHE_DIR/bench-sweep/<log>`` (resumable: a rerun finishes only missing cells), then
+``$SLAM_CACHE_DIR/bench-sweep/<code>/<log>``, where ``<code>`` is :func:`code_key` of the
+package, configurations, lock file and spec (resumable: a rerun of the same code finishes only
+the missing cells; a rerun after a change to any of them starts afresh, never reading the cells
+of other code), then
 summarised by :func:`summarise_log`. Per log: ``odometry`` and ``rbpf`` keep their earlier keys
 (seed 0: relation metric of Kümmerle et al. mean ± std, relations, wall, speed, peak memory,
 scans), ``rbpf`` adds the median errors and the share of relations over 0.2 m, ``per_seed`` (every
@@ -24,6 +27,7 @@ method on the same inputs.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import subprocess
@@ -219,6 +223,26 @@ def summarise_log(folder: Path, name: str) -> dict:
     return out
 
 
+ROOT = Path(__file__).resolve().parents[2]
+CODE_FILES = ("slam/**/*.py", "slam/**/*.json", "configs/**/*.toml", "uv.lock", "pyproject.toml")
+
+
+def code_key(root: Path = ROOT) -> str:
+    """12 hex digits of a SHA-256 over what a bench cell's result depends on: every file of
+    :data:`CODE_FILES` under ``root`` (path and bytes, in sorted order) and the sweep spec. A
+    sweep folder resumed with other code would report that code's figures as this code's."""
+    digest = hashlib.sha256()
+    files = sorted({p for pattern in CODE_FILES for p in root.glob(pattern) if p.is_file()})
+    for path in [*files, SPEC]:
+        digest.update(
+            str(path.relative_to(root) if path.is_relative_to(root) else path.name).encode()
+        )
+        digest.update(b"\0")
+        digest.update(path.read_bytes())
+        digest.update(b"\0")
+    return digest.hexdigest()[:12]
+
+
 def sweep_accuracy(name: str, extra: tuple[str, ...] = ()) -> dict:
     """Run (or finish) the bench sweep of log ``name`` and summarise it."""
     from slam.io.datadir import resolve_cache_dir
@@ -227,7 +251,7 @@ def sweep_accuracy(name: str, extra: tuple[str, ...] = ()) -> dict:
     log_path = data_dir() / get_dataset(name).log_file().path
     if not log_path.is_file():
         return skip(f"{log_path} is absent")
-    folder = resolve_cache_dir() / "bench-sweep" / name
+    folder = resolve_cache_dir() / "bench-sweep" / code_key() / name
     cmd = [
         sys.executable,
         "-m",
