@@ -132,6 +132,29 @@ def test_demo_route_visits_rooms_closes_the_loop_at_realistic_speeds(demo_scene)
     assert far > 10.0  # it went around the building, not in place
 
 
+def test_a_log_longer_than_the_scenario_drives_the_route_lap_after_lap():
+    """``small`` is planned for 45 s; 100 s drives its route three times (the third cut where the
+    log ends) at the same speed, through the start twice, never parked, clear of the walls."""
+    nominal = generate_scene(SCENARIOS["small"], np.random.default_rng(5))
+    long = generate_scene(SCENARIOS["small"], np.random.default_rng(5), duration=100.0)
+    assert long.info["cruise_speed"] == nominal.info["cruise_speed"]
+    overlap = float(np.hypot(*nominal.route.waypoints[-1]))  # the drive past the start
+    lap = nominal.info["route_length_m"] - overlap
+    assert long.info["route_length_m"] == pytest.approx(3 * lap + overlap, rel=1e-6)
+    assert not long.info["completed"]  # cut where the log ends, not parked at the end
+    traj = long.trajectory
+    assert traj.duration == pytest.approx(100.0)
+    # the first lap is the nominal log's drive (to the last bits of the arc lengths' sums)
+    steps = len(nominal.trajectory.v) - int(8.0 / traj.dt)  # before the nominal drive brakes
+    np.testing.assert_allclose(traj.poses[:steps], nominal.trajectory.poses[:steps], atol=1e-4)
+    assert np.all(traj.v[-int(10.0 / traj.dt) :] > 0.2)  # still driving in the last 10 s
+    at_start = np.hypot(traj.poses[:, 0], traj.poses[:, 1]) < 0.1
+    passes = np.count_nonzero(np.diff(at_start.astype(np.int8)) == 1)
+    assert passes == 2  # the start is left at rest, then driven through after laps 1 and 2
+    assert long.info["driven_length_m"] > 2.2 * nominal.info["driven_length_m"]
+    assert long.info["clearance_m"] >= ROBOT_RADIUS
+
+
 def test_demo_world_keeps_the_robot_clear_and_has_a_loop(demo_scene):
     world = demo_scene.world
     assert demo_scene.info["clearance_m"] >= ROBOT_RADIUS

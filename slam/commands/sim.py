@@ -28,7 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder (created)")
     parser.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
     parser.add_argument(
-        "--duration", type=float, metavar="SEC", help="log length in seconds (default: nominal)"
+        "--duration",
+        type=float,
+        metavar="SEC",
+        help="log length in seconds (default: nominal; longer logs drive the route lap after lap)",
     )
     parser.add_argument("--number", type=int, default=20, help="file number NN (default 20)")
     parser.add_argument("--no-rgbd", action="store_true", help="skip the Kinect frames")

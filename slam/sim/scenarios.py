@@ -176,6 +176,19 @@ def build_route(layout: Layout, detours: list[tuple[int, bool]], overlap: float)
     return Route(np.asarray(pts, dtype=np.float64), np.asarray(radii), tuple(visited))
 
 
+def repeat_laps(route: Route, laps: int) -> tuple[F64, F64]:
+    """The waypoints and fillet radii of ``route`` driven ``laps >= 1`` times: each lap but the
+    last ends at the start (the ring's loop closes there, on a straight stretch of the bottom
+    leg), the next goes on from it with the same detours, and the last drives past the start as
+    the route does. One lap is the route itself."""
+    if laps <= 1:
+        return route.waypoints, route.radii
+    lap = slice(1, -1)  # without the start, which the previous lap ends on, and the overlap
+    waypoints = [route.waypoints[:-1], *[route.waypoints[lap]] * (laps - 2), route.waypoints[1:]]
+    radii = [route.radii[:-1], *[route.radii[lap]] * (laps - 2), route.radii[1:]]
+    return np.concatenate(waypoints), np.concatenate(radii)
+
+
 def plan_route(
     layout: Layout, rng: np.random.Generator, duration: float, limits: DriveLimits
 ) -> Route:
@@ -232,13 +245,14 @@ def generate_scene(
     layout = ring_layout(scenario.spec, rng)
     route = plan_route(layout, rng, scenario.duration, scenario.limits)
     # The route is planned for the scenario's nominal duration; another duration keeps the route
-    # and its speed and cuts the log short (or lets the robot stand at the end).
+    # and its speed: a shorter log is cut short, a longer one drives it lap after lap (cut where
+    # the log ends, or the robot stands for the last seconds).
     trajectory, info = drive(route.waypoints, route.radii, scenario.duration, t0, scenario.limits)
     if duration != scenario.duration:
+        waypoints, radii = repeat_laps(route, math.ceil(duration / scenario.duration))
         trajectory, info = drive(
-            route.waypoints, route.radii, duration, t0, scenario.limits,
-            cruise=info["cruise_speed"],
-        )  # fmt: skip
+            waypoints, radii, duration, t0, scenario.limits, cruise=info["cruise_speed"]
+        )
     path_xy = np.concatenate([trajectory.sample_xy(0.02), info["reference_path"]])
     world = build_world(rng, layout, path_xy)
     clearance = _clearance(world, trajectory)
