@@ -245,11 +245,17 @@ def generate_scene(
     layout = ring_layout(scenario.spec, rng)
     route = plan_route(layout, rng, scenario.duration, scenario.limits)
     # The route is planned for the scenario's nominal duration; another duration keeps the route
-    # and its speed: a shorter log is cut short, a longer one drives it lap after lap (cut where
-    # the log ends, or the robot stands for the last seconds).
+    # and its speed: a shorter log is cut short, a longer one drives it lap after lap, cut where
+    # the log ends (a lap takes at least its length at the cruise speed: one more than fit).
     trajectory, info = drive(route.waypoints, route.radii, scenario.duration, t0, scenario.limits)
     if duration != scenario.duration:
-        waypoints, radii = repeat_laps(route, math.ceil(duration / scenario.duration))
+        lap = info["route_length_m"] - float(np.hypot(*np.diff(route.waypoints[-2:], axis=0)[0]))
+        laps = (
+            1
+            if duration < scenario.duration
+            else math.ceil(duration * info["cruise_speed"] / lap) + 1
+        )
+        waypoints, radii = repeat_laps(route, laps)
         trajectory, info = drive(
             waypoints, radii, duration, t0, scenario.limits, cruise=info["cruise_speed"]
         )

@@ -345,10 +345,13 @@ def _calibrate_cruise(
 
 
 def _polyline_distance(points: F64, path: F64) -> F64:
-    """Distance from each point to the nearest vertex of a densely sampled path (chunked)."""
+    """Distance from each point to the nearest vertex of a densely sampled path (chunked). Every
+    other vertex, each place once: a route driven lap after lap repeats its vertices, and the
+    work would grow with the square of the laps."""
+    vertices = np.unique(path[::2], axis=0)
     out = np.empty(len(points))
     for s in range(0, len(points), 512):
         chunk = points[s : s + 512]
-        d2 = ((chunk[:, None, :] - path[None, ::2, :]) ** 2).sum(axis=2)
+        d2 = ((chunk[:, None, :] - vertices[None, :, :]) ** 2).sum(axis=2)
         out[s : s + 512] = np.sqrt(d2.min(axis=1))
     return out
