@@ -111,6 +111,23 @@ def test_the_default_solves_a_long_loopy_graph_to_its_tolerance():
     assert np.abs(cut - x).max() > 0.5
 
 
+def test_a_system_with_a_nan_stops_at_once():
+    """A NaN in the right-hand side cannot converge: the solve returns after no iteration (it ran
+    to the cap, 10,000 iterations a Gauss-Newton step by default), NaN as before."""
+    n = 50
+    diag = np.tile(np.eye(3) * 4.0, (n, 1, 1))
+    band = np.tile(-np.eye(3), (n - 1, 1, 1))
+    ei = np.arange(n - 1, dtype=np.int64)
+    rhs = np.ones((n, 3))
+    rhs[7, 1] = np.nan
+    x, used = solve_system(diag, band, np.zeros((n - 1, 3, 3)), ei, ei + 1, rhs, 10000, 1e-8)
+    assert used == 0
+    assert np.isnan(x).all()
+    rhs[7, 1] = 1.0
+    x, used = solve_system(diag, band, np.zeros((n - 1, 3, 3)), ei, ei + 1, rhs, 10000, 1e-8)
+    assert np.isfinite(x).all() and used <= 1
+
+
 def test_optimize_closes_a_drifted_square_loop():
     # a 4 m square driven in 40 steps; odometry turns 1% too little, so the loop does not close
     true_steps = np.tile([0.4, 0.0, 0.0], (40, 1))
