@@ -19,6 +19,11 @@ def bench_slam():
         yield module
     finally:
         sys.path.remove(str(TOOLS))
+        for name in [m for m in sys.modules if m == "benches" or m.startswith("benches.")]:
+            del sys.modules[name]
+
+
+HOST = "AMD EPYC, no AVX-512"
 
 
 def make_tree(root: Path) -> None:
@@ -33,15 +38,15 @@ def make_tree(root: Path) -> None:
 
 def test_the_sweep_folder_changes_with_the_code_and_only_with_it(bench_slam, tmp_path):
     make_tree(tmp_path)
-    key = bench_slam.code_key(tmp_path)
+    key = bench_slam.code_key(tmp_path, host=HOST)
     assert len(key) == 12 and int(key, 16) >= 0
-    assert bench_slam.code_key(tmp_path) == key  # the same files, the same folder
+    assert bench_slam.code_key(tmp_path, host=HOST) == key  # the same files, the same folder
     # compiled kernels, run folders and notes are not the code
     (tmp_path / "slam" / "kernels" / "__pycache__" / "field.f-1.py311.nbi").write_bytes(b"\0")
     (tmp_path / "runs").mkdir()
     (tmp_path / "runs" / "metrics.json").write_text("{}")
     (tmp_path / "NOTES.md").write_text("a note")
-    assert bench_slam.code_key(tmp_path) == key
+    assert bench_slam.code_key(tmp_path, host=HOST) == key
     changed = []
     for path, text in [
         ("slam/graph.py", "CAP = 10000\n"),
@@ -50,15 +55,19 @@ def test_the_sweep_folder_changes_with_the_code_and_only_with_it(bench_slam, tmp
     ]:
         before = (tmp_path / path).read_text()
         (tmp_path / path).write_text(text)
-        changed.append(bench_slam.code_key(tmp_path))
+        changed.append(bench_slam.code_key(tmp_path, host=HOST))
         (tmp_path / path).write_text(before)
-    assert len({key, *changed}) == 4
-    assert bench_slam.code_key(tmp_path) == key
+    changed.append(bench_slam.code_key(tmp_path, host="another CPU, AVX-512"))
+    changed.append(bench_slam.code_key(tmp_path, ("--set", "rbpf.particles=60"), host=HOST))
+    assert len({key, *changed}) == 6
+    assert bench_slam.code_key(tmp_path, host=HOST) == key
     # a file moved is other code, even with the same bytes
     (tmp_path / "slam" / "graph.py").rename(tmp_path / "slam" / "graph2.py")
-    assert bench_slam.code_key(tmp_path) != key
+    assert bench_slam.code_key(tmp_path, host=HOST) != key
 
 
-def test_the_repository_has_a_key(bench_slam):
-    assert bench_slam.code_key() == bench_slam.code_key()
+def test_the_repository_has_a_key_of_this_host(bench_slam):
+    from benches._util import cpu_model
+
+    assert bench_slam.code_key() == bench_slam.code_key(host=cpu_model())
     assert bench_slam.code_key() != bench_slam.code_key(TOOLS)  # tools/ alone holds no package

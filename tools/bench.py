@@ -31,6 +31,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from benches._util import cpu_model
+
 BENCH_DIR = Path(__file__).resolve().parent / "benches"
 
 
@@ -57,21 +59,6 @@ def _run_one(name: str) -> dict:
     return result
 
 
-def _cpu_model() -> str:
-    """The CPU's model name and whether it has AVX-512 (``/proc/cpuinfo``; ``platform`` elsewhere):
-    the figures depend on the host, its speed and, in the last bits, its instruction set
-    (docs/accuracy.md, "Reproducible on one machine, not bit for bit across CPUs")."""
-    try:
-        text = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return platform.processor() or "unknown"
-    model = next((line.split(":", 1)[1].strip() for line in text.splitlines()
-                  if line.startswith("model name")), "unknown")  # fmt: skip
-    flags = next((line.split(":", 1)[1].split() for line in text.splitlines()
-                  if line.startswith("flags")), [])  # fmt: skip
-    return f"{model}, {'AVX-512' if 'avx512f' in flags else 'no AVX-512'}"
-
-
 def main() -> int:
     """Run the selected benches, each in its own process, and print or write their JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -95,7 +82,7 @@ def main() -> int:
             "cpus": os.cpu_count(),
             "python": platform.python_version(),
             "platform": platform.platform(),
-            "cpu": _cpu_model(),
+            "cpu": cpu_model(),
             "numba_threads": os.environ.get("NUMBA_NUM_THREADS", "default"),
         },
         "benches": {},

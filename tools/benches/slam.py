@@ -12,9 +12,9 @@ resident memory, ATE RMSE against the simulator's ground truth.
 Accuracy (``intel``, ``aces``, ``fr079``, ``mit-csail``, ``fr-clinic``, ``mit-killian``): the
 sweep spec ``tools/sweeps/slam_bench.toml`` run by ``slam sweep`` one log at a time into
 ``$SLAM_CACHE_DIR/bench-sweep/<code>/<log>``, where ``<code>`` is :func:`code_key` of the
-package, configurations, lock file and spec (resumable: a rerun of the same code finishes only
-the missing cells; a rerun after a change to any of them starts afresh, never reading the cells
-of other code), then
+package, configurations, lock file, spec and host CPU (resumable: a rerun of the same code on
+the same host finishes only the missing cells; after a change to any of them it starts afresh,
+never reading the cells of other code; the folders of other codes are left for you to remove), then
 summarised by :func:`summarise_log`. Per log: ``odometry`` and ``rbpf`` keep their earlier keys
 (seed 0: relation metric of Kümmerle et al. mean ± std, relations, wall, speed, peak memory,
 scans), ``rbpf`` adds the median errors and the share of relations over 0.2 m, ``per_seed`` (every
@@ -36,7 +36,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benches._util import data_dir, skip
+from benches._util import cpu_model, data_dir, skip
 
 from slam.sweep.driver import RELATION_FIGURES
 
@@ -227,19 +227,19 @@ ROOT = Path(__file__).resolve().parents[2]
 CODE_FILES = ("slam/**/*.py", "slam/**/*.json", "configs/**/*.toml", "uv.lock", "pyproject.toml")
 
 
-def code_key(root: Path = ROOT) -> str:
+def code_key(root: Path = ROOT, extra: tuple[str, ...] = (), host: str | None = None) -> str:
     """12 hex digits of a SHA-256 over what a bench cell's result depends on: every file of
-    :data:`CODE_FILES` under ``root`` (path and bytes, in sorted order) and the sweep spec. A
-    sweep folder resumed with other code would report that code's figures as this code's."""
+    :data:`CODE_FILES` under ``root`` (path and bytes, in sorted order), the sweep spec, the
+    options ``extra`` added to it and the ``host`` CPU (:func:`benches._util.cpu_model`; its
+    instruction set moves the last bits, docs/accuracy.md). A sweep folder resumed with other
+    code, or on another host, would report that code's or host's figures as these."""
     digest = hashlib.sha256()
     files = sorted({p for pattern in CODE_FILES for p in root.glob(pattern) if p.is_file()})
     for path in [*files, SPEC]:
-        digest.update(
-            str(path.relative_to(root) if path.is_relative_to(root) else path.name).encode()
-        )
-        digest.update(b"\0")
-        digest.update(path.read_bytes())
-        digest.update(b"\0")
+        name = path.relative_to(root) if path.is_relative_to(root) else path.name
+        digest.update(str(name).encode() + b"\0" + path.read_bytes() + b"\0")
+    for word in [*extra, cpu_model() if host is None else host]:
+        digest.update(word.encode() + b"\0")
     return digest.hexdigest()[:12]
 
 
@@ -251,7 +251,7 @@ def sweep_accuracy(name: str, extra: tuple[str, ...] = ()) -> dict:
     log_path = data_dir() / get_dataset(name).log_file().path
     if not log_path.is_file():
         return skip(f"{log_path} is absent")
-    folder = resolve_cache_dir() / "bench-sweep" / code_key() / name
+    folder = resolve_cache_dir() / "bench-sweep" / code_key(extra=extra) / name
     cmd = [
         sys.executable,
         "-m",
