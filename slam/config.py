@@ -532,7 +532,7 @@ class LoopConfig(Validated):
     """... and no node's heading more than this (rad)."""
     solver_iterations: int = bounded(10000, ge=1, le=100000)
     """Conjugate-gradient iterations per Gauss-Newton step (at most: a cap, not a setting; the
-    chain-preconditioned solve needs 0.3–0.8 × the keyframes, more where closures are dense, so
+    chain-preconditioned solve needs 0.2–0.8 × the keyframes, more where closures are dense, so
     a graph of 12,000 keyframes, more where they are sparse, is solved to ``solver_tolerance``)
     ..."""
     solver_tolerance: float = bounded(1e-8, gt=0.0, le=1.0)

@@ -112,8 +112,9 @@ def test_the_default_solves_a_long_loopy_graph_to_its_tolerance():
 
 
 def test_a_system_with_a_nan_stops_at_once():
-    """A NaN in the right-hand side cannot converge: the solve returns after no iteration (it ran
-    to the cap, 10,000 iterations a Gauss-Newton step by default), NaN as before."""
+    """A NaN in the right-hand side, or an infinity in a loop edge's block, cannot converge: the
+    solve returns after no iteration (it ran to the cap, 10,000 iterations a Gauss-Newton step by
+    default), NaN everywhere as before."""
     n = 50
     diag = np.tile(np.eye(3) * 4.0, (n, 1, 1))
     band = np.tile(-np.eye(3), (n - 1, 1, 1))
@@ -126,6 +127,12 @@ def test_a_system_with_a_nan_stops_at_once():
     rhs[7, 1] = 1.0
     x, used = solve_system(diag, band, np.zeros((n - 1, 3, 3)), ei, ei + 1, rhs, 10000, 1e-8)
     assert np.isfinite(x).all() and used <= 1
+    # a loop edge's block alone (the chain's preconditioner never reads it)
+    ei2, ej2 = np.append(ei, 3), np.append(ei + 1, 40)
+    far = np.zeros((n, 3, 3))
+    far[-1, 0, 0] = np.inf
+    x, used = solve_system(diag, band, far, ei2, ej2, rhs, 10000, 1e-8)
+    assert used == 0 and np.isnan(x).all()
 
 
 def test_optimize_closes_a_drifted_square_loop():

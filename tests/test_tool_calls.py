@@ -19,13 +19,40 @@ TOOLS = Path(__file__).resolve().parent.parent / "tools"
 SCRIPTS = sorted(TOOLS.rglob("*.py"))
 
 
-def slam_imports(tree: ast.AST) -> dict[str, object]:
-    """Every name a module imports from the package, at the top or inside a function: ``from
-    slam... import name [as alias]`` (resolved to the object it names) and ``import slam[.x]
-    [as alias]`` (to the module the name is bound to)."""
+SCOPES = (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)
+
+
+def in_scope(scope: ast.AST) -> list[ast.AST]:
+    """The nodes of ``scope``'s own body: not those of the functions and classes inside it
+    (their names and defaults are the scope's, their bodies are scopes of their own)."""
+    found = []
+    todo = list(ast.iter_child_nodes(scope))
+    while todo:
+        node = todo.pop()
+        found.append(node)
+        if isinstance(node, SCOPES):
+            decorators = [*getattr(node, "decorator_list", [])]
+            args = node.args if not isinstance(node, ast.ClassDef) else None
+            defaults = [*args.defaults, *[d for d in args.kw_defaults if d]] if args else []
+            todo.extend([*decorators, *defaults])
+        else:
+            todo.extend(ast.iter_child_nodes(node))
+    return found
+
+
+def scope_names(scope: ast.AST) -> dict[str, object]:
+    """What ``scope`` binds itself: a name imported from the package maps to the object it names
+    (``from slam... import name [as alias]``; ``import slam[.x] [as alias]``, the module), any
+    other binding (an assignment, a function, a class, a parameter, a loop, ``with`` or
+    ``except`` target, another import) to None: a call of it is not the package's."""
     names: dict[str, object] = {}
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "slam":
+    other: set[str] = set()
+    if isinstance(scope, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+        a = scope.args
+        params = [*a.posonlyargs, *a.args, *a.kwonlyargs, *filter(None, [a.vararg, a.kwarg])]
+        other.update(p.arg for p in params)
+    for node in in_scope(scope):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "slam":
             module = importlib.import_module(node.module)
             for alias in node.names:
                 target = getattr(module, alias.name, None)
@@ -34,27 +61,36 @@ def slam_imports(tree: ast.AST) -> dict[str, object]:
                 names[alias.asname or alias.name] = target
         elif isinstance(node, ast.Import):
             for alias in node.names:
-                if alias.name.split(".")[0] == "slam":
-                    module = importlib.import_module(alias.name)
-                    if alias.asname:
-                        names[alias.asname] = module
-                    else:  # `import slam.x` binds `slam`
-                        names["slam"] = importlib.import_module("slam")
-    return names
+                if alias.name.split(".")[0] != "slam":
+                    other.add(alias.asname or alias.name.split(".")[0])
+                elif alias.asname:
+                    names[alias.asname] = importlib.import_module(alias.name)
+                else:  # `import slam.x` binds `slam`
+                    importlib.import_module(alias.name)
+                    names["slam"] = importlib.import_module("slam")
+        elif isinstance(node, ast.ImportFrom):
+            other.update(alias.asname or alias.name for alias in node.names)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            other.add(node.id)
+        elif (
+            isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+            or isinstance(node, ast.ExceptHandler)
+            and node.name
+        ):
+            other.add(node.name)
+    return {**names, **dict.fromkeys(other & names.keys() | other - names.keys())}
 
 
-def bound_here(tree: ast.AST) -> set[str]:
-    """The names the module binds itself (assignments, functions, classes, parameters, loop and
-    ``with`` targets): where one shadows an import, which object a call names is not known."""
-    names: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
-            names.add(node.id)
-        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-            names.add(node.name)
-        elif isinstance(node, ast.arg):
-            names.add(node.arg)
-    return names
+def calls_with_names(scope: ast.AST, outer: dict[str, object]):
+    """Every call in ``scope`` and the scopes inside it, with the names it sees (Python's rule:
+    a scope's own bindings, else the enclosing functions' and the module's; a class body's are
+    not seen by its methods)."""
+    names = {**outer, **scope_names(scope)}
+    for node in in_scope(scope):
+        if isinstance(node, ast.Call):
+            yield node, names
+        if isinstance(node, SCOPES):
+            yield from calls_with_names(node, outer if isinstance(scope, ast.ClassDef) else names)
 
 
 def called(func: ast.expr, imported: dict[str, object]) -> tuple[str, object] | None:
@@ -81,14 +117,9 @@ def called(func: ast.expr, imported: dict[str, object]) -> tuple[str, object] | 
 def bad_calls(source: str, name: str) -> list[str]:
     """The calls in a tool's ``source`` (its file ``name``) to the package's callables whose
     arguments do not bind to their signatures."""
-    tree = ast.parse(source, filename=name)
-    shadowed = bound_here(tree)
-    imported = {k: v for k, v in slam_imports(tree).items() if k not in shadowed}
     found = []
-    for node in ast.walk(tree):
-        if not isinstance(node, ast.Call):
-            continue
-        hit = called(node.func, imported)
+    for node, names in calls_with_names(ast.parse(source, filename=name), {}):
+        hit = called(node.func, {k: v for k, v in names.items() if v is not None})
         if hit is None or not callable(hit[1]) or inspect.ismodule(hit[1]):
             continue
         if any(isinstance(a, ast.Starred) for a in node.args) or any(
@@ -128,7 +159,12 @@ def test_a_call_with_a_stale_signature_is_found():
 
 
 def test_a_name_the_tool_binds_itself_is_not_taken_for_the_import():
-    assert bad_calls(SHADOWED, "shadowed.py") == []
+    """Each scope sees its own names: a parameter, an ``except`` target or a function defined
+    in a scope shadows the import there (the call is not the package's, or not surely), and an
+    alias imported in two functions is each function's own."""
+    assert bad_calls(SHADOWED, "shadowed.py") == [
+        "shadowed.py:23: f: too many positional arguments"
+    ]
 
 
 STALE = """from slam.io.datadir import resolve_cache_dir
@@ -145,8 +181,32 @@ slam.io.datadir.resolve_cache_dir(2)
 """
 
 SHADOWED = """from slam.io.datadir import resolve_cache_dir
+from slam.pipeline import RunRequest, run
 
 
 def main(resolve_cache_dir=print):
     resolve_cache_dir("a", "b")
+
+
+def other():
+    try:
+        pass
+    except OSError as resolve_cache_dir:
+        resolve_cache_dir(1, 2)
+    run(RunRequest("intel", None, None), 1, 2, 3)  # the local run below, not the package's
+
+    def run(*_):
+        pass
+
+
+def third():
+    from slam.io.datadir import resolve_data_dir as f
+
+    f(1, 2, 3)
+
+
+def fourth():
+    from slam.pipeline import RunRequest as f
+
+    f("intel", None, None)
 """

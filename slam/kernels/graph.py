@@ -372,8 +372,8 @@ def solve_system(
 ) -> tuple[np.ndarray, int]:
     """Solve ``H x = rhs`` by conjugate gradients preconditioned with the chain part of ``H``.
 
-    Returns the solution and the number of iterations used (none when the system holds a NaN:
-    the solution is NaN however long it iterates). Written with scalar loops over the
+    Returns the solution and the number of iterations used (none, and NaN everywhere, when the
+    system holds a NaN or an infinity: no iteration would make it finite). Written with scalar loops over the
     ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the same order, but
     numba compiles every distinct array expression as a function of its own.
     """
@@ -391,8 +391,16 @@ def solve_system(
     norm0 = np.sqrt(_dot(rhs, rhs)) + 1e-300
     used = 0
     for _ in range(max_iter):
-        if not np.sqrt(_dot(r, r)) > tolerance * norm0:
-            break  # converged, or a NaN in the system: no iteration would change that
+        residual = np.sqrt(_dot(r, r))
+        if not (np.isfinite(residual) and np.isfinite(norm0)):
+            # a NaN or inf in the system: no iteration would make it finite, and a finite part
+            # of the solution would not be one
+            for k in range(n):
+                for c in range(3):
+                    x[k, c] = np.nan
+            break
+        if residual <= tolerance * norm0:
+            break
         used += 1
         hp = _matvec(diag, band, far, edge_i, edge_j, p)
         alpha = rz / _dot(p, hp)

@@ -345,9 +345,10 @@ def _calibrate_cruise(
 
 
 def _polyline_distance(points: F64, path: F64) -> F64:
-    """Distance from each point to the nearest vertex of a densely sampled path (chunked). Every
-    other vertex, each place once: a route driven lap after lap repeats its vertices, and the
-    work would grow with the square of the laps."""
+    """Distance from each point to the nearest vertex of a densely sampled path (chunked): every
+    other vertex, each only once. A route driven lap after lap repeats its vertices (at most two
+    laps' worth are distinct: a lap of an odd count takes the other half the next time), and the
+    work would otherwise grow with the square of the laps; the nearest is the same either way."""
     vertices = np.unique(path[::2], axis=0)
     out = np.empty(len(points))
     for s in range(0, len(points), 512):
