@@ -1,4 +1,4 @@
-"""The benches' own bookkeeping: the sweep folder of ``tools/bench.py slam`` is keyed by the code."""
+"""The benches' own bookkeeping: the sweep folder of ``tools/bench.py slam`` keyed by the code."""
 
 from __future__ import annotations
 

@@ -78,7 +78,7 @@ def scope_names(scope: ast.AST) -> dict[str, object]:
             and node.name
         ):
             other.add(node.name)
-    return {**names, **dict.fromkeys(other & names.keys() | other - names.keys())}
+    return {**names, **dict.fromkeys(other)}
 
 
 def calls_with_names(scope: ast.AST, outer: dict[str, object]):

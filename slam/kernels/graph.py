@@ -373,9 +373,9 @@ def solve_system(
     """Solve ``H x = rhs`` by conjugate gradients preconditioned with the chain part of ``H``.
 
     Returns the solution and the number of iterations used (none, and NaN everywhere, when the
-    system holds a NaN or an infinity: no iteration would make it finite). Written with scalar loops over the
-    ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the same order, but
-    numba compiles every distinct array expression as a function of its own.
+    system holds a NaN or an infinity: no iteration would make it finite). Written with scalar
+    loops over the ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the
+    same order, but numba compiles every distinct array expression as a function of its own.
     """
     n = rhs.shape[0]
     dinv, _ = _chain_factor(diag, band)
