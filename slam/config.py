@@ -531,10 +531,10 @@ class LoopConfig(Validated):
     converged_th: float = bounded(1e-4, gt=0.0, le=math.pi)
     """... and no node's heading more than this (rad)."""
     solver_iterations: int = bounded(10000, ge=1, le=100000)
-    """Conjugate-gradient iterations per Gauss-Newton step (at most: a cap, not a setting; the
-    chain-preconditioned solve needs 0.2–0.8 × the keyframes, more where closures are dense, so
-    a graph of 12,000 keyframes, more where they are sparse, is solved to ``solver_tolerance``)
-    ..."""
+    """Conjugate-gradient iterations per Gauss-Newton step, at most: a bound, not a setting. The
+    chain-preconditioned solve needs 0.2–0.8 × the keyframes (more where closures are dense), so
+    a graph of 12,000 keyframes is solved to ``solver_tolerance``; a step the bound cuts short
+    warns (the run's warnings, ``metrics.json``) ..."""
     solver_tolerance: float = bounded(1e-8, gt=0.0, le=1.0)
     """... stopping when the residual is this fraction of the right-hand side's norm."""
     rounds: int = bounded(2, ge=1, le=100)

@@ -27,6 +27,7 @@ deterministic, the way graph-based SLAM does, without changing what the filter d
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -435,8 +436,19 @@ def chain_graph(
     """The pose graph of the chain of ``poses`` (each pose to the next, measuring their relative
     pose with :func:`_chain_information`, its sigmas times ``loose`` where given, no robust
     kernel) followed by the loop ``edges`` ``(i, j, z, info)``, loop edge ``k`` with robust scale
-    ``robust[k]``."""
+    ``robust[k]``. A loop edge whose measurement or information is not finite is left out, with
+    a warning: one NaN in the system would make every optimised pose NaN."""
     n = poses.shape[0]
+    finite = [bool(np.isfinite(e[2]).all() and np.isfinite(e[3]).all()) for e in edges]
+    if not all(finite):
+        warnings.warn(
+            f"pose graph of {n} nodes: {finite.count(False)} of its {len(edges)} loop edges have "
+            "a measurement or an information that is not finite (NaN or infinity); they are "
+            "left out of the optimisation",
+            stacklevel=3,
+        )
+        robust = np.asarray(robust, dtype=np.float64)[np.array(finite, dtype=bool)]
+        edges = [e for e, ok in zip(edges, finite, strict=True) if ok]
     seq_z = relative(poses[:-1], poses[1:])
     loop_info = np.array([e[3] for e in edges], dtype=np.float64).reshape(-1, 3, 3)
     return PoseGraph(
@@ -474,12 +486,17 @@ def gauss_newton(
     """Gauss-Newton on the pose ``graph`` from ``x`` (modified in place and returned): node 0
     fixed — or, with ``priors`` ``(poses, information)``, every node held to its pose in
     ``poses`` with that ``(3, 3)`` information instead — at most ``lc.iterations`` steps, until a
-    step moves no node more than ``lc.converged_xy`` / ``lc.converged_th``."""
+    step moves no node more than ``lc.converged_xy`` / ``lc.converged_th``.
+
+    Warns when a step's conjugate gradients stop at ``lc.solver_iterations`` before
+    ``lc.solver_tolerance`` (the poses may then be off), and when the system is not finite: the
+    steps then stop and ``x`` keeps the last finite estimate."""
     n = x.shape[0]
     diag = np.zeros((n, 3, 3))
     band = np.zeros((max(n - 1, 1), 3, 3))
     far = np.zeros((graph.i.size, 3, 3))
     grad = np.zeros((n, 3))
+    capped = 0
     for _ in range(lc.iterations):
         linearize(x, graph.i, graph.j, graph.z, graph.info, graph.robust, diag, band, far, grad)
         if priors is None:
@@ -489,9 +506,17 @@ def gauss_newton(
             d[:, 2] = wrap_angle(d[:, 2])
             diag += priors[1]
             grad += d @ priors[1]
-        delta, _ = solve_system(
+        delta, used = solve_system(
             diag, band, far, graph.i, graph.j, -grad, lc.solver_iterations, lc.solver_tolerance
         )
+        if not np.isfinite(delta).all():
+            warnings.warn(
+                f"pose graph of {n} nodes: its system holds a NaN or an infinity; the "
+                "optimisation stops at its last finite estimate",
+                stacklevel=2,
+            )
+            break
+        capped += used >= lc.solver_iterations
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])
         if (
@@ -499,6 +524,14 @@ def gauss_newton(
             and np.abs(delta[:, 2]).max() < lc.converged_th
         ):
             break
+    if capped:
+        warnings.warn(
+            f"pose graph of {n} nodes: in {capped} Gauss-Newton steps the conjugate gradients "
+            f"stopped at loops.solver_iterations = {lc.solver_iterations} before "
+            f"loops.solver_tolerance = {lc.solver_tolerance:g}; the optimised poses may be off "
+            "(raise loops.solver_iterations)",
+            stacklevel=2,
+        )
     return x
 
 

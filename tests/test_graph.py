@@ -1,5 +1,8 @@
 """Pose-graph kernels and loop closing: errors, Jacobians, the solver, a closed square loop."""
 
+import dataclasses
+import warnings
+
 import numpy as np
 import pytest
 
@@ -135,19 +138,23 @@ def test_a_system_with_a_nan_stops_at_once():
     assert used == 0 and np.isnan(x).all()
 
 
-def test_optimize_closes_a_drifted_square_loop():
-    # a 4 m square driven in 40 steps; odometry turns 1% too little, so the loop does not close
+def _drifted_square() -> tuple[np.ndarray, np.ndarray, list]:
+    """A 4 m square driven in 40 steps, truth and dead reckoning (turns 1 % too small, steps 1 %
+    too long: the loop does not close), and the loop edge that closes it (the last pose seen from
+    the first, far more certain than 40 drifting steps)."""
     true_steps = np.tile([0.4, 0.0, 0.0], (40, 1))
     true_steps[9::10, 2] = np.pi / 2
     truth = accumulate(true_steps)
     drifted_steps = true_steps.copy()
     drifted_steps[:, 2] *= 0.99
     drifted_steps[:, 0] *= 1.01
-    drifted = accumulate(drifted_steps)
+    edge = (0, 40, relative(truth[0], truth[40]), np.diag([1e6, 1e6, 1e7]))
+    return truth, accumulate(drifted_steps), [edge]
+
+
+def test_optimize_closes_a_drifted_square_loop():
+    truth, drifted, edges = _drifted_square()
     assert np.hypot(*drifted[-1, :2]) > 0.05  # visibly open
-    # loop edge: the last pose seen from the first is the identity (back at the start)
-    info = np.diag([1e6, 1e6, 1e7])  # a loop closure far more certain than 40 drifting steps
-    edges = [(0, 40, relative(truth[0], truth[40]), info)]
     # the chain's uncertainty matches this drift: 2 % of each step, 5 mrad per turn
     lc = LoopConfig(seq_sigma_xy=0.005, seq_sigma_rel=0.02, seq_sigma_th=0.005)
     closed = optimize(drifted, edges, lc)
@@ -155,6 +162,48 @@ def test_optimize_closes_a_drifted_square_loop():
     assert np.hypot(gap[0], gap[1]) < 0.01 and abs(gap[2]) < 0.005
     assert np.abs(closed - truth)[:, :2].max() < 0.05  # the whole square comes back into shape
     np.testing.assert_allclose(closed[0], drifted[0], atol=1e-6)  # node 0 is fixed
+
+
+@pytest.mark.parametrize("where", ["z", "info"])
+def test_a_loop_edge_that_is_not_finite_is_left_out_with_a_warning(where):
+    """One NaN in a loop edge used to make every optimised pose NaN: the edge is now left out
+    (the other closures still apply) and the run is told."""
+    truth, drifted, edges = _drifted_square()
+    lc = LoopConfig(seq_sigma_xy=0.005, seq_sigma_rel=0.02, seq_sigma_th=0.005)
+    good = optimize(drifted, edges, lc)
+    i, j, z, info = edges[0]
+    bad = (i, 20, np.array([np.nan, 0.0, 0.0]), info) if where == "z" else None
+    if where == "info":
+        broken = info.copy()
+        broken[2, 2] = np.inf
+        bad = (i, 20, relative(truth[i], truth[20]), broken)
+    with pytest.warns(UserWarning, match=r"1 of its 2 loop edges .* not finite"):
+        out = optimize(drifted, [*edges, bad], lc, robust=np.array([3.0, 3.0]))
+    np.testing.assert_array_equal(out, good)
+    assert np.abs(out - truth)[:, :2].max() < 0.05
+
+
+def test_a_system_that_turns_non_finite_keeps_the_last_finite_estimate():
+    """An information whose entries overflow only once squared by the Jacobians (finite going
+    in) makes the system infinite: the steps stop and the poses stay finite, with a warning."""
+    truth, drifted, edges = _drifted_square()
+    i, j, z, _ = edges[0]
+    huge = [(i, j, z, np.diag([1e306, 1e306, 1e306]))]
+    with pytest.warns(UserWarning, match="NaN or an infinity; the optimisation stops"):
+        out = optimize(drifted, huge, LoopConfig(robust=0.0))
+    assert np.isfinite(out).all()
+
+
+def test_a_solve_cut_by_its_cap_warns():
+    """A step whose conjugate gradients stop at ``loops.solver_iterations`` says so (the poses
+    may be off); the default cap on the same graph does not."""
+    truth, drifted, edges = _drifted_square()
+    lc = LoopConfig(seq_sigma_xy=0.005, seq_sigma_rel=0.02, seq_sigma_th=0.005)
+    with pytest.warns(UserWarning, match=r"stopped at loops.solver_iterations = 1 before"):
+        optimize(drifted, edges, dataclasses.replace(lc, solver_iterations=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        optimize(drifted, edges, lc)
 
 
 def test_a_wrong_loop_edge_is_down_weighted():
