@@ -203,8 +203,8 @@ class FilterConfig(Validated):
     single-map correlation filter) or ``"odometry"`` (dead reckoning)."""
     particles: int = bounded(30, ge=1, le=100000)
     """Number of particles."""
-    seed: int = bounded(0, ge=0)
-    """Seed of the single random generator of a run."""
+    seed: int = bounded(0, ge=0, lt=2**63)
+    """Seed of the single random generator of a run (below 2**63: TOML's integers are 64-bit)."""
     every: int = bounded(1, ge=1, le=1000000)
     """Process every k-th scan."""
     max_scans: int = bounded(0, ge=0)
@@ -1000,7 +1000,10 @@ def parse_override(text: str) -> tuple[str, str, Any]:
         raise ConfigError(f"--set {text!r}: expected section.key=value, e.g. filter.particles=100")
     lhs, raw = text.split("=", 1)
     section, key = lhs.strip().split(".", 1)
-    return section, key, parse_literal(raw)
+    try:
+        return section, key, parse_literal(raw)
+    except ConfigError as exc:
+        raise ConfigError(f"--set {lhs.strip()}: {exc}") from None
 
 
 def read_toml(path: Path) -> dict[str, Any]:

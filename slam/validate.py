@@ -116,6 +116,8 @@ class Bounds:
 
 
 def _num(value: float) -> str:
+    if value == 2**63 and isinstance(value, int):  # a 64-bit integer's bound, as written
+        return "2**63"
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
@@ -463,8 +465,12 @@ def read_toml(path: Path, what: str = "config file") -> dict[str, Any]:
 
 def parse_literal(text: str) -> Any:
     """A ``KEY=VALUE`` right-hand side: a TOML literal (``3``, ``0.5``, ``true``, ``"x"``,
-    ``[1, 2]``), else the bare text as a string. Never evaluated."""
+    ``[1, 2]``), else the bare text as a string. Never evaluated. A line break is refused
+    (:class:`ConfigError`): the lines after it would be read as more TOML, or dropped."""
+    stripped = text.strip()
+    if "\n" in stripped or "\r" in stripped:
+        raise ConfigError(f"expected one value on one line, found a line break in {stripped!r}")
     try:
-        return tomllib.loads(f"v = {text.strip()}")["v"]
+        return tomllib.loads(f"v = {stripped}")["v"]
     except tomllib.TOMLDecodeError:
-        return text.strip()
+        return stripped

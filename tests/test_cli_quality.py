@@ -222,6 +222,23 @@ def test_run_folder_without_config(run_folder, tmp_path, capsys):
     assert not (broken / "eval.json").exists() and not (broken / "quality.png").exists()
 
 
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("{not json", "expected the run's metrics as JSON, cannot read it (Expecting property"),
+        ("[1, 2]", "expected a JSON object, found list"),
+    ],
+)
+def test_a_damaged_metrics_json_is_named(run_folder, tmp_path, capsys, text, expected):
+    """The bug: a metrics.json that is not JSON was taken for a run that recorded no log, and
+    the message blamed the dataset."""
+    broken = copy_run(run_folder, tmp_path / "badmetrics")
+    (broken / "metrics.json").write_text(text)
+    assert main(["eval", str(broken), "--quality"]) == 2
+    assert f"badmetrics/metrics.json: {expected}" in one_line_error(capsys)
+    assert not (broken / "eval.json").exists() and not (broken / "quality.png").exists()
+
+
 def test_log_no_longer_present(run_folder, small_log, tmp_path, capsys):
     moved = copy_run(run_folder, tmp_path / "moved")
     gone = tmp_path / "gone"

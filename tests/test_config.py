@@ -27,11 +27,15 @@ def test_overrides_parse_toml_literals():
     [
         ("filter.particles=abc", "filter.particles: expected an integer, found 'abc'"),
         ("filter.particles=0", "filter.particles: expected an integer in [1, 100000], found 0"),
+        (  # TOML's integers are 64-bit: a run's config.toml must read back
+            "filter.seed=9223372036854775808",
+            "filter.seed: expected an integer in [0, 2**63), found 9223372036854775808",
+        ),
         ("nosuch.key=1", "unknown section [nosuch]"),
         ("filter.nosuch=1", "filter.nosuch: unknown key; expected one of"),
         ("filter.method=magic", "filter.method: expected one of"),
         ("particles", "expected section.key=value"),
-        ("filter.seed=-1", "filter.seed: expected an integer ≥ 0, found -1"),
+        ("filter.seed=-1", "filter.seed: expected an integer in [0, 2**63), found -1"),
         ("loops.stride=0", "loops.stride: expected an integer in [1, 1000000], found 0"),
         ("loops.search_xy=0", "loops.search_xy: expected a finite number in (0, 100], found 0.0"),
         (
@@ -83,13 +87,35 @@ def test_an_option_is_named_as_typed_and_a_set_as_set(tmp_path, capsys):
         assert not out.exists()
 
 
+def test_a_set_value_with_a_line_break_is_refused(tmp_path, capsys):
+    """The bug: ``--set $'map.resolution=0.1\\n[filter]\\nparticles = -5'`` ran (exit 0) with
+    everything after the line break dropped; now one error naming the key, nothing written."""
+    from slam.cli import main
+
+    text = "map.resolution=0.1\n[filter]\nparticles = -5"
+    with pytest.raises(ConfigError, match=r"^--set map.resolution: expected one value on one"):
+        parse_override(text)
+    out = tmp_path / "o"
+    for command in (
+        ["run", "demo", "--out", str(out), "--quiet", "--set", text],
+        ["sweep", "--logs", "demo", "--out", str(out), "--set", "map.resolution=0.1\nx=1"],
+    ):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("slam: error: --set map.resolution: expected one value on one line")
+        assert len(err.splitlines()) == 1
+        assert not out.exists()
+
+
 def test_slam_run_names_its_keyword_options():
     import slam
 
     with pytest.raises(ConfigError) as info:
         slam.run("demo", every=0)
     assert str(info.value) == "slam.run(every=0): expected an integer in [1, 1000000], found 0"
-    with pytest.raises(ConfigError, match=re.escape("slam.run(seed=-2): expected an integer ≥ 0")):
+    with pytest.raises(
+        ConfigError, match=re.escape("slam.run(seed=-2): expected an integer in [0, 2**63)")
+    ):
         slam.run("demo", seed=-2)
 
 

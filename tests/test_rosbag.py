@@ -626,6 +626,42 @@ def test_damage_messages_are_one_line_with_the_truncation_hint(tmp_path):
         assert "('" not in message and "looks truncated" in message, message
 
 
+def test_an_mcap_file_that_ends_after_its_magic_is_one_clear_error(tmp_path, capsys):
+    """The bug: rosbags raised a TypeError (exit 1, a traceback) on a file holding only the
+    MCAP magic; a damaged length field says what was expected."""
+    magic = tmp_path / "magic.mcap"
+    magic.write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(DataError) as caught:
+        load_bag(magic)
+    assert str(caught.value) == (
+        f"{magic}: cannot read the MCAP file: it ends inside a record; the file looks truncated "
+        "or unindexed (copy it again, or `mcap recover` it)"
+    )
+    code, out, err = _run(capsys, "data", "inspect", str(magic))
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+
+
+def test_damaged_mcap_bytes_are_one_clear_error_wherever_they_are(tmp_path):
+    """Eight bytes overwritten with 0xff every 13 bytes through a whole MCAP file: each damage
+    is one DataError naming the file (before: a zstd chunk's damage escaped as a ZstdError, a
+    length field's as a MemoryError)."""
+    whole = write_bare_mcap(tmp_path / "whole.mcap", straight_run(10)).read_bytes()
+    kinds = set()
+    for at in range(8, len(whole), 13):
+        damaged = bytearray(whole)
+        damaged[at : at + 8] = b"\xff" * 8
+        path = tmp_path / "damaged.mcap"
+        path.write_bytes(bytes(damaged))
+        try:
+            load_bag(path)
+        except DataError as exc:
+            message = str(exc)
+            assert message.startswith(f"{path}: "), message
+            assert "\n" not in message
+            kinds.add("damaged" if "looks damaged: expected a whole MCAP file" in message else "")
+    assert "damaged" in kinds
+
+
 def test_bag_options_on_a_log_that_is_no_bag_are_refused(tmp_path, capsys):
     """The bug: `slam run aces --scan-topic /front/scan` ran and ignored the option."""
     log = tmp_path / "room.clf"

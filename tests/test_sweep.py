@@ -76,6 +76,76 @@ def test_seeds_values_and_the_grid_of_the_command_line():
     assert parse_seeds([4, 1], "x") == (4, 1)
     with pytest.raises(UsageError, match="--seeds: expected seeds like 0-3"):
         parse_seeds("3-1", "--seeds")
+
+
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        # the bug: a list of 10**11 seeds was built (MemoryError, a traceback)
+        ("0-99999999999", "--seeds: at most 10000 seeds, found 100000000000 in '0-99999999999'"),
+        ("0-5000,6000-11000", "--seeds: at most 10000 seeds, found 10002 in"),
+        # the bug: reported as `slam run --seed` errors, without the spec's key
+        ([True], "spec.toml: [sweep] seeds: expected seeds like 0-3, 0,2,5 or a list of integers"),
+        ([-1], "spec.toml: [sweep] seeds: expected seeds like 0-3"),
+        (-1, "spec.toml: [sweep] seeds: expected seeds like 0-3"),
+        ([0, 2**63], "spec.toml: [sweep] seeds: expected seeds like 0-3"),
+        ("0,,2", "spec.toml: [sweep] seeds: expected seeds like 0-3"),
+    ],
+)
+def test_bad_seeds_are_one_error_naming_where(value, message):
+    where = "--seeds" if message.startswith("--seeds") else "spec.toml: [sweep] seeds"
+    with pytest.raises(UsageError) as caught:
+        parse_seeds(value, where)
+    assert str(caught.value).startswith(message)
+
+
+@pytest.mark.parametrize(
+    "address, message",
+    [
+        # the bug: a ValueError traceback from ray.init, the sweep folder left behind
+        ("notanaddress", "--address: expected HOST:PORT of a Ray cluster (e.g. 127.0.0.1:6379"),
+        ("127.0.0.1:0", "--address: expected HOST:PORT"),
+        ("ray://[::1]:99999", "--address: expected HOST:PORT"),
+        # the bug: ray.init retried for minutes, the sweep folder made
+        ("127.0.0.1:1", "--address 127.0.0.1:1: no Ray cluster answers there"),
+    ],
+)
+def test_a_bad_ray_address_is_refused_before_the_sweep_folder(tmp_path, capsys, address, message):
+    from slam.cli import main
+
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--logs", "demo", "--seeds", "0", "--method", "odometry", "--max-scans", "3",
+            "--out", str(out), "--executor", "ray", "--address", address]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"slam: error: {message}") and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_ray_addresses_that_parse():
+    from slam.sweep.executors import ray_endpoint
+
+    assert ray_endpoint("10.0.0.2:6379", "x") == ("10.0.0.2", 6379)
+    assert ray_endpoint("ray://head.local:10001", "x") == ("head.local", 10001)
+    assert ray_endpoint("[::1]:6379", "x") == ("::1", 6379)
+    assert ray_endpoint("auto", "x") is None
+
+
+def test_a_tune_grid_too_large_is_refused_before_it_is_built():
+    """The bug: two ranges of 100,000 steps built 10**10 grid points (MemoryError) before the
+    check against ``trials``; now the size is counted first, and ``steps`` has a ceiling."""
+    from slam.sweep.tune import parse_tune, trial_settings
+
+    def table(steps: int) -> dict:
+        return {"tune": {"search": "grid", "trials": 5, "ranges": {
+            "rbpf.temperature": {"min": 1.0, "max": 2.0, "steps": steps},
+            "rbpf.dmax": {"min": 0.1, "max": 0.5, "steps": steps},
+        }}}  # fmt: skip
+
+    with pytest.raises(UsageError, match=r"steps: expected an integer in \[1, 10000\], found"):
+        parse_tune(table(100_000), "t.toml")
+    with pytest.raises(UsageError, match="the grid has 100000000 points but trials = 5"):
+        trial_settings(parse_tune(table(10_000), "t.toml"))
     assert split_values('10,20.5,[1,2],"a,b"') == ["10", "20.5", "[1,2]", '"a,b"']
 
     spec = build_spec(

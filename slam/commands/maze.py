@@ -118,7 +118,10 @@ def _options(pairs: list[str]) -> dict[str, Any]:
         key = key.strip()
         if not sep or not key:
             raise UsageError(f"--set expects KEY=VALUE, found {pair!r}")
-        value = parse_literal(text)
+        try:
+            value = parse_literal(text)
+        except ConfigError as exc:
+            raise UsageError(f"--set {key}: {exc}") from None
         if key in types_:
             value = coerce(value, types_[key], f"--set {pair}", key)
             problem = check_value(value, types_[key], Bounds())

@@ -167,15 +167,27 @@ def _run_config(run_dir: Path) -> Config:
     return load_config("", path)
 
 
-def recorded_source(run_dir: Path) -> Path | None:
-    """The ``log_source`` a run recorded in its ``metrics.json`` (``None`` when absent)."""
+def _recorded(run_dir: Path, key: str) -> Any:
+    """``key`` of the run's ``metrics.json`` (``None`` without the file or the key); a file that
+    is not a JSON object is one :class:`DataError` naming it (before, it was taken for a run
+    that recorded nothing, and the message blamed the dataset)."""
     path = run_dir / "metrics.json"
     if not path.is_file():
         return None
     try:
-        value = json.loads(path.read_text()).get("log_source")
-    except (OSError, ValueError, AttributeError):
-        return None
+        metrics = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else str(exc).splitlines()[0]
+        message = f"{path}: expected the run's metrics as JSON, cannot read it ({reason})"
+        raise DataError(message) from None
+    if not isinstance(metrics, dict):
+        raise DataError(f"{path}: expected a JSON object, found {type(metrics).__name__}")
+    return metrics.get(key)
+
+
+def recorded_source(run_dir: Path) -> Path | None:
+    """The ``log_source`` a run recorded in its ``metrics.json`` (``None`` when absent)."""
+    value = _recorded(run_dir, "log_source")
     return Path(value) if isinstance(value, str) and value else None
 
 
@@ -186,10 +198,7 @@ def recorded_bag_options(run_dir: Path) -> BagOptions | None:
     from slam.io.rosbag import BagOptions
 
     path = run_dir / "metrics.json"
-    try:
-        value = json.loads(path.read_text()).get("bag_options") if path.is_file() else None
-    except (OSError, ValueError, AttributeError):
-        return None
+    value = _recorded(run_dir, "bag_options")
     if not isinstance(value, dict):
         return None
     try:

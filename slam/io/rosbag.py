@@ -67,6 +67,7 @@ from __future__ import annotations
 import bisect
 import contextlib
 import dataclasses
+import importlib
 import math
 import re
 import struct
@@ -206,6 +207,22 @@ class _Mismatch(Exception):
 # --- opening ------------------------------------------------------------------------------
 
 
+def _damage_errors() -> tuple[type[BaseException], ...]:
+    """What a damaged length field or compressed chunk raises while a bag is read."""
+    zstd: tuple[type[BaseException], ...] = ()
+    for module in ("compression.zstd", "backports.zstd"):  # what rosbags decompresses with
+        with contextlib.suppress(ImportError, AttributeError):
+            zstd = (importlib.import_module(module).ZstdError,)
+            break
+    return (
+        OverflowError,  # a corrupt length field in an MCAP record
+        MemoryError,  # ... gigabytes asked for, refused
+        zlib.error,
+        RuntimeError,  # a damaged compressed chunk (lz4: ROS 1 and MCAP)
+        *zstd,  # ... (zstd: MCAP)
+    )
+
+
 def _reader_errors() -> tuple[type[BaseException], ...]:
     from rosbags.highlevel import AnyReaderError
     from rosbags.rosbag1 import ReaderError as Reader1Error
@@ -225,9 +242,9 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         ValueError,
         KeyError,
         IndexError,
-        zlib.error,
         AssertionError,
-        OverflowError,  # a corrupt length field in an MCAP record
+        TypeError,  # an MCAP file that ends right after its magic
+        *_damage_errors(),
     )
 
 
@@ -273,13 +290,19 @@ def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
         return [t for a in args for t in (flat(a) if isinstance(a, tuple) else [str(a)])]
 
     text = " ".join(" ".join(flat(exc.args)).split()) or type(exc).__name__
+    if isinstance(exc, TypeError):  # rosbags reading a record past the end of the file
+        text = "it ends inside a record"
     text = re.sub(r"\('([^']*)',\)", r"\1", text)  # "damaged: ('Header ...',)": a wrapped tuple
     signs = ("ndex", "runcat", "eader could not", "magic is invalid")
-    if isinstance(exc, EOFError | struct.error) or any(sign in text for sign in signs):
-        repair = {"ros1": "`rosbag reindex` it", "mcap": "`mcap recover` it"}.get(
-            fmt, "`ros2 bag reindex` it"
-        )
+    repair = {"ros1": "`rosbag reindex` it", "mcap": "`mcap recover` it"}.get(
+        fmt, "`ros2 bag reindex` it"
+    )
+    if isinstance(exc, EOFError | struct.error | TypeError) or any(s in text for s in signs):
         text += f"; the file looks truncated or unindexed (copy it again, or {repair})"
+    elif isinstance(exc, _damage_errors()) or "nvalid data stream" in text:
+        # a length or a compressed chunk that no whole file holds
+        whole = _FORMAT_NAMES[fmt]
+        text += f"; the file looks damaged: expected a whole {whole} (copy it again, or {repair})"
     return DataError(f"{path}: cannot read the {_FORMAT_NAMES[fmt]}: {text}")
 
 

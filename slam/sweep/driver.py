@@ -477,6 +477,10 @@ def run_sweep(
     folder = Path(folder or spec.out or default_sweep_dir(spec))
     cells = spec.cells()
     configs = check_sweep(spec, data_dir)  # bad input: exit 2 now, before any cell
+    if spec.executor == "ray" and spec.address is not None and executor is None:
+        from slam.sweep.executors import probe_ray_address
+
+        probe_ray_address(spec.address, "--address")
     open_sweep_folder(folder, spec)
     results: dict[str, dict[str, Any] | None] = {}
     tasks: list[dict[str, Any]] = []

@@ -24,8 +24,10 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -214,6 +216,37 @@ def import_ray() -> Any:
     return ray
 
 
+def ray_endpoint(address: str, where: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a Ray cluster's ``address`` (``HOST:PORT``, ``ray://HOST:PORT``, an
+    IPv6 host in brackets), ``None`` for ``auto`` (Ray finds the cluster itself); anything else
+    is one :class:`UsageError` naming ``where``."""
+    if address == "auto":
+        return None
+    text = address.removeprefix("ray://")
+    match = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})", text)
+    if match is None or not 1 <= int(match[2]) <= 65535:
+        raise UsageError(
+            f"{where}: expected HOST:PORT of a Ray cluster (e.g. 127.0.0.1:6379, or auto), "
+            f"found {address!r}"
+        )
+    return match[1].strip("[]"), int(match[2])
+
+
+def probe_ray_address(address: str, where: str, timeout: float = 5.0) -> None:
+    """Refuse, with one :class:`UsageError`, a Ray ``address`` that no server answers at within
+    ``timeout`` seconds: checked before the sweep folder is made (``ray.init`` itself would
+    retry for minutes)."""
+    endpoint = ray_endpoint(address, where)
+    if endpoint is None:
+        return
+    try:
+        with socket.create_connection(endpoint, timeout=timeout):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise UsageError(f"{where} {address}: no Ray cluster answers there ({reason})") from None
+
+
 class RayExecutor:
     """Cells as Ray tasks (see the module docstring)."""
 
@@ -249,9 +282,10 @@ class RayExecutor:
                 options["num_cpus"] = self.workers
         try:
             ray.init(**options)
-        except ConnectionError as exc:
+        except (ConnectionError, ValueError, RuntimeError) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise UsageError(
-                f"--address {self.address}: cannot reach a Ray cluster ({exc})"
+                f"--address {self.address}: cannot reach a Ray cluster ({first})"
             ) from None
 
     def run(self, tasks: list[Task], on_result: OnResult) -> None:

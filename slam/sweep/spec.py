@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from slam.errors import UsageError
+from slam.errors import ConfigError, UsageError
 
 EXECUTORS = ("local", "ray")
 """Where cells run: a local process pool, or a Ray cluster."""
@@ -217,28 +217,39 @@ def cell_name(log: str, seed: int, setting: Setting, n_settings: int) -> str:
     return name
 
 
+MAX_SEEDS = 10_000
+"""Most seeds one sweep may list (a cell each): a typo such as ``0-99999999999`` is refused
+before a list of that many is built."""
+
+
 def parse_seeds(value: Any, where: str) -> tuple[int, ...]:
-    """Seeds from ``"0-3"``, ``"0,2,5"``, ``3`` or a list of integers."""
-    if isinstance(value, bool):
-        raise UsageError(f"{where}: expected seeds like 0-3, 0,2,5 or a list, found {value!r}")
-    if isinstance(value, int):
-        return (value,)
-    if isinstance(value, list) and value and all(isinstance(v, int) for v in value):
-        return tuple(value)
-    if isinstance(value, str):
-        out: list[int] = []
+    """Seeds from ``"0-3"``, ``"0,2,5"``, ``3`` or a list of integers: each in ``[0, 2**63)``,
+    at most :data:`MAX_SEEDS` of them."""
+    expected = f"{where}: expected seeds like 0-3, 0,2,5 or a list of integers in [0, 2**63)"
+    ranges: list[tuple[int, int]] = []
+    if isinstance(value, int) and not isinstance(value, bool):
+        ranges = [(value, value)]
+    elif isinstance(value, list) and value:
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+            raise UsageError(f"{expected}, found {value!r}")
+        ranges = [(v, v) for v in value]
+    elif isinstance(value, str):
         for part in value.split(","):
             match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
             if match is None:
-                break
+                raise UsageError(f"{expected}, found {value!r}")
             lo, hi = int(match[1]), int(match[2] if match[2] is not None else match[1])
             if hi < lo:
-                break
-            out.extend(range(lo, hi + 1))
-        else:
-            if out:
-                return tuple(out)
-    raise UsageError(f"{where}: expected seeds like 0-3, 0,2,5 or a list, found {value!r}")
+                raise UsageError(f"{expected}, found {value!r}")
+            ranges.append((lo, hi))
+    if not ranges:
+        raise UsageError(f"{expected}, found {value!r}")
+    if any(lo < 0 or hi >= 2**63 for lo, hi in ranges):
+        raise UsageError(f"{expected}, found {value!r}")
+    count = sum(hi - lo + 1 for lo, hi in ranges)
+    if count > MAX_SEEDS:
+        raise UsageError(f"{where}: at most {MAX_SEEDS} seeds, found {count} in {value!r}")
+    return tuple(seed for lo, hi in ranges for seed in range(lo, hi + 1))
 
 
 def split_values(text: str) -> list[str]:
@@ -266,7 +277,6 @@ def _override(key: str, value: Any, where: str, label: str | None = None) -> str
     """``key=value`` (value as a TOML literal); an :class:`~slam.config.Override` naming
     ``label`` when one is given (where the user gave it, for the configuration's messages)."""
     from slam.config import Override, _toml_value
-    from slam.errors import ConfigError
 
     if not isinstance(key, str) or key.count(".") != 1:
         raise UsageError(
@@ -530,7 +540,10 @@ def apply_command_line(spec: SweepSpec, args: Any) -> SweepSpec:
         if "=" not in text:
             raise UsageError(f"--set {text!r}: expected section.key=V1[,V2,...]")
         key, raw = text.split("=", 1)
-        values = [parse_literal(v) for v in split_values(raw)]
+        try:
+            values = [parse_literal(v) for v in split_values(raw)]
+        except ConfigError as exc:
+            raise UsageError(f"--set {key.strip()}: {exc}") from None
         if len(values) == 1:
             run["set"] = (*run.get("set", spec.run.set), _override(key.strip(), values[0], "--set"))
         else:
@@ -601,5 +614,11 @@ def build_spec(path: Path | None, args: Any) -> SweepSpec:
         raise UsageError(
             f"{spec.where('sweep')} address: the address of a Ray cluster needs executor "
             f"'ray' (found {spec.executor!r})"
+        )
+    if spec.address is not None:
+        from slam.sweep.executors import ray_endpoint
+
+        ray_endpoint(
+            spec.address, "--address" if spec.source is None else f"{spec.where('sweep')} address"
         )
     return spec

@@ -31,6 +31,8 @@ CONFIG_FILE = "config.toml"
 PLOT = "tune.png"
 DEFAULT_TRIALS = 8
 DEFAULT_STEPS = 3
+MAX_STEPS = 10_000
+"""Most grid points one range may have (``steps``)."""
 
 
 @dataclass(frozen=True)
@@ -129,8 +131,10 @@ def parse_tune(data: dict[str, Any], where: str, args: Any = None) -> TuneSpec:
                 f"{here}: expected min < max (and min > 0 with log), found {low}, {high}"
             )
         steps = item.get("steps", DEFAULT_STEPS)
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-            raise UsageError(f"{here}: steps: expected a positive integer, found {steps!r}")
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= MAX_STEPS:
+            raise UsageError(
+                f"{here}: steps: expected an integer in [1, {MAX_STEPS}], found {steps!r}"
+            )
         ranges.append(Range(key, (), low, high, log, integer, steps))
     for declared in ranges:
         _check_ends(declared, f"{where}: [tune.ranges] {declared.key}")
@@ -208,12 +212,14 @@ def trial_settings(
 
     settings = [Setting("trial000-default")]
     if tune.search == "grid":
-        points = list(itertools.product(*(r.grid() for r in tune.ranges)))
-        if len(points) > tune.trials - 1:
+        grids = [r.grid() for r in tune.ranges]
+        size = math.prod(len(g) for g in grids)  # before the points: a typo may make billions
+        if size > tune.trials - 1:
             raise UsageError(
-                f"{where}: the grid has {len(points)} points but trials = {tune.trials} (one is the "
-                f"default): raise trials to {len(points) + 1} or lower the steps"
+                f"{where}: the grid has {size} points but trials = {tune.trials} (one is the "
+                f"default): raise trials to {size + 1} or lower the steps"
             )
+        points = list(itertools.product(*grids))
     else:
         rng = np.random.default_rng(tune.seed)
         points, seen = [], set()
