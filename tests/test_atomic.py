@@ -4,6 +4,8 @@ behind and names the file the caller asked for."""
 
 from __future__ import annotations
 
+import errno
+
 import cv2
 import numpy as np
 import pytest
@@ -112,3 +114,21 @@ def test_write_npz_is_what_np_load_reads_and_refuses_objects_leaving_nothing(tmp
     with pytest.raises(ValueError):
         write_npz(tmp_path / "bad.npz", {"x": np.array([{}, None], dtype=object)})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["map.npz", "numpy.npz", "six.npz"]
+
+
+def test_an_output_folder_that_cannot_be_made_is_named_as_given(tmp_path, monkeypatch):
+    """The bug: an unwritable parent was reported as its hidden staging folder
+    (``.run.777e90d5.partial: Operation not permitted``), a name the user never gave."""
+    from slam.errors import UsageError
+
+    def refuse(parent, name):
+        raise PermissionError(errno.EPERM, "Operation not permitted", str(parent / f".{name}.x"))
+
+    monkeypatch.setattr(atomic, "make_partial", refuse)
+    out = tmp_path / "runs" / "r1"
+    with pytest.raises(UsageError) as caught, atomic.atomic_dir(out, kind="run"):
+        pass
+    assert str(caught.value) == (
+        f"--out {out}: cannot write in {out.parent} (Operation not permitted)"
+    )
+    assert not out.exists()

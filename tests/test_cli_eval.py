@@ -181,3 +181,15 @@ def test_eval_replaces_no_file_in_a_folder_slam_did_not_make(run_dir, tmp_path, 
     assert f"slam: warning: {message}\n" in captured.err
     assert json.loads(captured.out)["warnings"] == [message]
     assert (run_dir / "eval.json").read_text() == "mine\n"
+
+
+def test_a_non_numeric_tum_field_names_its_column(tmp_path):
+    """The message names the column and what it holds (it quoted the whole line before)."""
+    from slam.errors import DataError
+    from slam.io.tum import read_tum
+
+    path = tmp_path / "t.tum"
+    path.write_text("# t x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n1 0 0.5x 0 0 0 0 1\n")
+    with pytest.raises(DataError) as caught:
+        read_tum(path)
+    assert str(caught.value) == f"{path}:3: column 3 (ty): expected a number, found '0.5x'"

@@ -284,4 +284,9 @@ def test_study_rejects_bad_settings(capsys, tmp_path):
         assert capsys.readouterr().err == f"slam: error: {message}\n"
     assert main(["grid", "study", "--sizes", "3,x", "--out", str(tmp_path / "a.png")]) == 2
     assert "--sizes '3,x': expected comma-separated numbers" in capsys.readouterr().err
+    # the bug: the empty item was dropped without a word (exit 0)
+    assert main(["grid", "study", "--sizes", "3,,5", "--out", str(tmp_path / "a.png")]) == 2
+    assert capsys.readouterr().err == (
+        "slam: error: --sizes '3,,5': expected comma-separated numbers, found an empty item\n"
+    )
     assert main(["grid", "study", "--out", str(tmp_path / "a.jpg")]) == 2

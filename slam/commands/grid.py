@@ -189,13 +189,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _numbers(text: str, kind: type, name: str) -> tuple:
+    """Comma-separated numbers of ``kind``; an empty item (``3,,5``) is refused, as ``--seeds``
+    refuses it."""
+    parts = text.split(",")
+    if not text.strip() or any(not p.strip() for p in parts):
+        raise UsageError(
+            f"--{name} {text!r}: expected comma-separated numbers, found an empty item"
+        )
     try:
-        values = tuple(kind(v) for v in text.split(",") if v.strip())
+        return tuple(kind(p) for p in parts)
     except ValueError:
         raise UsageError(f"--{name} {text!r}: expected comma-separated numbers") from None
-    if not values:
-        raise UsageError(f"--{name}: expected at least one value")
-    return values
 
 
 def cmd_study(args: argparse.Namespace) -> int:

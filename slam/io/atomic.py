@@ -576,7 +576,10 @@ def atomic_dir(
     inputs = tuple(inputs)
     plan = check_output_dir(path, kind, overwrite, inputs, option)
     parent = path.parent
-    parent.mkdir(parents=True, exist_ok=True)
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # named as the user gave it, not as the folder that failed
+        raise UsageError(f"{option} {path}: cannot make {exc.filename} ({exc.strerror})") from None
     _announce_cleaned(parent)
     writers = live_writers(parent, path.name)
     if writers:
@@ -589,7 +592,11 @@ def atomic_dir(
     staging: _Staging | None = None
     try:
         with _signals_deferred():  # no signal between the folder and the cleanup that owns it
-            staging = _Staging(make_partial(parent, path.name))
+            try:
+                staging = _Staging(make_partial(parent, path.name))
+            except OSError as exc:  # the hidden staging folder is not what the user named
+                reason = exc.strerror or type(exc).__name__
+                raise UsageError(f"{option} {path}: cannot write in {parent} ({reason})") from None
         yield staging.path
         raise_pending_termination()  # a signal whose exception a callback swallowed: no commit
         write_marker(staging.path, plan.kind)

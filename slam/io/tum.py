@@ -65,7 +65,12 @@ def read_tum(path: Path, distinct_times: bool = False) -> Trajectory:
         try:
             rows.append([float(f) for f in fields])
         except ValueError:
-            raise DataError(f"{path}:{lineno}: non-numeric field in {line!r}") from None
+            names = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
+            column = next(i for i, f in enumerate(fields) if not _is_number(f))
+            raise DataError(
+                f"{path}:{lineno}: column {column + 1} ({names[column]}): expected a number, "
+                f"found {fields[column]!r}"
+            ) from None
         linenos.append(lineno)
     if not rows:
         raise DataError(f"{path}: no poses (expected lines 'timestamp tx ty tz qx qy qz qw')")
@@ -115,3 +120,11 @@ def _first_of_each_time(
                 f"{np.rad2deg(turn[k]):.4g}° away); a reference holds one pose per time"
             )
     return np.sort(first)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
