@@ -339,6 +339,7 @@ def test_export_guards_the_run_and_names_a_damaged_map(tmp_path, capsys):
         ({"resolution": np.inf}, "key 'resolution': expected one finite number > 0"),
         ({"origin": np.array([np.inf, 0.0])}, "key 'origin': expected 2 finite numbers"),
         ({"log_odds": np.zeros((0, 0))}, "key 'log_odds': expected a non-empty 2-D numeric array"),
+        ({"origin": np.array([object(), 0.0], dtype=object)}, "key 'origin': expected a numeric array, found pickled objects"),
     ):  # fmt: skip
         fields = {"log_odds": np.zeros((4, 4)), "resolution": 0.05, "origin": np.zeros(2), **arrays}
         np.savez(run / "map.npz", **fields)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import json
 import math
@@ -141,6 +142,21 @@ def test_varying_beam_counts_pad_angles_and_ranges(tmp_path):
     # -1 (negative), 0.05 (< range_min 0.1) and NaN are invalid; padding is not counted
     assert s.invalid_beams == 3
     np.testing.assert_array_equal(np.isnan(s.ranges[2, :5]), [False, True, True, True, False])
+
+
+@pytest.mark.parametrize("range_max", [-1.0, 0.05, math.nan])
+def test_a_range_max_below_range_min_is_named(tmp_path, range_max):
+    """The bug: a LaserScan with range_max -1 was reported as "no scan has a valid beam" (the
+    limits [0.1, -1) quoted as if they were the data's fault)."""
+    content = straight_run(4)
+    content.scans[2] = dataclasses.replace(content.scans[2], range_max=range_max)
+    bag = write_ros1_bag(tmp_path / "limits.bag", content)
+    with pytest.raises(DataError) as caught:
+        load_bag(bag)
+    assert str(caught.value) == (
+        f"{bag}: /scan message at t = {content.scans[2].t:.6f} s (1 of 4 messages): expected a "
+        f"range_max above range_min and 0 (m), found range_min 0.1, range_max {range_max:g}"
+    )
 
 
 def _laser_only(n: int = 20) -> BagContent:

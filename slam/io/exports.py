@@ -156,7 +156,18 @@ def read_npz_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, NDArray[Any]
                     f"{path}: expected keys {', '.join(keys)}; missing {', '.join(missing)} "
                     f"(found {', '.join(data.files) or 'none'})"
                 )
-            return {k: np.asarray(data[k]) for k in data.files}
+            arrays = {}
+            for k in data.files:
+                try:
+                    arrays[k] = np.asarray(data[k])
+                except ValueError as exc:  # numpy refuses an object array without pickle
+                    if "allow_pickle" not in str(exc):
+                        raise
+                    raise DataError(
+                        f"{path}: key {k!r}: expected a numeric array, found pickled objects "
+                        "(refused: a pickle can run code)"
+                    ) from None
+            return arrays
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise DataError(f"{path}: not a readable .npz archive ({exc})") from None
 

@@ -1530,6 +1530,14 @@ def _scan_stream(
     if ranges.shape[1] == 0 or not np.any(geometry[:, 4] > 0):
         raise DataError(f"{path}: {topic}: every scan has 0 beams")
     amin, inc, rmin, rmax, beams = geometry.T
+    bad = np.flatnonzero(~(np.isfinite(rmin) & (rmax > rmin) & (rmax > 0)))  # NaN fails too
+    if bad.size:  # REP 117: range_max is the laser's longest reading, past range_min
+        k = int(bad[0])
+        raise DataError(
+            f"{path}: {topic} message at t = {time[k]:.6f} s ({bad.size} of {len(time)} messages): "
+            f"expected a range_max above range_min and 0 (m), found range_min {rmin[k]:g}, "
+            f"range_max {rmax[k]:g}"
+        )
     beams = beams.astype(np.int64)
     width = ranges.shape[1]
     range_min = float(np.min(rmin)) if lidar.range_min is None else lidar.range_min
