@@ -115,6 +115,11 @@ def test_errors_are_one_line_and_exit_2(maze_dir, capsys):
     assert len(err) == 1 and "maze" in err[0] and "not found" in err[0]
     assert main(["maze", "run", str(maze_dir / "a.txt"), "--set", "payoff"]) == 2
     assert "--set expects KEY=VALUE" in capsys.readouterr().err
+    assert main(["maze", "run", str(maze_dir / "a.txt"), "--set", "payoff=1\nx=2"]) == 2
+    assert capsys.readouterr().err == (
+        "slam: error: --set payoff: expected one value on one line, found a line break in "
+        "'1\\nx=2'\n"
+    )
     bad = maze_dir / "bad.txt"
     bad.write_text("2\n1,6\n1,4\n")
     assert main(["maze", "run", str(bad)]) == 2
