@@ -506,17 +506,17 @@ def gauss_newton(
             d[:, 2] = wrap_angle(d[:, 2])
             diag += priors[1]
             grad += d @ priors[1]
-        delta, used = solve_system(
+        delta, _, converged = solve_system(
             diag, band, far, graph.i, graph.j, -grad, lc.solver_iterations, lc.solver_tolerance
         )
         if not np.isfinite(delta).all():
             warnings.warn(
                 f"pose graph of {n} nodes: its system holds a NaN or an infinity; the "
                 "optimisation stops at its last finite estimate",
-                stacklevel=2,
+                stacklevel=3,
             )
             break
-        capped += used >= lc.solver_iterations
+        capped += not converged
         x += delta
         x[:, 2] = wrap_angle(x[:, 2])
         if (
@@ -530,7 +530,7 @@ def gauss_newton(
             f"stopped at loops.solver_iterations = {lc.solver_iterations} before "
             f"loops.solver_tolerance = {lc.solver_tolerance:g}; the optimised poses may be off "
             "(raise loops.solver_iterations)",
-            stacklevel=2,
+            stacklevel=3,
         )
     return x
 

@@ -428,7 +428,7 @@ def test_out_on_a_file_system_that_refuses_writes_is_one_line(small, tmp_path, m
     if Path("/sys").is_dir():
         assert main(["run", str(small), "--out", "/sys/slam-test-run", "--quiet"]) == 2
         err = one_line(capsys.readouterr().err)
-        assert err.startswith("slam: error: /sys/")
+        assert err.startswith("slam: error: --out /sys/slam-test-run: cannot write in /sys (")
         assert "Operation not permitted" in err or "Permission denied" in err
     readonly = tmp_path / "ro"
     readonly.mkdir()

@@ -678,6 +678,22 @@ def test_damaged_mcap_bytes_are_one_clear_error_wherever_they_are(tmp_path):
     assert "damaged" in kinds
 
 
+@pytest.mark.parametrize("error", [TypeError("x"), RuntimeError("y"), MemoryError()])
+def test_slams_own_errors_inside_a_readable_bag_are_not_called_damage(tmp_path, monkeypatch, error):
+    """The review's find: a TypeError, RuntimeError or MemoryError raised by slam's own code
+    while a whole file is read was reported as a damaged file; only the readers' are."""
+    import slam.io.rosbag as rosbag
+
+    path = write_bare_mcap(tmp_path / "ok.mcap", straight_run(10))
+
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(rosbag, "_stream", fail)
+    with pytest.raises(type(error)):
+        load_bag(path)
+
+
 def test_bag_options_on_a_log_that_is_no_bag_are_refused(tmp_path, capsys):
     """The bug: `slam run aces --scan-topic /front/scan` ran and ignored the option."""
     log = tmp_path / "room.clf"

@@ -76,6 +76,21 @@ def test_seeds_values_and_the_grid_of_the_command_line():
     assert parse_seeds([4, 1], "x") == (4, 1)
     with pytest.raises(UsageError, match="--seeds: expected seeds like 0-3"):
         parse_seeds("3-1", "--seeds")
+    assert split_values('10,20.5,[1,2],"a,b"') == ["10", "20.5", "[1,2]", '"a,b"']
+
+    spec = build_spec(
+        None,
+        no_args(logs="intel,aces", seeds="0-1", set=["rbpf.temperature=10,20,40",
+                "filter.particles=15", "loops.enabled=true,false"], max_scans=50),
+    )  # fmt: skip
+    cells = spec.cells()
+    assert len(cells) == 2 * 2 * 3 * 2
+    first = cells[0]
+    assert first.name == "intel-seed0-temperature=10,enabled=true"
+    # an ordinary slam run argument list: options first, the seed, then the setting
+    assert first.argv == ("intel", "--max-scans", "50", "--set", "filter.particles=15", "--seed",
+                          "0", "--set", "rbpf.temperature=10", "--set", "loops.enabled=true")  # fmt: skip
+    assert len({c.name for c in cells}) == len(cells)
 
 
 @pytest.mark.parametrize(
@@ -122,13 +137,53 @@ def test_a_bad_ray_address_is_refused_before_the_sweep_folder(tmp_path, capsys, 
     assert not out.exists()
 
 
+def test_a_ray_address_is_blamed_where_it_was_given(tmp_path, capsys):
+    """The review's find: a bad --address was blamed on the spec file, a spec file's address on
+    --address; an address that is no string crashed."""
+    from slam.cli import main
+
+    spec = tmp_path / "s.toml"
+    out = tmp_path / "sweep"
+    base = ["--seeds", "0", "--method", "odometry", "--max-scans", "3", "--out", str(out)]
+    spec.write_text('[sweep]\nlogs = ["demo"]\nexecutor = "ray"\n')
+    assert main(["sweep", str(spec), *base, "--address", "bad addr"]) == 2
+    assert capsys.readouterr().err.startswith("slam: error: --address: expected HOST:PORT")
+    spec.write_text('[sweep]\nlogs = ["demo"]\nexecutor = "ray"\naddress = "127.0.0.1:1"\n')
+    assert main(["sweep", str(spec), *base]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"slam: error: {spec}: [sweep] address 127.0.0.1:1: no Ray cluster answers there"
+    )
+    spec.write_text('[sweep]\nlogs = ["demo"]\nexecutor = "ray"\naddress = 6379\n')
+    assert main(["sweep", str(spec), *base]) == 2
+    assert (
+        capsys.readouterr().err
+        == f"slam: error: {spec}: [sweep] address: expected str, found 6379\n"
+    )
+    assert not out.exists()
+
+
+def test_a_finished_sweep_is_written_again_without_its_cluster(tmp_path, capsys):
+    """The review's find: the probe refused a finished sweep whose Ray cluster has gone, though
+    nothing is left to run (its results are written again, as before the probe)."""
+    pytest.importorskip("ray")
+    from slam.cli import main
+
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--logs", "demo", "--seeds", "0", "--method", "odometry", "--max-scans", "3",
+            "--no-record", "--no-texture", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main([*argv, "--executor", "ray", "--address", "127.0.0.1:1"]) == 0
+    assert "(1 done, 0 to run); ray: 127.0.0.1:1" in capsys.readouterr().err
+
+
 def test_ray_addresses_that_parse():
     from slam.sweep.executors import ray_endpoint
 
     assert ray_endpoint("10.0.0.2:6379", "x") == ("10.0.0.2", 6379)
     assert ray_endpoint("ray://head.local:10001", "x") == ("head.local", 10001)
     assert ray_endpoint("[::1]:6379", "x") == ("::1", 6379)
-    assert ray_endpoint("auto", "x") is None
+    assert ray_endpoint("auto", "x") is None and ray_endpoint("local", "x") is None
 
 
 def test_a_tune_grid_too_large_is_refused_before_it_is_built():
@@ -144,23 +199,16 @@ def test_a_tune_grid_too_large_is_refused_before_it_is_built():
 
     with pytest.raises(UsageError, match=r"steps: expected an integer in \[1, 10000\], found"):
         parse_tune(table(100_000), "t.toml")
-    with pytest.raises(UsageError, match="the grid has 100000000 points but trials = 5"):
+    with pytest.raises(UsageError) as caught:
         trial_settings(parse_tune(table(10_000), "t.toml"))
-    assert split_values('10,20.5,[1,2],"a,b"') == ["10", "20.5", "[1,2]", '"a,b"']
-
-    spec = build_spec(
-        None,
-        no_args(logs="intel,aces", seeds="0-1", set=["rbpf.temperature=10,20,40",
-                "filter.particles=15", "loops.enabled=true,false"], max_scans=50),
-    )  # fmt: skip
-    cells = spec.cells()
-    assert len(cells) == 2 * 2 * 3 * 2
-    first = cells[0]
-    assert first.name == "intel-seed0-temperature=10,enabled=true"
-    # an ordinary slam run argument list: options first, the seed, then the setting
-    assert first.argv == ("intel", "--max-scans", "50", "--set", "filter.particles=15", "--seed",
-                          "0", "--set", "rbpf.temperature=10", "--set", "loops.enabled=true")  # fmt: skip
-    assert len({c.name for c in cells}) == len(cells)
+    assert str(caught.value) == (  # no advice to raise trials past their ceiling
+        "[tune]: the grid has 100000000 points but trials = 5 (one is the default): lower the steps"
+    )
+    # the review's find: the message said to raise trials to 100000001, which then built it
+    big = table(10_000)
+    big["tune"]["trials"] = 100_000_001
+    with pytest.raises(UsageError, match=r"trials: expected an integer in \[2, 10000\] \(the"):
+        parse_tune(big, "t.toml")
 
 
 def test_spec_file_explicit_settings_and_per_setting_seeds(tmp_path):

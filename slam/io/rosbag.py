@@ -275,14 +275,38 @@ def open_bag(path: Path) -> Iterator[tuple[Any, str]]:
             reader = AnyReader([read], default_typestore=get_typestore(store))
             reader.open()
         except errors as exc:
-            raise _read_error(path, fmt, exc) from None
+            raise _reader_failure(path, fmt, exc) from None
         try:
             yield reader, fmt
         except errors as exc:
-            raise _read_error(path, fmt, exc) from None
+            raise _reader_failure(path, fmt, exc) from None
         finally:
             with contextlib.suppress(Exception):
                 reader.close()
+
+
+_READER_MODULES = ("rosbags", "backports.zstd", "compression.zstd", "zstandard", "lz4", "mcap")
+"""The bag readers' modules and their decompressors' (with their submodules)."""
+
+
+def _reader_failure(path: Path, fmt: str, exc: BaseException) -> BaseException:
+    """The :class:`DataError` of a reader's failure on a damaged file — or ``exc`` itself for a
+    ``TypeError``, ``RuntimeError`` or ``MemoryError`` raised outside the readers' code (slam's
+    own, within the ``with open_bag`` block): a bug or a real shortage of memory, not a damaged
+    file."""
+    if isinstance(exc, TypeError | RuntimeError | MemoryError) and not _raised_in_reader(exc):
+        return exc
+    return _read_error(path, fmt, exc)
+
+
+def _raised_in_reader(exc: BaseException) -> bool:
+    """Whether the innermost Python frame of ``exc``'s traceback is in the readers' modules."""
+    tb = exc.__traceback__
+    last = None
+    while tb is not None:
+        last, tb = tb, tb.tb_next
+    module = str(last.tb_frame.f_globals.get("__name__", "")) if last is not None else ""
+    return any(module == m or module.startswith(m + ".") for m in _READER_MODULES)
 
 
 def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
@@ -292,6 +316,8 @@ def _read_error(path: Path, fmt: str, exc: BaseException) -> DataError:
     text = " ".join(" ".join(flat(exc.args)).split()) or type(exc).__name__
     if isinstance(exc, TypeError):  # rosbags reading a record past the end of the file
         text = "it ends inside a record"
+    elif isinstance(exc, MemoryError):  # a damaged length field
+        text = "a record's length is more than memory holds"
     text = re.sub(r"\('([^']*)',\)", r"\1", text)  # "damaged: ('Header ...',)": a wrapped tuple
     signs = ("ndex", "runcat", "eader could not", "magic is invalid")
     repair = {"ros1": "`rosbag reindex` it", "mcap": "`mcap recover` it"}.get(

@@ -369,11 +369,13 @@ def solve_system(
     rhs: np.ndarray,
     max_iter: int,
     tolerance: float,
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, bool]:
     """Solve ``H x = rhs`` by conjugate gradients preconditioned with the chain part of ``H``.
 
-    Returns the solution and the number of iterations used (none, and NaN everywhere, when the
-    system holds a NaN or an infinity: no iteration would make it finite). Written with scalar
+    Returns the solution, the number of iterations used (none, and NaN everywhere, when the
+    system holds a NaN or an infinity: no iteration would make it finite) and whether the
+    residual reached ``tolerance`` (a solve cut by ``max_iter`` may have reached it on its last
+    iteration, or not). Written with scalar
     loops over the ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the
     same order, but numba compiles every distinct array expression as a function of its own.
     """
@@ -415,7 +417,8 @@ def solve_system(
             for c in range(3):
                 p[k, c] = z[k, c] + beta * p[k, c]
         rz = rz_new
-    return x, used
+    converged = np.sqrt(_dot(r, r)) <= tolerance * norm0  # False for a NaN
+    return x, used, converged
 
 
 @njit(cache=True, nogil=True)

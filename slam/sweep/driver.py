@@ -461,6 +461,14 @@ def make_executor(spec: SweepSpec, data_dir: Path, folder: Path) -> Any:
     return LocalExecutor(spec.workers, data_dir, folder / LOG_DIR)
 
 
+def _probe(spec: SweepSpec) -> None:
+    """Refuse a Ray address where no cluster answers
+    (:func:`~slam.sweep.executors.probe_ray_address`)."""
+    from slam.sweep.executors import probe_ray_address
+
+    probe_ray_address(str(spec.address), spec.address_where)
+
+
 def _say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
@@ -477,10 +485,10 @@ def run_sweep(
     folder = Path(folder or spec.out or default_sweep_dir(spec))
     cells = spec.cells()
     configs = check_sweep(spec, data_dir)  # bad input: exit 2 now, before any cell
-    if spec.executor == "ray" and spec.address is not None and executor is None:
-        from slam.sweep.executors import probe_ray_address
-
-        probe_ray_address(spec.address, "--address")
+    probe = spec.executor == "ray" and spec.address is not None and executor is None
+    fresh = not folder.exists()
+    if probe and fresh:  # before the folder is made: a sweep that cannot run leaves nothing
+        _probe(spec)
     open_sweep_folder(folder, spec)
     results: dict[str, dict[str, Any] | None] = {}
     tasks: list[dict[str, Any]] = []
@@ -517,6 +525,8 @@ def run_sweep(
     def rows() -> list[dict[str, Any]]:
         return [row_of(c, results[c.name]) for c in cells]
 
+    if probe and not fresh and any(not t["evaluate_only"] for t in tasks):
+        _probe(spec)  # a finished sweep's results are written again without its cluster
     executor = executor or make_executor(spec, data_dir, folder)
     local_tasks = tasks
     if spec.executor == "ray":  # a finished run is evaluated where it is, by the driver

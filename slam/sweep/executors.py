@@ -218,15 +218,17 @@ def import_ray() -> Any:
 
 def ray_endpoint(address: str, where: str) -> tuple[str, int] | None:
     """``(host, port)`` of a Ray cluster's ``address`` (``HOST:PORT``, ``ray://HOST:PORT``, an
-    IPv6 host in brackets), ``None`` for ``auto`` (Ray finds the cluster itself); anything else
-    is one :class:`UsageError` naming ``where``."""
-    if address == "auto":
+    IPv6 host in brackets), ``None`` for ``auto`` and ``local`` (Ray finds, or starts, the
+    cluster itself); anything else is one :class:`UsageError` naming ``where``."""
+    if not isinstance(address, str):
+        raise UsageError(f"{where}: expected HOST:PORT of a Ray cluster, found {address!r}")
+    if address in ("auto", "local"):
         return None
     text = address.removeprefix("ray://")
     match = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})", text)
     if match is None or not 1 <= int(match[2]) <= 65535:
         raise UsageError(
-            f"{where}: expected HOST:PORT of a Ray cluster (e.g. 127.0.0.1:6379, or auto), "
+            f"{where}: expected HOST:PORT of a Ray cluster (e.g. 127.0.0.1:6379, auto or local), "
             f"found {address!r}"
         )
     return match[1].strip("[]"), int(match[2])

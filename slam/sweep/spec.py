@@ -137,6 +137,8 @@ class SweepSpec:
     """The spec file, when there is one."""
     logs_where: str = "slam sweep logs"
     """Where the logs were given, for messages: ``FILE: [sweep] logs`` or ``--logs``."""
+    address_where: str = "--address"
+    """Where the address was given, for messages: ``FILE: [sweep] address`` or ``--address``."""
 
     def metric_of(self, log: str) -> str:
         """How cells of ``log`` are evaluated."""
@@ -395,6 +397,7 @@ def spec_from_toml(data: dict[str, Any], source: Path | None) -> SweepSpec:
         settings = grid_settings(list(grid.items()), f"{here}: [grid]")
     out = sweep.get("out")
     workers = sweep.get("workers")
+    address = sweep.get("address")
     return SweepSpec(
         logs=logs,
         seeds=seeds,
@@ -404,9 +407,10 @@ def spec_from_toml(data: dict[str, Any], source: Path | None) -> SweepSpec:
         out=base / _typed(out, str, f"{here}: [sweep] out") if out is not None else None,
         workers=_typed(workers, int, f"{here}: [sweep] workers") if workers is not None else None,
         executor=sweep.get("executor", "local"),
-        address=sweep.get("address"),
+        address=_typed(address, str, f"{here}: [sweep] address") if address is not None else None,
         source=source,
         logs_where=f"{here}: [sweep] logs",
+        address_where=f"{here}: [sweep] address",
     )
 
 
@@ -560,6 +564,8 @@ def apply_command_line(spec: SweepSpec, args: Any) -> SweepSpec:
     for flag in ("out", "workers", "executor", "address"):
         if getattr(args, flag, None) is not None:
             changes[flag] = getattr(args, flag)
+    if getattr(args, "address", None) is not None:
+        changes["address_where"] = "--address"
     return replace(spec, **changes)
 
 
@@ -618,7 +624,5 @@ def build_spec(path: Path | None, args: Any) -> SweepSpec:
     if spec.address is not None:
         from slam.sweep.executors import ray_endpoint
 
-        ray_endpoint(
-            spec.address, "--address" if spec.source is None else f"{spec.where('sweep')} address"
-        )
+        ray_endpoint(spec.address, spec.address_where)
     return spec

@@ -33,6 +33,8 @@ DEFAULT_TRIALS = 8
 DEFAULT_STEPS = 3
 MAX_STEPS = 10_000
 """Most grid points one range may have (``steps``)."""
+MAX_TRIALS = 10_000
+"""Most trials (cells per log and seed) one tune may have."""
 
 
 @dataclass(frozen=True)
@@ -145,9 +147,10 @@ def parse_tune(data: dict[str, Any], where: str, args: Any = None) -> TuneSpec:
         trials = args.trials
     if args is not None and getattr(args, "search", None) is not None:
         search = args.search
-    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 2:
+    if isinstance(trials, bool) or not isinstance(trials, int) or not 2 <= trials <= MAX_TRIALS:
         raise UsageError(
-            f"{where}: [tune] trials: expected at least 2 (the default and one more), found {trials!r}"
+            f"{where}: [tune] trials: expected an integer in [2, {MAX_TRIALS}] (the default and "
+            f"at least one more), found {trials!r}"
         )
     if search not in SEARCHES:
         raise UsageError(
@@ -215,9 +218,10 @@ def trial_settings(
         grids = [r.grid() for r in tune.ranges]
         size = math.prod(len(g) for g in grids)  # before the points: a typo may make billions
         if size > tune.trials - 1:
+            fix = f"raise trials to {size + 1} or " if size + 1 <= MAX_TRIALS else ""
             raise UsageError(
                 f"{where}: the grid has {size} points but trials = {tune.trials} (one is the "
-                f"default): raise trials to {size + 1} or lower the steps"
+                f"default): {fix}lower the steps"
             )
         points = list(itertools.product(*grids))
     else:
