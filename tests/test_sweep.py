@@ -633,3 +633,32 @@ def test_sweep_cells_equal_separate_slam_runs(carmen_dir, data_dir, tmp_path):
         assert sha256_of(separate / "trajectory.tum") == row["trajectory_sha256"], name
         assert sha256_of(out / name / "trajectory.tum") == row["trajectory_sha256"], name
         assert (separate / "config.toml").read_text() == (out / name / "config.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    "address, message",
+    [
+        (None, "--executor ray: cannot start a local Ray instance (no resources)"),
+        ("10.0.0.2:6379", "--address 10.0.0.2:6379: cannot reach a Ray cluster (no resources)"),
+    ],
+)
+def test_a_failed_ray_init_names_what_was_asked(tmp_path, monkeypatch, address, message):
+    """A local Ray instance that fails to start is not called an address "None" that cannot be
+    reached; a cluster that cannot be joined names its address."""
+    pytest.importorskip("ray")
+    from types import SimpleNamespace
+
+    from slam.sweep.executors import LOOPBACK_ONLY, NO_UV_RUN_HOOK, RayExecutor
+
+    for name in (LOOPBACK_ONLY, NO_UV_RUN_HOOK):  # the executor sets them: restored afterwards
+        monkeypatch.setenv(name, os.environ.get(name, "0"))
+
+    executor = RayExecutor(1, tmp_path, address)
+
+    def init(**options):
+        raise RuntimeError("no resources\nmore detail")
+
+    executor.ray = SimpleNamespace(init=init)
+    with pytest.raises(UsageError) as caught:
+        executor._init()
+    assert str(caught.value) == message

@@ -375,9 +375,9 @@ def solve_system(
     Returns the solution, the number of iterations used (none, and NaN everywhere, when the
     system holds a NaN or an infinity: no iteration would make it finite) and whether the
     residual reached ``tolerance`` (a solve cut by ``max_iter`` may have reached it on its last
-    iteration, or not). Written with scalar
-    loops over the ``(n, 3)`` arrays instead of array expressions: the same arithmetic in the
-    same order, but numba compiles every distinct array expression as a function of its own.
+    iteration, or not). Written with scalar loops over the ``(n, 3)`` arrays instead of array
+    expressions: the same arithmetic in the same order, but numba compiles every distinct array
+    expression as a function of its own.
     """
     n = rhs.shape[0]
     dinv, _ = _chain_factor(diag, band)

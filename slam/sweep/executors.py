@@ -286,6 +286,10 @@ class RayExecutor:
             ray.init(**options)
         except (ConnectionError, ValueError, RuntimeError) as exc:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            if self.address is None:  # no address given: Ray's own start failed
+                raise UsageError(
+                    f"--executor ray: cannot start a local Ray instance ({first})"
+                ) from None
             raise UsageError(
                 f"--address {self.address}: cannot reach a Ray cluster ({first})"
             ) from None
