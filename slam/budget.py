@@ -137,7 +137,8 @@ def run_memory(
     growth margin on every side (at least ``map.initial_size_m``). Components: ``scans``,
     ``occupancy grid`` and, for ``rbpf``, ``particle-map tables`` (one tile index per particle
     and tile, twice while resampling) and ``particle-map tiles`` (the shared map plus, per
-    particle, the tiles one update copies).
+    particle, the tiles one update copies) and ``vacancy grid`` (four bytes a cell of twice
+    the particle maps' size, when ``rbpf.vacate_after`` is set).
     """
     m = config.map
     margin = 2.0 * (reach_m + m.grow_margin_m + 1.0)
@@ -157,6 +158,9 @@ def run_memory(
         particles = config.filter.particles
         out["particle-map tables"] = 2.0 * particles * tiles * 4
         out["particle-map tiles"] = (tiles + particles * per_update) * tile_bytes
+        if rc.vacate_after:
+            coarse = 2.0 * (rc.resolution or m.resolution)
+            out["vacancy grid"] = 4.0 * (side_x / coarse) * (side_y / coarse)
     return out
 
 
@@ -165,6 +169,7 @@ _HINTS = {
     "occupancy grid": "use a coarser map.resolution or a smaller map.initial_size_m",
     "particle-map tables": "use fewer particles (--particles) or a larger rbpf.tile",
     "particle-map tiles": "use fewer particles (--particles) or a smaller rbpf.tile",
+    "vacancy grid": "use a coarser rbpf.resolution, or rbpf.vacate_after = 0",
 }
 
 

@@ -408,6 +408,12 @@ class RbpfConfig(Validated):
     a scan already measure (the benchmark logs have 180–361, all judged)."""
     skip_insert_below: float = bounded(0.02, ge=0.0, le=10.0)
     """A hit closer than this (m) to an existing surface adds nothing to a particle's map."""
+    vacate_after: int = bounded(0, ge=0, le=255)
+    """A hit of the particle maps that this many later rays went through, with no return in its
+    cell since, is gone (a person who walked on, a door): a return whose nearest hit it is
+    counts as unexplained in the matcher (:class:`slam.mapping.VacancyGrid`; a ray counts when
+    it crosses the hit's surface at 30° or more and passes ``dmax`` + 2 % of its range short of
+    its own end). 0 (the default: measured, not adopted, docs/accuracy.md): every hit stays."""
 
 
 MAX_SEARCH_CANDIDATES = 1_000_000

@@ -10,6 +10,8 @@ rows going up in y. Images for people are flipped so that +y points up on screen
 * :class:`ParticleMaps`: one truncated distance field per particle (unsigned, or signed
   point-to-plane with ``rbpf.field = "plane"``), stored as copy-on-write tiles
   (:mod:`slam.kernels.field`), the sensor model of the ``rbpf`` method.
+* :class:`VacancyGrid`: which of those maps' hits later rays went through (people, doors), shared
+  by the particles (:mod:`slam.kernels.vacancy`); the ``rbpf`` matcher leaves them out.
 
 Both refuse (one :class:`~slam.errors.UsageError` line) to grow an array past the memory budget of
 :mod:`slam.budget`: a diverged trajectory must not take the machine down.
@@ -42,6 +44,7 @@ from slam.kernels.field import (
     resample_tables,
 )
 from slam.kernels.grid import integrate_rays
+from slam.kernels.vacancy import VacancyCells, VacancyView, observe
 
 F64 = NDArray[np.float64]
 
@@ -579,6 +582,7 @@ class ParticleMaps:
         coarse_stride: int = 1,
         probe_yaws: F64 | None = None,
         particle: int | None = None,
+        vacancy: VacancyView | None = None,
     ) -> MatchResult:
         """Scan-match every particle's predicted pose against its own map and score it — or,
         with ``particle``, every pose of ``poses`` against that particle's map.
@@ -586,11 +590,19 @@ class ParticleMaps:
         ``luts`` comes from :func:`likelihood_tables`. With ``probe_yaws`` (rad), the basin probe
         in the same kernel call (:func:`~slam.kernels.field.match_particles`): the predicted
         pose of the particle whose match scores highest, turned by each yaw, matched against
-        that particle's map, into the result's ``probe``.
+        that particle's map, into the result's ``probe``. With ``vacancy``, returns whose
+        nearest hit later rays went through count as unexplained (:class:`VacancyGrid`).
         """
         yaws = _NO_YAWS if probe_yaws is None else np.ascontiguousarray(probe_yaws, np.float64)
         out, probe = _match_result(poses.shape[0]), _match_result(yaws.shape[0])
         view = self.field()
+        if vacancy is not None:
+            view = view._replace(
+                vacated=vacancy.vacated,
+                vac_ox=vacancy.ox,
+                vac_oy=vacancy.oy,
+                vac_res=vacancy.res,
+            )
         if particle is not None:  # the kernel reads row p's table for pose p
             one = self.tables[particle : particle + 1]
             view = view._replace(table=np.ascontiguousarray(np.repeat(one, len(poses), axis=0)))
@@ -635,6 +647,92 @@ class ParticleMaps:
             out,
         )
         return out
+
+
+class VacancyGrid:
+    """Where the particle maps' hits were later seen through (:mod:`slam.kernels.vacancy`): a
+    dense grid of twice the particle maps' cell, four bytes a cell, grown like
+    :class:`OccupancyGrid`; one for every particle, written along the best particle's poses.
+
+    A ray counts a miss on a live hit only over its range less ``margin`` + ``margin_share`` of
+    it (a return on the same surface, a few centimetres off, must not erase it) and only when it
+    crosses the hit's surface at least ``asin(min_cos)`` off it (a ray grazing a wall does not
+    erase the wall's far returns).
+    """
+
+    MIN_COS = 0.5
+    """A miss counts when the ray meets the hit's surface at 30° or more."""
+    MARGIN_SHARE = 0.02
+    """... and passes the cell at least ``margin`` + 2 % of its range short of its own end."""
+
+    def __init__(
+        self,
+        resolution: float,
+        center: tuple[float, float],
+        after: int,
+        margin: float,
+        size_m: float,
+        grow_margin_m: float,
+    ) -> None:
+        self.resolution, self.grow_margin_m = float(resolution), float(grow_margin_m)
+        self.after, self.margin = int(after), float(margin)
+        """Misses that make a hit gone; what a ray keeps clear of its own end (m)."""
+        cells = max(int(np.ceil(size_m / self.resolution)), 1)
+        _check_growth(4.0 * cells * cells, "a vacancy grid", size_m, size_m)
+        half = cells * self.resolution / 2
+        self.origin = np.array([center[0] - half, center[1] - half])
+        self.layers = np.zeros((4, cells, cells), dtype=np.uint8)
+        """``state``, ``misses``, ``normal``, ``vacated`` (:class:`VacancyCells`)."""
+
+    @property
+    def geometry(self) -> GridGeometry:
+        """Where the grid lies (origin, resolution, shape; world↔cell)."""
+        return GridGeometry.of(self.origin, self.resolution, self.layers.shape[1:])
+
+    def ensure_contains(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
+        """Grow the grid (by at least ``grow_margin_m``) so the box lies inside it."""
+        res = self.resolution
+        box = (xmin, ymin, xmax, ymax)
+        grow = growth_steps(box, self.geometry.extent, res, self.grow_margin_m)
+        if grow is None:
+            return
+        left, bottom, right, top = grow
+        rows, cols = self.layers.shape[1] + bottom + top, self.layers.shape[2] + left + right
+        _check_growth(4.0 * rows * cols, "a vacancy grid", cols * res, rows * res)
+        self.layers = np.pad(self.layers, ((0, 0), (bottom, top), (left, right)))
+        self.origin = self.origin - np.array([left * res, bottom * res])
+
+    def observe(self, sensor: F64, rays: F64, hits: F64, normals: F64) -> None:
+        """One scan seen from world ``sensor`` ``(x, y)``: its rays' world ends ``(N, 2)`` (the
+        returns and the readings past the laser's range), then its returns ``(K, 2)`` with their
+        surface normals' world angles ``(K,)``."""
+        pts = np.concatenate([rays, hits, sensor[None, :2]])
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        self.ensure_contains(lo[0], lo[1], hi[0], hi[1])
+        d = rays - sensor[None, :2]
+        length = np.hypot(d[:, 0], d[:, 1])
+        unit = d / np.where(length > 0, length, 1.0)[:, None]
+        counted = length * (1.0 - self.MARGIN_SHARE) - self.margin
+        g = self.geometry
+        state, misses, normal, vacated = self.layers
+        cells = VacancyCells(state, misses, normal, vacated, *g.origin, g.resolution, 1)
+        observe(
+            cells,
+            np.ascontiguousarray(sensor[:2], dtype=np.float64),
+            np.ascontiguousarray(np.stack([unit[:, 0], unit[:, 1], counted])),
+            np.ascontiguousarray(np.stack([hits[:, 0], hits[:, 1], normals])),
+            self.MIN_COS,
+            self.after,
+        )
+
+    def view(self) -> VacancyView:
+        """The grid as the matcher reads it."""
+        g = self.geometry
+        return VacancyView(self.layers[3], *g.origin, g.resolution)
+
+    def memory_bytes(self) -> int:
+        """Bytes of the grid's layers."""
+        return int(self.layers.nbytes)
 
 
 _NO_YAWS = np.zeros(0)

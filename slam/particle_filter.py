@@ -47,7 +47,14 @@ from slam.geometry import compose, relative, transform_points, wrap_angle
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
-from slam.mapping import MatchResult, OccupancyGrid, ParticleMaps, likelihood_tables
+from slam.kernels.vacancy import VacancyView
+from slam.mapping import (
+    MatchResult,
+    OccupancyGrid,
+    ParticleMaps,
+    VacancyGrid,
+    likelihood_tables,
+)
 from slam.scans import ScanSequence
 
 F64 = NDArray[np.float64]
@@ -232,6 +239,30 @@ def integrate_scan(grid: OccupancyGrid, seq: ScanSequence, k: int, pose: F64) ->
     grid.integrate(sensor[:2], transform_points(pose, ends), hit)
 
 
+def vacancy_grid(config: Config, center: F64, resolution: float) -> VacancyGrid | None:
+    """The ``rbpf`` filter's vacancy grid around ``center``: cells twice the particle maps'
+    ``resolution``, rays counted up to ``rbpf.dmax`` short of their ends (None:
+    ``rbpf.vacate_after = 0``)."""
+    rc = config.rbpf
+    if rc.vacate_after == 0:
+        return None
+    return VacancyGrid(
+        2.0 * resolution, (float(center[0]), float(center[1])), rc.vacate_after, rc.dmax,
+        config.map.initial_size_m, config.map.grow_margin_m,
+    )  # fmt: skip
+
+
+def observe_scan(grid: VacancyGrid, seq: ScanSequence, k: int, pose: F64) -> None:
+    """Scan ``k`` taken at robot ``pose`` into the vacancy ``grid``: its rays (returns and
+    readings past the laser's range) and its returns with their surface normals."""
+    ends, _ = seq.rays(k, 0.0)
+    hx, hy, nx, ny = seq.hits_with_normals(k)
+    sensor = compose(pose, seq.laser_offset)
+    hits = transform_points(pose, np.stack([hx, hy], axis=1))
+    normals = np.arctan2(ny, nx) + pose[2]
+    grid.observe(sensor[:2], transform_points(pose, ends), hits, normals)
+
+
 def hits_for_insert(
     seq: ScanSequence, k: int, max_beams: int, normals: bool
 ) -> tuple[F64, F64, F64, F64]:
@@ -285,6 +316,8 @@ class RbpfFilter:
         p = fc.particles
         start = scans.odometry[0]
         self.maps = particle_maps(config, start, p)
+        self.vacancy = vacancy_grid(config, start, self.maps.geometry.resolution)
+        """Which hits later rays went through (None: ``rbpf.vacate_after = 0``)."""
         self._reach = (-1, 0.0)  # (scan, its reach) of the last _make_room
         self.particles = np.tile(start, (p, 1))
         self.logw = np.zeros(p)
@@ -292,6 +325,7 @@ class RbpfFilter:
         # the first scan builds the initial map, shared by every particle
         self._insert(0, self.particles[:1])
         self.maps.share_from(0)
+        self._observe(0, start)
         self.lineage = Lineage(self.particles)
         self.mapped = bool(scans.hits(0)[0].size)
         """Whether a scan with a return has built the map yet (scan 0 unless the laser started
@@ -378,6 +412,15 @@ class RbpfFilter:
         hi = poses[:, :2].max(axis=0) + r
         self.maps.ensure_contains(lo[0], lo[1], hi[0], hi[1])
 
+    def _vacancy_view(self) -> VacancyView | None:
+        """The vacancy grid as the matcher reads it (None: no grid)."""
+        return None if self.vacancy is None else self.vacancy.view()
+
+    def _observe(self, k: int, pose: F64) -> None:
+        """Scan ``k`` at ``pose`` into the vacancy grid (when there is one)."""
+        if self.vacancy is not None:
+            observe_scan(self.vacancy, self.scans, k, pose)
+
     def _insert(self, k: int, poses: F64) -> None:
         rc = self.config.rbpf
         hx, hy, nx, ny = hits_for_insert(self.scans, k, rc.insert_beams, self.maps.signed)
@@ -454,6 +497,7 @@ class RbpfFilter:
         match = self.maps.match(
             predicted, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance,
             rc.min_inliers, rc.coarse_stride, self.probe_yaws if probe_open else None,
+            vacancy=self._vacancy_view(),
         )  # fmt: skip
         probe, match.probe = match.probe, None
         b = int(np.argmax(match.loglik))
@@ -558,7 +602,9 @@ class RbpfFilter:
         if probe is None:
             starts = np.repeat(predicted[b : b + 1], yaws.size, axis=0)
             starts[:, 2] = wrap_angle(starts[:, 2] + yaws)
-            probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+            probe = match_from_starts(
+                self.maps, b, starts, hits, self.luts, rc, self._vacancy_view()
+            )
         j = self._winner(probe, beams, first, typical)
         if j is None:
             return match
@@ -608,7 +654,7 @@ class RbpfFilter:
         starts = np.repeat(predicted[b : b + 1], shifts.size, axis=0)
         starts[:, 0] += shifts * math.cos(th)
         starts[:, 1] += shifts * math.sin(th)
-        probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc)
+        probe = match_from_starts(self.maps, b, starts, hits, self.luts, rc, self._vacancy_view())
         j = self._winner(probe, beams, first, typical)
         if j is None:
             return match
@@ -634,7 +680,7 @@ class RbpfFilter:
         rc = self.config.rbpf
         alt = self.maps.match(
             start, hits[0], hits[1], self.luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
-            rc.coarse_stride,
+            rc.coarse_stride, vacancy=self._vacancy_view(),
         )  # fmt: skip
         better = (alt.loglik > match.loglik) & (alt.inliers >= rc.min_inliers)
         match.poses[better] = alt.poses[better]
@@ -658,9 +704,11 @@ class RbpfFilter:
 
     def map(self, k: int) -> None:
         """Every particle adds scan ``k`` to its own map; the lineage records the update (before
-        a resampling, so that children share a map that holds the scan)."""
+        a resampling, so that children share a map that holds the scan); the vacancy grid
+        takes the scan at the pose of the particle with the highest weight."""
         self._insert(k, self.particles)
         self.lineage.record(k, self.particles, self.parents)
+        self._observe(k, self.particles[int(np.argmax(self.weights))])
 
     def resample(self, n_eff: float) -> bool:
         """Systematic resampling when ``N_eff`` is below ``resample_threshold`` of the count."""
@@ -832,12 +880,13 @@ def match_from_starts(
     hits: tuple[F64, F64],
     luts: tuple[F64, float],
     rc: RbpfConfig,
+    vacancy: VacancyView | None = None,
 ) -> MatchResult:
     """Match one scan (robot-frame ``hits``) from several ``starts`` ``(S, 3)`` against the map
-    of one ``particle``, with the proposal's matcher and settings (``rc``)."""
+    of one ``particle``, with the proposal's matcher and settings (``rc``) and ``vacancy``."""
     return maps.match(
         starts, hits[0], hits[1], luts, rc.max_iterations, rc.tolerance, rc.min_inliers,
-        rc.coarse_stride, particle=particle,
+        rc.coarse_stride, particle=particle, vacancy=vacancy,
     )  # fmt: skip
 
 

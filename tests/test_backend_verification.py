@@ -69,7 +69,8 @@ class _Maps:
     def __init__(self) -> None:
         self.calls = 0
 
-    def match(self, poses, ex, ey, luts, iterations, tolerance, min_inliers, stride):
+    def match(self, poses, ex, ey, luts, iterations, tolerance, min_inliers, stride, vacancy=None):
+        assert vacancy is None  # the filter made below keeps no vacancy grid
         self.calls += 1
         out = poses.copy()
         near = np.abs(poses[:, 2]) < 0.1
@@ -83,7 +84,7 @@ def _filter(ratio: float) -> RbpfFilter:
     f = RbpfFilter.__new__(RbpfFilter)
     config = Config()
     f.config = dataclasses.replace(config, rbpf=dataclasses.replace(config.rbpf, retry_ratio=ratio))
-    f.maps, f.luts, f.retries = _Maps(), None, 0
+    f.maps, f.luts, f.retries, f.vacancy = _Maps(), None, 0, None
     f.recent_loglik = [-0.05] * 10
     return f
 

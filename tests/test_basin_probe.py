@@ -46,6 +46,7 @@ def _filter(hits: tuple[np.ndarray, np.ndarray], probe_gain: float = 0.3) -> Rbp
     f.luts = likelihood_tables(np.asarray(rc.sigmas), rc.z_hit, rc.z_rand, rc.dmax)
     f.maps = ParticleMaps(3, config.map.resolution, rc.dmax, size_m=20.0)
     f.maps.insert(np.zeros((3, 3)), *hits, *hits, rc.skip_insert_below)
+    f.vacancy = None
     f.probes = 0
     f.recent_best = [-0.05] * 10  # recent updates matched well
     return f

@@ -96,6 +96,22 @@ def test_online_equals_batch_bit_for_bit_on_a_simulated_log(small, method):
     assert batch.metrics["ate_rmse"] < (0.05 if method == "rbpf" else 0.5)
 
 
+def test_the_vacancy_grid_option_runs_online_as_in_batch(small):
+    """``rbpf.vacate_after`` (off by default): the filter keeps its vacancy grid, written at
+    every update, and the online run still equals the batch run bit for bit."""
+    config = slam.load_config("", None, ["filter.particles=16", "rbpf.vacate_after=2"])
+    batch = slam.run(str(small), config, seed=3, max_scans=400)
+    grids = []
+    online = replay(
+        _log(str(small), config), config, 400, seed=3,
+        during=lambda s, k: grids.append(s._filter.vacancy) if k == 399 else None,
+    )  # fmt: skip
+    assert_identical(online, batch)
+    assert batch.metrics["ate_rmse"] < 0.05
+    state = grids[0].layers[0]
+    assert int((state == 1).sum()) > 500  # the walls' hits, live
+
+
 @pytest.fixture(scope="module")
 def intel(carmen_dir) -> Log:
     return _log("intel", slam.load_config("intel"), carmen_dir.parent)

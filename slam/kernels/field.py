@@ -48,6 +48,7 @@ from numba import njit, prange
 
 from slam.kernels.cells import cell_index
 from slam.kernels.linalg import solve_sym3
+from slam.kernels.vacancy import vacated_near
 
 
 class FieldView(NamedTuple):
@@ -69,6 +70,17 @@ class FieldView(NamedTuple):
     """World y of the lower-left corner of cell (0, 0) (m)."""
     inv_res: float
     """``1 / resolution`` (cells per metre)."""
+    vacated: np.ndarray = np.zeros((0, 0), np.uint8)
+    """Where later rays went through the maps' hits: the ``vacated`` layer of a vacancy grid
+    (:mod:`slam.kernels.vacancy`; a return whose nearest hit is vacated counts as unexplained).
+    Empty (the default): none. Its geometry follows (fields of their own: numba's parallel
+    loops do not take a tuple nested in a tuple)."""
+    vac_ox: float = 0.0
+    """World x of the lower-left corner of the vacancy grid's cell (0, 0) (m)."""
+    vac_oy: float = 0.0
+    """World y of the lower-left corner of the vacancy grid's cell (0, 0) (m)."""
+    vac_res: float = 1.0
+    """The vacancy grid's cell size (m)."""
 
 
 class TilePool(NamedTuple):
@@ -102,6 +114,11 @@ class TilePool(NamedTuple):
     one_layer: bool
     """``dist`` is ``surface`` (the unsigned field): a NaN there reads as ``float32(dmax)``,
     what the ``dist`` layer would hold."""
+
+
+VACATED = 1e6
+"""The field value :func:`beam_geometry` gives a beam whose nearest hit was seen through: beyond
+every likelihood table, so the cost of a beam far from every hit."""
 
 
 class MatchSettings(NamedTuple):
@@ -273,12 +290,16 @@ def normal_equations(
     the number of beams on known cells.
 
     Two passes: the field at the endpoints (:func:`beam_geometry`, the view's fields read once,
-    interpolated by :func:`surface_at`'s own :func:`_interpolate`), then the tables
-    (:func:`accumulate`).
+    interpolated by :func:`surface_at`'s own :func:`_interpolate`; with a vacancy grid, the
+    beams whose nearest hit is gone marked at this pose first, :func:`mark_gone`), then the
+    tables (:func:`accumulate`).
     """
     every = np.int64(stride)  # one type for the callee whether ``stride`` is given or not
-    geo = np.empty(((ex.shape[0] + every - 1) // every, 4))
-    beam_geometry(geo, view, x, y, th, every, ex, ey)
+    n = (ex.shape[0] + every - 1) // every
+    geo = np.empty((n, 4))
+    gone = np.zeros(n, np.uint8)
+    mark_gone(gone, view, x, y, th, every, ex, ey)
+    beam_geometry(geo, view, x, y, th, every, ex, ey, gone)
     return accumulate(geo, cost_row, weight_row, step_inv, h, g)
 
 
@@ -292,16 +313,22 @@ def beam_geometry(
     stride: int,
     ex: np.ndarray,
     ey: np.ndarray,
+    gone: np.ndarray,
 ) -> None:
     """The field at every ``stride``-th endpoint at pose ``(x, y, th)``, for :func:`accumulate`:
     ``geo[j]`` is the value ``d`` (NaN: unknown), its gradient ``(∂d/∂x, ∂d/∂y)`` and its
-    derivative by the heading, of beam ``j·stride``.
+    derivative by the heading, of beam ``j·stride``. With a vacancy grid in the view, a beam
+    marked in ``gone[j]`` (:func:`mark_gone`: its nearest hit later rays went through,
+    :mod:`slam.kernels.vacancy`) reads :data:`VACATED` with no gradient: on a known cell (it
+    counts among the inliers: the space is known, as free) at the cost of a beam far from every
+    hit.
 
     Apart from the tables, so that a level of :func:`refine` that starts where the previous one
     ended (with the same stride) reuses it: only the tables change from level to level.
     """
     surface, table, shift = view.surface, view.table, view.shift
     ox, oy, inv_res = view.ox, view.oy, view.inv_res
+    vacant = view.vacated.shape[0] > 0
     c = np.cos(th)
     s = np.sin(th)
     for j in range(geo.shape[0]):
@@ -313,11 +340,58 @@ def beam_geometry(
         if fgx < 0.0 or fgy < 0.0:
             geo[j, 0] = np.nan
         else:
+            if vacant and gone[j]:
+                # its nearest hit was seen through: known space that no surface explains, the
+                # cost of a beam far from every hit and no gradient
+                geo[j, 0] = VACATED
+                geo[j, 1] = 0.0
+                geo[j, 2] = 0.0
+                geo[j, 3] = 0.0
+                continue
             d, gx, gy = _interpolate(surface, table, shift, fgx, fgy, inv_res)
             geo[j, 0] = d
             geo[j, 1] = gx
             geo[j, 2] = gy
             geo[j, 3] = -gx * ry + gy * rx
+
+
+@njit(cache=True, _nrt=False)
+def mark_gone(gone: np.ndarray, view: FieldView, x: float, y: float, th: float, stride: int,
+              ex: np.ndarray, ey: np.ndarray) -> None:  # fmt: skip
+    """Mark in ``gone[j]`` the beams ``j·stride`` whose endpoint at pose ``(x, y, th)`` draws on a
+    hit that later rays went through (:func:`_through`); nothing without a vacancy grid.
+
+    :func:`refine` marks them where each level starts and keeps the marks over that level's
+    steps (a step moves the endpoints by centimetres; the nearest hit rarely changes), so the
+    vacancy grid is read once a beam and level rather than at every step."""
+    if view.vacated.shape[0] == 0:
+        return
+    surface, table, shift = view.surface, view.table, view.shift
+    ox, oy, inv_res = view.ox, view.oy, view.inv_res
+    c = np.cos(th)
+    s = np.sin(th)
+    for j in range(gone.shape[0]):
+        b = j * stride
+        wx = x + c * ex[b] - s * ey[b]
+        wy = y + s * ex[b] + c * ey[b]
+        fgx = (wx - ox) * inv_res - 0.5
+        fgy = (wy - oy) * inv_res - 0.5
+        gone[j] = 0
+        if fgx >= 0.0 and fgy >= 0.0:
+            d, gx, gy = _interpolate(surface, table, shift, fgx, fgy, inv_res)
+            if d == d and _through(view, wx, wy, d, gx, gy):
+                gone[j] = 1
+
+
+@njit(cache=True, inline="always")
+def _through(view: FieldView, wx: float, wy: float, d: float, gx: float, gy: float) -> bool:
+    """Whether the hit nearest to the endpoint ``(wx, wy)`` — the endpoint moved back by its
+    field value ``d`` against the field's gradient ``(gx, gy)`` — is vacated."""
+    norm = np.sqrt(gx * gx + gy * gy)
+    if norm > 1e-9:
+        wx -= d * gx / norm
+        wy -= d * gy / norm
+    return vacated_near(view.vacated, view.vac_ox, view.vac_oy, view.vac_res, wx, wy)
 
 
 @njit(cache=True, _nrt=False)
@@ -462,7 +536,8 @@ def refine(
     system only for a step taken); a level ends when a step moves less than
     ``settings.tolerance``. A level that uses the beams of the previous one starts from that
     level's field values at the pose it ended at (:func:`beam_geometry`), so only its tables are
-    read again.
+    read again. With a vacancy grid, the beams whose nearest hit is gone are marked where a
+    level first reads its beams (:func:`mark_gone`) and stay marked over its steps.
     """
     luts, step_inv, max_iter = settings.luts, settings.step_inv, settings.max_iter
     tolerance, coarse_stride = settings.tolerance, settings.coarse_stride
@@ -474,6 +549,7 @@ def refine(
     last = luts.shape[0] - 1
     geo = np.empty((ex.shape[0], 4))  # the field at the beams at the current pose
     trial = np.empty((ex.shape[0], 4))  # ... at the pose tried
+    gone = np.zeros(ex.shape[0], np.uint8)  # beams whose nearest hit is gone (this level)
     known = 0  # stride of the beams in ``geo`` (0: none yet)
     for level in range(luts.shape[0]):
         cost_row = luts[level, 0]
@@ -481,7 +557,8 @@ def refine(
         stride = 1 if level == last else coarse_stride
         n = (ex.shape[0] + stride - 1) // stride
         if known != stride:  # else the previous level ended at this pose with these beams
-            beam_geometry(geo[:n], view, x, y, th, stride, ex, ey)
+            mark_gone(gone[:n], view, x, y, th, stride, ex, ey)
+            beam_geometry(geo[:n], view, x, y, th, stride, ex, ey, gone)
             known = stride
         cost, inliers = accumulate(geo[:n], cost_row, weight_row, step_inv, h, g)
         lam = 1e-3
@@ -497,7 +574,7 @@ def refine(
             nx = x - s0
             ny = y - s1
             nth = th - s2
-            beam_geometry(trial[:n], view, nx, ny, nth, stride, ex, ey)
+            beam_geometry(trial[:n], view, nx, ny, nth, stride, ex, ey, gone)
             new_cost, new_inliers = scan_cost(trial[:n], cost_row, step_inv)
             if new_cost < cost:  # the step is taken: its system too
                 gauss_newton_system(trial[:n], weight_row, step_inv, h, g)
@@ -579,7 +656,10 @@ def _match_particle(
     luts = settings.luts
     ex, ey = ends[0], ends[1]
     nbeams = max(ex.shape[0], 1)
-    own = FieldView(view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res)
+    own = FieldView(
+        view.surface, view.table[p], view.shift, view.ox, view.oy, view.inv_res, view.vacated,
+        view.vac_ox, view.vac_oy, view.vac_res,
+    )  # fmt: skip
     h = np.zeros((3, 3))
     x, y, th, cost, inliers = refine(own, pose, ex, ey, settings, h)
     frac = inliers / nbeams
