@@ -138,7 +138,7 @@ def run_memory(
     ``occupancy grid`` and, for ``rbpf``, ``particle-map tables`` (one tile index per particle
     and tile, twice while resampling) and ``particle-map tiles`` (the shared map plus, per
     particle, the tiles one update copies) and ``vacancy grid`` (four bytes a cell of twice
-    the particle maps' size, when ``rbpf.vacate_after`` is set).
+    the particle maps' size, twice while it grows, when ``rbpf.vacate_after`` is set).
     """
     m = config.map
     margin = 2.0 * (reach_m + m.grow_margin_m + 1.0)
@@ -160,7 +160,7 @@ def run_memory(
         out["particle-map tiles"] = (tiles + particles * per_update) * tile_bytes
         if rc.vacate_after:
             coarse = 2.0 * (rc.resolution or m.resolution)
-            out["vacancy grid"] = 4.0 * (side_x / coarse) * (side_y / coarse)
+            out["vacancy grid"] = 8.0 * (side_x / coarse) * (side_y / coarse)  # pad copies
     return out
 
 

@@ -567,7 +567,8 @@ def _refine_by_the_rule(view, pose, ex, ey, settings):
     x, y, th = (float(v) for v in pose)
     h, g = np.zeros((3, 3)), np.zeros(3)
     geo = np.empty((ex.size, 4))
-    beam_geometry(geo, view, x, y, th, 1, ex, ey)
+    none = np.zeros(ex.size, np.uint8)  # no beam gone (the view has no vacancy grid)
+    beam_geometry(geo, view, x, y, th, 1, ex, ey, none)
     cost, inliers = 0.0, 0
     for level in range(luts.shape[0]):
         cost_row, weight_row = luts[level, 0], luts[level, 1]
@@ -581,7 +582,7 @@ def _refine_by_the_rule(view, pose, ex, ey, settings):
                 hd[0, 0], hd[0, 1], hd[0, 2], hd[1, 1], hd[1, 2], hd[2, 2], g[0], g[1], g[2], 1e-18
             )
             trial = np.empty((ex.size, 4))
-            beam_geometry(trial, view, x - s0, y - s1, th - s2, 1, ex, ey)
+            beam_geometry(trial, view, x - s0, y - s1, th - s2, 1, ex, ey, none)
             new_cost, new_inliers = scan_cost(trial, cost_row, step_inv)
             if new_cost < cost:  # taken: its Gauss-Newton system too
                 gauss_newton_system(trial, weight_row, step_inv, h, g)

@@ -170,7 +170,7 @@ def test_run_memory_estimate_figures():
     assert "vacancy grid" not in parts  # off by default
     on = load_config("", overrides=["rbpf.vacate_after=2"])
     vacancy = run_memory(on, 13631, 180, 40.0, 30.0, 27.0)["vacancy grid"]
-    assert vacancy == pytest.approx(side_x / 0.1 * side_y / 0.1 * 4)
+    assert vacancy == pytest.approx(side_x / 0.1 * side_y / 0.1 * 8)  # 4 bytes, twice growing
     with pytest.raises(
         UsageError, match=r"x would need about 1.0 GiB of memory; the limit is 1.0 MiB"
     ):

@@ -361,9 +361,12 @@ def mark_gone(gone: np.ndarray, view: FieldView, x: float, y: float, th: float, 
     """Mark in ``gone[j]`` the beams ``j·stride`` whose endpoint at pose ``(x, y, th)`` draws on a
     hit that later rays went through (:func:`_through`); nothing without a vacancy grid.
 
-    :func:`refine` marks them where each level starts and keeps the marks over that level's
-    steps (a step moves the endpoints by centimetres; the nearest hit rarely changes), so the
-    vacancy grid is read once a beam and level rather than at every step."""
+    :func:`refine` marks them where it first reads a level's beams — with ``coarse_stride`` 1
+    (the default) once, at the pose the match starts from, for every level; with a larger
+    stride again where the last level starts — and keeps the marks over the steps (a step moves
+    the endpoints by centimetres; the nearest hit rarely changes), so the vacancy grid is read
+    once a beam rather than at every step. A score computed afresh at the final pose
+    (:func:`normal_equations`) marks there, and may differ from the match's own."""
     if view.vacated.shape[0] == 0:
         return
     surface, table, shift = view.surface, view.table, view.shift

@@ -5,7 +5,7 @@ ahead of the robot, a door that opens, a bed pushed along a corridor leave hits 
 stands any more, and the matcher then fits the new returns on them to where they stood before:
 behind where they are now, which pulls the robot back (fr-clinic's corridor, docs/accuracy.md).
 The vacancy grid keeps the evidence that a hit is gone, shared by every particle and written
-along the best particle's poses (:class:`slam.vacancy.VacancyGrid`):
+along the best particle's poses (:class:`slam.mapping.VacancyGrid`):
 
 * a cell a return falls in is a live hit (``state`` 1), with the surface normal of that return;
 * a ray that passes through a live hit, at least a margin short of its own end and at least
@@ -16,8 +16,9 @@ along the best particle's poses (:class:`slam.vacancy.VacancyGrid`):
   through, whichever particle's map it is in (their poses differ by centimetres).
 
 The matcher reads ``vacated`` at the hit nearest to a return (the endpoint moved back along the
-field's gradient by its distance, :func:`slam.kernels.field.beam_geometry`) and counts such a
-return as one that no surface explains. Cells follow :mod:`slam.kernels.cells`, rows going up
+field's gradient by its distance, :func:`slam.kernels.field.mark_gone`) and counts such a
+return as one that no surface explains. A ray's margin is measured to where it enters a cell,
+so a hit may lie up to a cell's diagonal closer to the ray's end than the margin says. Cells follow :mod:`slam.kernels.cells`, rows going up
 in y.
 """
 
@@ -86,7 +87,7 @@ def observe(
 
     ``sensor`` is the laser's world position ``(2,)``; ``rays`` is ``(3, N)``: each ray's world
     unit direction ``(ux, uy)`` and the length it counts misses over (its range less the margin,
-    :meth:`slam.vacancy.VacancyGrid.observe`); ``hits`` is ``(3, K)``: the returns' world
+    :meth:`slam.mapping.VacancyGrid.observe`); ``hits`` is ``(3, K)``: the returns' world
     positions and surface normals' angles (rad). Every cell is inside the grid (the caller grows
     it first); cells outside are skipped all the same.
     """
