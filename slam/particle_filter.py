@@ -47,7 +47,7 @@ from slam.geometry import compose, relative, transform_points, wrap_angle
 from slam.kernels.motion import sample_motion
 from slam.kernels.resample import effective_sample_size, systematic_resample
 from slam.kernels.scan import correlation_search
-from slam.kernels.vacancy import VacancyView
+from slam.kernels.vacancy import LIVE, SEEN_THROUGH, VacancyView
 from slam.mapping import (
     MatchResult,
     OccupancyGrid,
@@ -416,6 +416,17 @@ class RbpfFilter:
         """The vacancy grid as the matcher reads it (None: no grid)."""
         return None if self.vacancy is None else self.vacancy.view()
 
+    def _vacancy_stats(self) -> dict[str, float | int]:
+        """The vacancy grid's size and counts at the end, for ``metrics.json`` (none without)."""
+        if self.vacancy is None:
+            return {}
+        state = self.vacancy.layers[0]
+        return {
+            "vacancy_grid_mb": round(self.vacancy.memory_bytes() / 2**20, 1),
+            "vacancy_live_hits": int(np.count_nonzero(state == LIVE)),
+            "vacancy_gone_hits": int(np.count_nonzero(state == SEEN_THROUGH)),
+        }
+
     def _observe(self, k: int, pose: F64) -> None:
         """Scan ``k`` at ``pose`` into the vacancy grid (when there is one)."""
         if self.vacancy is not None:
@@ -757,6 +768,7 @@ class RbpfFilter:
                 "gross_shifts": self.gross_shifts,
                 "peak_tiles": int(self.peak_tiles),
                 "peak_particle_map_mb": round(self.peak_map_bytes / 2**20, 1),
+                **self._vacancy_stats(),
                 **({"blind_updates": self.blind} if self.blind else {}),
             },
         )

@@ -110,6 +110,10 @@ def test_the_vacancy_grid_option_runs_online_as_in_batch(small):
     assert batch.metrics["ate_rmse"] < 0.05
     state = grids[0].layers[0]
     assert int((state == 1).sum()) > 500  # the walls' hits, live
+    assert int((state == 2).sum()) > 0  # and a few that later rays went through
+    assert batch.stats["vacancy_live_hits"] == int((state == 1).sum())
+    assert batch.stats["vacancy_gone_hits"] == int((state == 2).sum())
+    assert batch.stats["vacancy_grid_mb"] == round(grids[0].memory_bytes() / 2**20, 1)
 
 
 @pytest.fixture(scope="module")
