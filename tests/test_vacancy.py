@@ -3,7 +3,8 @@ later rays went through, and the matcher that leaves them out.
 
 The rules, one test each: a hit is seen through after ``after`` steep rays that end well beyond
 it; a ray grazing the hit's surface, or ending near it, does not count; a new return brings it
-back; a live hit in the window keeps its neighbours. Then the case it is for: a thing that moved
+back; a live hit in the window keeps its neighbours; a grid that grows keeps what it holds
+where it was. Then the case it is for: a thing that moved
 on along a corridor pulls the match back to where it stood, unless its old hits are vacated.
 """
 
@@ -93,6 +94,29 @@ def test_the_vacancy_grid_grows_to_hold_what_it_observes() -> None:
     assert grid.layers.shape[1] > before[1] and grid.layers.shape[2] > before[2]
     assert _state(grid, (40.0, -35.0)) == (1, 0)
     assert grid.memory_bytes() == grid.layers.size
+
+
+def test_growing_keeps_what_the_grid_holds_where_it_was() -> None:
+    """A grid that grows to the left and below (its origin moves) keeps every cell's content at
+    the same world position, and rays after the growth count on the old hits."""
+    grid = _grid(after=1)
+    _hit(grid, (5.05, 0.05), np.pi)  # seen through below: gone, its window vacated
+    _through(grid, (9.0, 0.05))
+    _hit(grid, (0.05, 4.05), -np.pi / 2)  # live, facing the sensor
+    _hit(grid, (-4.05, -0.05), 0.0)  # live: seen through once after the growth
+    before = grid.layers.copy()
+    origin = grid.origin.copy()
+    _hit(grid, (-40.0, -35.0), 0.0)  # far to the left and below
+    shift = np.round((origin - grid.origin) / grid.resolution).astype(int)
+    assert shift[0] > 0 and shift[1] > 0
+    rows, cols = before.shape[1:]
+    kept = grid.layers[:, shift[1] : shift[1] + rows, shift[0] : shift[0] + cols]
+    assert np.array_equal(kept, before)
+    assert _state(grid, (5.05, 0.05)) == (2, 1) and _state(grid, (5.15, 0.15))[1] == 1
+    assert _state(grid, (0.05, 4.05)) == (1, 0)
+    _through(grid, (-9.0, -0.05))
+    assert _state(grid, (-4.05, -0.05)) == (2, 1)
+    assert _state(grid, (0.05, 4.05)) == (1, 0)
 
 
 def _corridor_maps() -> tuple[ParticleMaps, Config]:
