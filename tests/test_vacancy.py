@@ -3,9 +3,9 @@ later rays went through, and the matcher that leaves them out.
 
 The rules, one test each: a hit is seen through after ``after`` steep rays that end well beyond
 it; a ray grazing the hit's surface, or ending near it, does not count; a new return brings it
-back; a live hit in the window keeps its neighbours; a grid that grows keeps what it holds
-where it was. Then the case it is for: a thing that moved
-on along a corridor pulls the match back to where it stood, unless its old hits are vacated.
+back; a live hit in the window keeps its neighbours; a grid that grows keeps what it holds where
+it was. Then the case it is for: a thing that moved on along a corridor pulls the match back to
+where it stood, unless its old hits are vacated.
 """
 
 from __future__ import annotations
